@@ -1,0 +1,595 @@
+"""The robot in minimal coordinates: paper eq. ``dyn`` built from MuJoCo.
+
+A WIP humanoid on flat ground keeps its wheels rolling without slip (and, in 3-D, without side
+slip), its axle at the wheel radius and its axle level. What is left are the minimal coordinates
+(DESIGN 4):
+
+* 3-D: ``q = [x, psi, q1, q2, ..., qn]``, velocities ``nu = [xd, psid, q1d, ..., qnd]``;
+* planar: ``q = [x, q1, ..., qn]``, ``nu = [xd, q1d, ..., qnd]``;
+
+with ``x`` the distance rolled along the heading (3-D: wheel odometry
+``r (phi_L + phi_R) / 2`` with the absolute wheel angles, joint angle plus base pitch; planar:
+the base slide), ``psi`` the heading, ``q1`` the base pitch from vertical and ``q2..qn`` the body
+joints. MuJoCo's velocities are ``qvel = J_tf nu`` (the paper's transform Jacobian), and
+
+    A nu_dot + h = B tau                                        (paper eq. ``dyn``)
+    A = J_tf^T M J_tf,   h = J_tf^T (M Jdot_tf nu + c - f_passive),   B = J_tf^T S
+
+with ``M`` MuJoCo's mass matrix, ``c`` its bias (Coriolis, centrifugal, gravity), ``f_passive``
+its passive forces (joint damping: the paper's friction ``Gamma_fric``) and ``S`` the actuator
+map. The same update gives the body CoM in the axle frame, ``theta``, ``thetad`` and the WIPM
+parameters ``lambda(q)`` (paper section "Simplified Model"; ERRATA 1 for what they mean).
+
+``RobotModel`` owns an ``MjData``; :meth:`RobotModel.update` computes everything for one state,
+once per control step, and the properties read the cache.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+Array = NDArray[np.float64]
+
+_FREE = int(mujoco.mjtJoint.mjJNT_FREE)
+_SLIDE = int(mujoco.mjtJoint.mjJNT_SLIDE)
+_HINGE = int(mujoco.mjtJoint.mjJNT_HINGE)
+
+
+@dataclass(frozen=True)
+class RobotLayout:
+    """Where a wip-gym robot lives inside a MuJoCo model (found from the names of
+    ``assets/mjcf/README.md``).
+
+    Attributes:
+        planar: base on slide x, slide z, pitch hinge (else a free joint).
+        nq, nv: the robot's own position and velocity sizes (its joints come first in the model).
+        root_qpos, root_dof: first qpos / dof address of the root joint(s).
+        wheel_qpos, wheel_dof: addresses of ``wheel_left``, ``wheel_right``.
+        body_qpos, body_dof: addresses of the body joints ``q2..qn`` in tree order.
+        wheel_radius, wheel_separation: from the wheel collision geoms and wheel positions.
+        base_body: id of ``base``; wheel_bodies: ids of the wheels; body_bodies: ids of every
+            robot body except the wheels (the "body" of the paper: its CoM defines ``theta``).
+        wheel_actuators: actuator ids of the wheels (left, right); joint_actuators: actuator id of
+            each body joint, in ``body_dof`` order.
+    """
+
+    planar: bool
+    nq: int
+    nv: int
+    root_qpos: int
+    root_dof: int
+    wheel_qpos: tuple[int, int]
+    wheel_dof: tuple[int, int]
+    body_qpos: tuple[int, ...]
+    body_dof: tuple[int, ...]
+    wheel_radius: float
+    wheel_separation: float
+    base_body: int
+    wheel_bodies: tuple[int, int]
+    body_bodies: tuple[int, ...]
+    wheel_actuators: tuple[int, int]
+    joint_actuators: tuple[int, ...]
+
+    @property
+    def n_min(self) -> int:
+        """Number of minimal coordinates: ``2 + n`` in 3-D, ``1 + n`` planar (n body joints
+        including the base pitch q1)."""
+        return (2 if not self.planar else 1) + 1 + len(self.body_dof)
+
+    @property
+    def index_x(self) -> int:
+        return 0
+
+    @property
+    def index_psi(self) -> int | None:
+        return None if self.planar else 1
+
+    @property
+    def index_q1(self) -> int:
+        return 1 if self.planar else 2
+
+    @classmethod
+    def from_model(cls, model: mujoco.MjModel) -> RobotLayout:
+        """Read the layout of the robot in ``model``; raise ``ValueError`` where the contract of
+        ``assets/mjcf/README.md`` is broken."""
+
+        def body_id(name: str) -> int:
+            i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name)
+            if i < 0:
+                raise ValueError(f"robot model has no body {name!r}")
+            return int(i)
+
+        def joint_id(name: str) -> int:
+            i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)
+            if i < 0:
+                raise ValueError(f"robot model has no joint {name!r}")
+            return int(i)
+
+        base = body_id("base")
+        robot_bodies = [b for b in range(model.nbody) if model.body_rootid[b] == base]
+        wheels = (body_id("wheel_left"), body_id("wheel_right"))
+        planar = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, "root") < 0
+        if planar:
+            roots = [joint_id(n) for n in ("root_x", "root_z", "root_pitch")]
+            expected = [_SLIDE, _SLIDE, _HINGE]
+            if [int(model.jnt_type[j]) for j in roots] != expected:
+                raise ValueError("planar root must be slide root_x, slide root_z, hinge root_pitch")
+            if list(model.jnt_dofadr[roots]) != [0, 1, 2]:
+                raise ValueError("planar root joints must be the model's first three dofs")
+        else:
+            roots = [joint_id("root")]
+            if int(model.jnt_type[roots[0]]) != _FREE:
+                raise ValueError("joint 'root' must be a free joint")
+            if model.jnt_dofadr[roots[0]] != 0:
+                raise ValueError("the free joint 'root' must be the model's first joint")
+        wheel_joints = (joint_id("wheel_left"), joint_id("wheel_right"))
+        robot_joints = [j for j in range(model.njnt) if model.jnt_bodyid[j] in robot_bodies]
+        body_joints = [j for j in robot_joints if j not in roots and j not in wheel_joints]
+        for j in body_joints:
+            if int(model.jnt_type[j]) not in (_HINGE, _SLIDE):
+                raise ValueError(f"body joint {model.joint(j).name!r} must be a hinge or slide")
+        body_joints.sort(key=lambda j: model.jnt_dofadr[j])
+        dof_counts = {j: 6 if int(model.jnt_type[j]) == _FREE else 1 for j in robot_joints}
+        nv = sum(dof_counts.values())
+        nq = sum(7 if n == 6 else 1 for n in dof_counts.values())
+        robot_dofs = sorted(
+            int(model.jnt_dofadr[j]) + k for j in robot_joints for k in range(dof_counts[j])
+        )
+        if robot_dofs != list(range(nv)):
+            raise ValueError(
+                "the robot's joints must come first in the model (before any free object)"
+            )
+
+        geom_left = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "wheel_left")
+        if geom_left < 0 or int(model.geom_type[geom_left]) != int(mujoco.mjtGeom.mjGEOM_SPHERE):
+            raise ValueError("wheel collision geom 'wheel_left' must be a sphere")
+        radius = float(model.geom_size[geom_left, 0])
+        separation = float(abs(model.body_pos[wheels[0], 1] - model.body_pos[wheels[1], 1]))
+
+        actuator_of_dof: dict[int, int] = {}
+        for a in range(model.nu):
+            if int(model.actuator_trntype[a]) != int(mujoco.mjtTrn.mjTRN_JOINT):
+                raise ValueError(f"actuator {model.actuator(a).name!r} must drive a joint")
+            actuator_of_dof[int(model.jnt_dofadr[model.actuator_trnid[a, 0]])] = a
+        wheel_dof = tuple(int(model.jnt_dofadr[j]) for j in wheel_joints)
+        body_dof = tuple(int(model.jnt_dofadr[j]) for j in body_joints)
+        missing = [
+            model.joint(j).name
+            for j in (*wheel_joints, *body_joints)
+            if model.jnt_dofadr[j] not in actuator_of_dof
+        ]
+        if missing:
+            raise ValueError(f"joints without an actuator: {missing}")
+
+        return cls(
+            planar=planar,
+            nq=nq,
+            nv=nv,
+            root_qpos=int(model.jnt_qposadr[roots[0]]),
+            root_dof=int(model.jnt_dofadr[roots[0]]),
+            wheel_qpos=(
+                int(model.jnt_qposadr[wheel_joints[0]]),
+                int(model.jnt_qposadr[wheel_joints[1]]),
+            ),
+            wheel_dof=(wheel_dof[0], wheel_dof[1]),
+            body_qpos=tuple(int(model.jnt_qposadr[j]) for j in body_joints),
+            body_dof=body_dof,
+            wheel_radius=radius,
+            wheel_separation=separation,
+            base_body=base,
+            wheel_bodies=wheels,
+            body_bodies=tuple(b for b in robot_bodies if b not in wheels),
+            wheel_actuators=(actuator_of_dof[wheel_dof[0]], actuator_of_dof[wheel_dof[1]]),
+            joint_actuators=tuple(actuator_of_dof[d] for d in body_dof),
+        )
+
+
+@dataclass(frozen=True)
+class WIPMParameters:
+    """``lambda(q)``: the simplified model's parameters at one state (paper section
+    "Simplified Model", with the meanings of ERRATA 1).
+
+    Attributes:
+        body_mass: ``M``, the mass of everything but the wheels (kg).
+        com: body CoM in the axle frame ``(X_com, Y_com, Z_com)`` (m).
+        com_distance: ``L = sqrt(X_com^2 + Z_com^2)``, the pendulum length (m).
+        theta, thetad: CoM pitch about the wheel axis from vertical, and its rate.
+        pitch_inertia: ``I``, the body's inertia about the wheel axis (= ``A[q1, q1]``) (kg m^2).
+        inertia_axle: the body's inertia tensor about the axle midpoint in the axle frame.
+        wheel_mass, wheel_inertia: mass and axial inertia of ONE wheel.
+        wheel_inertia_transverse: a wheel's inertia about a diameter.
+        wheel_damping: viscous damping of ONE wheel joint (N m s / rad).
+        wheel_radius, wheel_separation: ``r`` and the distance between the wheels.
+        gravity: ``g`` (m/s^2), MuJoCo's.
+    """
+
+    body_mass: float
+    com: Array
+    com_distance: float
+    theta: float
+    thetad: float
+    pitch_inertia: float
+    inertia_axle: Array
+    wheel_mass: float
+    wheel_inertia: float
+    wheel_inertia_transverse: float
+    wheel_damping: float
+    wheel_radius: float
+    wheel_separation: float
+    gravity: float
+
+
+class RobotModel:
+    """Minimal-coordinate kinematics and dynamics of a wip-gym robot, cached per state.
+
+    Args:
+        model: a MuJoCo model that follows ``assets/mjcf/README.md`` (extra free objects such as
+            a cup may follow the robot's joints; they do not enter the robot's dynamics).
+
+    Use ``update(qpos, qvel)`` once per control step (``qpos``/``qvel`` are the robot's own
+    ``nq``/``nv`` entries, as in an observation), then read ``q``, ``nu``, ``J_tf``,
+    ``Jdot_tf_nu``, ``A``, ``h``, ``B``, ``com``, ``theta``, ``thetad``, ``J_theta``, ...
+    """
+
+    def __init__(self, model: mujoco.MjModel) -> None:
+        self.model = model
+        self.data = mujoco.MjData(model)
+        self.layout = RobotLayout.from_model(model)
+        lay = self.layout
+        nv, n = model.nv, lay.n_min
+        self._M = np.zeros((nv, nv))
+        self._bias = np.zeros(nv)
+        self._J = np.zeros((nv, n))
+        self._Jdot_nu = np.zeros(nv)
+        self._S = np.zeros((nv, model.nu))
+        for a in range(model.nu):
+            self._S[model.jnt_dofadr[model.actuator_trnid[a, 0]], a] = model.actuator_gear[a, 0]
+        self._jacp = np.zeros((3, nv))
+        self._jacp_wheel = np.zeros((3, nv))
+        self._body_ids = np.array(lay.body_bodies)
+        self._q = np.zeros(n)
+        self._nu = np.zeros(n)
+        first_body = 3 if not lay.planar else 2
+        self._body_cols = np.arange(first_body, n)
+        # constant entries of J_tf
+        r, sep = lay.wheel_radius, lay.wheel_separation
+        for k, dof in enumerate(lay.body_dof):
+            self._J[dof, first_body + k] = 1.0
+        for dof in lay.wheel_dof:
+            self._J[dof, lay.index_x] = 1.0 / r
+            self._J[dof, lay.index_q1] = -1.0
+        if lay.planar:
+            self._J[lay.root_dof + 0, lay.index_x] = 1.0
+            self._J[lay.root_dof + 2, lay.index_q1] = 1.0
+        else:
+            self._J[lay.wheel_dof[0], 1] = -sep / (2.0 * r)
+            self._J[lay.wheel_dof[1], 1] = sep / (2.0 * r)
+            self._J[lay.root_dof + 4, 2] = 1.0
+        self._updated = False
+
+    # ------------------------------------------------------------------ state
+    def update(self, qpos: ArrayLike, qvel: ArrayLike) -> None:
+        """Compute everything for the state ``(qpos, qvel)`` (the robot's own coordinates)."""
+        m, d, lay = self.model, self.data, self.layout
+        qpos = np.asarray(qpos, dtype=float)
+        qvel = np.asarray(qvel, dtype=float)
+        if qpos.shape != (lay.nq,) or qvel.shape != (lay.nv,):
+            raise ValueError(
+                f"expected qpos of shape ({lay.nq},) and qvel ({lay.nv},), "
+                f"got {qpos.shape}, {qvel.shape}"
+            )
+        if not (np.all(np.isfinite(qpos)) and np.all(np.isfinite(qvel))):
+            raise ValueError("qpos/qvel contain NaN or inf")
+        d.qpos[: lay.nq] = qpos
+        d.qvel[: lay.nv] = qvel
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)
+        mujoco.mj_crb(m, d)
+        mujoco.mj_fullM(m, d, self._M)
+        mujoco.mj_comVel(m, d)
+        mujoco.mj_passive(m, d)
+        mujoco.mj_rne(m, d, 0, self._bias)
+        self._update_minimal_coordinates()
+        self._update_transform()
+        J = self._J
+        self._A = J.T @ self._M @ J
+        self._h = J.T @ (self._M @ self._Jdot_nu + self._bias - d.qfrc_passive)
+        self._B = J.T @ self._S
+        self._update_com()
+        self._updated = True
+
+    def _update_minimal_coordinates(self) -> None:
+        d, lay = self.data, self.layout
+        r = lay.wheel_radius
+        body_q = d.qpos[list(lay.body_qpos)]
+        body_qd = d.qvel[list(lay.body_dof)]
+        wl, wr = lay.wheel_qpos
+        dl, dr = lay.wheel_dof
+        if lay.planar:
+            x = d.qpos[lay.root_qpos]
+            q1 = d.qpos[lay.root_qpos + 2]
+            xd = d.qvel[lay.root_dof]
+            q1d = d.qvel[lay.root_dof + 2]
+            self._psi = 0.0
+            self._psid = 0.0
+            self._q[:2] = x, q1
+            self._nu[:2] = xd, q1d
+        else:
+            R = d.xmat[lay.base_body].reshape(3, 3)
+            psi = np.arctan2(-R[0, 1], R[1, 1])
+            c, s = np.cos(psi), np.sin(psi)
+            q1 = np.arctan2(c * R[0, 2] + s * R[1, 2], R[2, 2])
+            omega_world = R @ d.qvel[lay.root_dof + 3 : lay.root_dof + 6]
+            psid = omega_world[2]
+            q1d = -s * omega_world[0] + c * omega_world[1]
+            x = r * 0.5 * (d.qpos[wl] + d.qpos[wr]) + r * q1
+            xd = r * 0.5 * (d.qvel[dl] + d.qvel[dr]) + r * q1d
+            self._psi, self._psid = float(psi), float(psid)
+            self._q[:3] = x, psi, q1
+            self._nu[:3] = xd, psid, q1d
+        self._q[self._body_cols] = body_q
+        self._nu[self._body_cols] = body_qd
+
+    def _update_transform(self) -> None:
+        lay = self.layout
+        if lay.planar:
+            return  # J_tf is constant and Jdot_tf is zero for the planar base
+        J, Jd = self._J, self._Jdot_nu
+        psi, q1 = self._psi, self._q[2]
+        xd, psid, q1d = self._nu[:3]
+        c, s = np.cos(psi), np.sin(psi)
+        c1, s1 = np.cos(q1), np.sin(q1)
+        o = lay.root_dof
+        # free joint: linear velocity of the axle midpoint in world, angular velocity in base frame
+        J[o + 0, 0] = c
+        J[o + 1, 0] = s
+        J[o + 3, 1] = -s1
+        J[o + 5, 1] = c1
+        Jd[o + 0] = -s * psid * xd
+        Jd[o + 1] = c * psid * xd
+        Jd[o + 3] = -c1 * q1d * psid
+        Jd[o + 5] = -s1 * q1d * psid
+
+    def _update_com(self) -> None:
+        m, d, lay = self.model, self.data, self.layout
+        ids = self._body_ids
+        masses = m.body_mass[ids]
+        mass = float(masses.sum())
+        com_world = masses @ d.xipos[ids] / mass
+        origin = d.xpos[lay.base_body]
+        Rh = self.heading_rotation
+        rel = Rh.T @ (com_world - origin)
+        # CoM Jacobian of the body (wheels excluded) in world coordinates
+        mujoco.mj_jacSubtreeCom(m, d, self._jacp, lay.base_body)
+        Jc = self._jacp * m.body_subtreemass[lay.base_body]
+        for w in lay.wheel_bodies:
+            mujoco.mj_jac(m, d, self._jacp_wheel, None, d.xipos[w], w)
+            Jc -= m.body_mass[w] * self._jacp_wheel
+        Jc /= mass
+        # axle-origin velocity: the base origin's linear velocity
+        mujoco.mj_jac(m, d, self._jacp_wheel, None, origin, lay.base_body)
+        J_rel = Rh.T @ ((Jc - self._jacp_wheel) @ self._J)
+        if not lay.planar:
+            # the axle frame turns with psi: d/dt (Rh^T p) has the extra term -psid e_z x rel
+            J_rel[0, 1] += rel[1]
+            J_rel[1, 1] -= rel[0]
+        X, Z = rel[0], rel[2]
+        self._body_mass = mass
+        self._com = rel
+        self._J_com = J_rel
+        self._theta = float(np.arctan2(X, Z))
+        self._J_theta = (Z * J_rel[0] - X * J_rel[2]) / (X * X + Z * Z)
+        self._thetad = float(self._J_theta @ self._nu)
+
+    def _require(self) -> None:
+        if not self._updated:
+            raise RuntimeError("RobotModel.update(qpos, qvel) must be called first")
+
+    # ------------------------------------------------------------- accessors
+    @property
+    def q(self) -> Array:
+        """Minimal positions ``[x, psi, q1, ..., qn]`` (planar: ``[x, q1, ..., qn]``)."""
+        self._require()
+        return self._q
+
+    @property
+    def nu(self) -> Array:
+        """Minimal velocities ``[xd, psid, q1d, ..., qnd]`` (planar: ``[xd, q1d, ...]``)."""
+        self._require()
+        return self._nu
+
+    @property
+    def J_tf(self) -> Array:
+        """Transform Jacobian, ``qvel = J_tf @ nu`` (``nv x n_min``)."""
+        self._require()
+        return self._J
+
+    @property
+    def Jdot_tf_nu(self) -> Array:
+        """``Jdot_tf @ nu``: ``qacc = J_tf @ nu_dot + Jdot_tf_nu``."""
+        self._require()
+        return self._Jdot_nu
+
+    @property
+    def A(self) -> Array:
+        """Minimal-coordinate inertia ``J_tf^T M J_tf`` (paper eq. ``dyn``)."""
+        self._require()
+        return self._A
+
+    @property
+    def h(self) -> Array:
+        """Bias ``J_tf^T (M Jdot_tf nu + c - f_passive)``: Coriolis, gravity, friction."""
+        self._require()
+        return self._h
+
+    @property
+    def B(self) -> Array:
+        """Actuation ``J_tf^T S`` (``n_min x nu``): ``A nu_dot + h = B ctrl``."""
+        self._require()
+        return self._B
+
+    @property
+    def mass_matrix(self) -> Array:
+        """MuJoCo's full mass matrix at this state (``nv x nv``)."""
+        self._require()
+        return self._M
+
+    @property
+    def psi(self) -> float:
+        self._require()
+        return self._psi
+
+    @property
+    def heading_rotation(self) -> Array:
+        """Rotation of the axle frame in world: ``Rz(psi)`` (identity for planar robots)."""
+        c, s = np.cos(self._psi), np.sin(self._psi)
+        return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+    @property
+    def axle_position(self) -> Array:
+        """World position of the axle midpoint ``(X0, Y0, Z0)``."""
+        self._require()
+        return self.data.xpos[self.layout.base_body].copy()
+
+    @property
+    def body_mass(self) -> float:
+        self._require()
+        return self._body_mass
+
+    @property
+    def com(self) -> Array:
+        """Body CoM (wheels excluded) in the axle frame."""
+        self._require()
+        return self._com
+
+    @property
+    def J_com(self) -> Array:
+        """Jacobian of :attr:`com` with respect to ``nu`` (``3 x n_min``)."""
+        self._require()
+        return self._J_com
+
+    @property
+    def theta(self) -> float:
+        """CoM pitch ``atan2(X_com, Z_com)`` in the axle frame; positive with the CoM ahead."""
+        self._require()
+        return self._theta
+
+    @property
+    def thetad(self) -> float:
+        """``d theta / dt = J_theta @ nu`` (paper: ``cos(theta)/Z [cos, -sin] J_com qdot``)."""
+        self._require()
+        return self._thetad
+
+    @property
+    def J_theta(self) -> Array:
+        """Row Jacobian of ``theta`` with respect to ``nu``."""
+        self._require()
+        return self._J_theta
+
+    # ---------------------------------------------------------- derived
+    def accelerations(self, ctrl: ArrayLike) -> Array:
+        """Minimal accelerations ``nu_dot`` solving ``A nu_dot + h = B ctrl``."""
+        self._require()
+        return np.linalg.solve(self._A, self._B @ np.asarray(ctrl, dtype=float) - self._h)
+
+    def full_accelerations(self, nu_dot: ArrayLike) -> Array:
+        """MuJoCo's ``qacc`` for minimal accelerations: ``J_tf nu_dot + Jdot_tf nu``."""
+        self._require()
+        return self._J @ np.asarray(nu_dot, dtype=float) + self._Jdot_nu
+
+    def body_inertia_about_axle(self) -> Array:
+        """The body's (wheels excluded) inertia tensor about the axle midpoint, axle frame."""
+        self._require()
+        m, d = self.model, self.data
+        ids = self._body_ids
+        Rh = self.heading_rotation
+        rot = np.einsum("ji,njk->nik", Rh, d.ximat[ids].reshape(-1, 3, 3))  # Rh^T R_i
+        inertia = np.einsum("nij,nj,nkj->ik", rot, m.body_inertia[ids], rot)
+        p = (d.xipos[ids] - d.xpos[self.layout.base_body]) @ Rh
+        mass = m.body_mass[ids]
+        inertia += np.einsum(
+            "n,nij->ij",
+            mass,
+            np.einsum("ni,ni->n", p, p)[:, None, None] * np.eye(3) - np.einsum("ni,nj->nij", p, p),
+        )
+        return inertia
+
+    def wipm_parameters(self) -> WIPMParameters:
+        """``lambda(q)`` at the current state (see :class:`WIPMParameters`)."""
+        self._require()
+        m, lay = self.model, self.layout
+        w = lay.wheel_bodies[0]
+        wheel_inertia = np.asarray(m.body_inertia[w])
+        # inertia about the wheel's axle (y of the wheel body) and about a diameter
+        R = np.zeros(9)
+        mujoco.mju_quat2Mat(R, m.body_iquat[w])
+        R = R.reshape(3, 3)
+        tensor = R @ np.diag(wheel_inertia) @ R.T
+        com = self._com.copy()
+        return WIPMParameters(
+            body_mass=self._body_mass,
+            com=com,
+            com_distance=float(np.hypot(com[0], com[2])),
+            theta=self._theta,
+            thetad=self._thetad,
+            pitch_inertia=float(self._A[lay.index_q1, lay.index_q1]),
+            inertia_axle=self.body_inertia_about_axle(),
+            wheel_mass=float(m.body_mass[w]),
+            wheel_inertia=float(tensor[1, 1]),
+            wheel_inertia_transverse=float(tensor[0, 0]),
+            wheel_damping=float(m.dof_damping[lay.wheel_dof[0]]),
+            wheel_radius=lay.wheel_radius,
+            wheel_separation=lay.wheel_separation,
+            gravity=float(-m.opt.gravity[2]),
+        )
+
+    # ------------------------------------------------------- full state
+    def full_state(
+        self, q: ArrayLike, nu: ArrayLike, axle_xy: ArrayLike = (0.0, 0.0)
+    ) -> tuple[Array, Array]:
+        """MuJoCo ``(qpos, qvel)`` of the robot at minimal state ``(q, nu)`` with the wheels on
+        the floor (axle at the wheel radius, level), and, in 3-D, the axle midpoint at
+        ``axle_xy``. Wheel angles are split so that ``x`` is their odometry."""
+        lay = self.layout
+        q = np.asarray(q, dtype=float)
+        nu = np.asarray(nu, dtype=float)
+        n = lay.n_min
+        if q.shape != (n,) or nu.shape != (n,):
+            raise ValueError(f"expected q and nu of shape ({n},), got {q.shape}, {nu.shape}")
+        r, sep = lay.wheel_radius, lay.wheel_separation
+        qpos = np.zeros(lay.nq)
+        qvel = np.zeros(lay.nv)
+        x, q1 = q[0], q[lay.index_q1]
+        first_body = lay.index_q1 + 1
+        qpos[list(lay.body_qpos)] = q[first_body:]
+        qvel[list(lay.body_dof)] = nu[first_body:]
+        xd, q1d = nu[0], nu[lay.index_q1]
+        if lay.planar:
+            o = lay.root_qpos
+            qpos[o : o + 3] = x, r, q1
+            qpos[list(lay.wheel_qpos)] = x / r - q1
+            qvel[lay.root_dof : lay.root_dof + 3] = xd, 0.0, q1d
+            qvel[list(lay.wheel_dof)] = xd / r - q1d
+            return qpos, qvel
+        psi, psid = q[1], nu[1]
+        o = lay.root_qpos
+        qpos[o : o + 3] = axle_xy[0], axle_xy[1], r
+        quat_yaw = np.array([np.cos(psi / 2), 0.0, 0.0, np.sin(psi / 2)])
+        quat_pitch = np.array([np.cos(q1 / 2), 0.0, np.sin(q1 / 2), 0.0])
+        quat = np.zeros(4)
+        mujoco.mju_mulQuat(quat, quat_yaw, quat_pitch)
+        qpos[o + 3 : o + 7] = quat
+        half = sep / (2.0 * r)
+        qpos[lay.wheel_qpos[0]] = x / r - half * psi - q1
+        qpos[lay.wheel_qpos[1]] = x / r + half * psi - q1
+        c, s = np.cos(psi), np.sin(psi)
+        v = lay.root_dof
+        qvel[v : v + 3] = xd * c, xd * s, 0.0
+        qvel[v + 3 : v + 6] = -psid * np.sin(q1), q1d, psid * np.cos(q1)
+        qvel[lay.wheel_dof[0]] = xd / r - half * psid - q1d
+        qvel[lay.wheel_dof[1]] = xd / r + half * psid - q1d
+        return qpos, qvel
