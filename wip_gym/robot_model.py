@@ -270,10 +270,15 @@ class RobotModel:
             self._J[lay.wheel_dof[1], 1] = sep / (2.0 * r)
             self._J[lay.root_dof + 4, 2] = 1.0
         self._updated = False
+        self._has_dynamics = False
 
     # ------------------------------------------------------------------ state
-    def update(self, qpos: ArrayLike, qvel: ArrayLike) -> None:
-        """Compute everything for the state ``(qpos, qvel)`` (the robot's own coordinates)."""
+    def update(self, qpos: ArrayLike, qvel: ArrayLike, *, dynamics: bool = True) -> None:
+        """Compute everything for the state ``(qpos, qvel)`` (the robot's own coordinates).
+
+        With ``dynamics=False`` only the kinematic quantities (minimal coordinates, ``J_tf``,
+        CoM, ``theta``, ``thetad``) are computed; ``A``, ``h``, ``B`` are then unavailable.
+        """
         m, d, lay = self.model, self.data, self.layout
         qpos = np.asarray(qpos, dtype=float)
         qvel = np.asarray(qvel, dtype=float)
@@ -288,19 +293,22 @@ class RobotModel:
         d.qvel[: lay.nv] = qvel
         mujoco.mj_kinematics(m, d)
         mujoco.mj_comPos(m, d)
+        self._update_minimal_coordinates()
+        self._update_transform()
+        self._update_com()
+        self._updated = True
+        self._has_dynamics = dynamics
+        if not dynamics:
+            return
         mujoco.mj_crb(m, d)
         mujoco.mj_fullM(m, d, self._M)
         mujoco.mj_comVel(m, d)
         mujoco.mj_passive(m, d)
         mujoco.mj_rne(m, d, 0, self._bias)
-        self._update_minimal_coordinates()
-        self._update_transform()
         J = self._J
         self._A = J.T @ self._M @ J
         self._h = J.T @ (self._M @ self._Jdot_nu + self._bias - d.qfrc_passive)
         self._B = J.T @ self._S
-        self._update_com()
-        self._updated = True
 
     def _update_minimal_coordinates(self) -> None:
         d, lay = self.data, self.layout
@@ -389,6 +397,11 @@ class RobotModel:
         if not self._updated:
             raise RuntimeError("RobotModel.update(qpos, qvel) must be called first")
 
+    def _require_dynamics(self) -> None:
+        self._require()
+        if not self._has_dynamics:
+            raise RuntimeError("the last update had dynamics=False: A, h, B were not computed")
+
     # ------------------------------------------------------------- accessors
     @property
     def q(self) -> Array:
@@ -417,25 +430,25 @@ class RobotModel:
     @property
     def A(self) -> Array:
         """Minimal-coordinate inertia ``J_tf^T M J_tf`` (paper eq. ``dyn``)."""
-        self._require()
+        self._require_dynamics()
         return self._A
 
     @property
     def h(self) -> Array:
         """Bias ``J_tf^T (M Jdot_tf nu + c - f_passive)``: Coriolis, gravity, friction."""
-        self._require()
+        self._require_dynamics()
         return self._h
 
     @property
     def B(self) -> Array:
         """Actuation ``J_tf^T S`` (``n_min x nu``): ``A nu_dot + h = B ctrl``."""
-        self._require()
+        self._require_dynamics()
         return self._B
 
     @property
     def mass_matrix(self) -> Array:
         """MuJoCo's full mass matrix at this state (``nv x nv``)."""
-        self._require()
+        self._require_dynamics()
         return self._M
 
     @property
@@ -493,7 +506,7 @@ class RobotModel:
     # ---------------------------------------------------------- derived
     def accelerations(self, ctrl: ArrayLike) -> Array:
         """Minimal accelerations ``nu_dot`` solving ``A nu_dot + h = B ctrl``."""
-        self._require()
+        self._require_dynamics()
         return np.linalg.solve(self._A, self._B @ np.asarray(ctrl, dtype=float) - self._h)
 
     def full_accelerations(self, nu_dot: ArrayLike) -> Array:

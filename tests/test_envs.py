@@ -1,0 +1,169 @@
+"""The five environments: Gymnasium's checkers, determinism, rewards, spaces, physics sanity."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+from gymnasium.wrappers import FlattenObservation
+
+import wip_gym
+
+ENV_IDS = list(wip_gym.ENV_IDS)
+TRAY_IDS = ["wip_gym/PlanarTray-v0", "wip_gym/KrangTray-v0"]
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_check_env(env_id: str) -> None:
+    env = gym.make(env_id)
+    check_env(env.unwrapped, skip_render_check=True)
+    env.close()
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_same_seed_same_episode(env_id: str) -> None:
+    def run() -> list[np.ndarray]:
+        env = gym.make(env_id)
+        obs, _ = env.reset(seed=7)
+        rng = np.random.default_rng(0)
+        trace = [np.concatenate([obs["qpos"], obs["qvel"]])]
+        for _ in range(200):
+            action = rng.uniform(-0.2, 0.2, env.action_space.shape) * env.action_space.high
+            obs, *_ = env.step(action)
+            trace.append(np.concatenate([obs["qpos"], obs["qvel"]]))
+        env.close()
+        return trace
+
+    first, second = run(), run()
+    np.testing.assert_array_equal(np.array(first), np.array(second))
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_different_seeds_differ_and_noise_is_nonzero(env_id: str) -> None:
+    env = gym.make(env_id)
+    a, _ = env.reset(seed=1)
+    b, _ = env.reset(seed=2)
+    assert not np.allclose(a["qvel"], b["qvel"])
+    quiet = gym.make(env_id, reset_noise_scale=0.0)
+    c, info = quiet.reset(seed=1)
+    assert abs(info["theta"]) < 1e-9  # the CoM starts exactly over the axle
+    assert not np.allclose(a["qpos"], c["qpos"])
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_reward_is_sum_of_terms(env_id: str) -> None:
+    env = gym.make(env_id)
+    env.reset(seed=0)
+    rng = np.random.default_rng(1)
+    for _ in range(300):
+        action = rng.uniform(-0.3, 0.3, env.action_space.shape) * env.action_space.high
+        _, reward, terminated, _, info = env.step(action)
+        terms = sum(v for k, v in info.items() if k.startswith("reward_"))
+        assert reward == terms
+        if terminated:
+            break
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_zero_torque_falls_and_is_reported(env_id: str) -> None:
+    env = gym.make(env_id)
+    env.reset(seed=0)
+    zero = np.zeros(env.action_space.shape)
+    for _ in range(5000):
+        _, reward, terminated, _, info = env.step(zero)
+        if terminated:
+            break
+    assert terminated and info["fallen"]
+    assert info["reward_fall"] < 0
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_flatten_and_vector_env_step(env_id: str) -> None:
+    flat = FlattenObservation(gym.make(env_id))
+    obs, _ = flat.reset(seed=0)
+    assert obs.dtype == np.float64 and obs.ndim == 1
+    flat.step(np.zeros(flat.action_space.shape))
+    vec = gym.make_vec(env_id, num_envs=2, vectorization_mode="sync")
+    obs, _ = vec.reset(seed=0)
+    assert obs["qpos"].shape[0] == 2
+    vec.step(np.zeros(vec.action_space.shape))
+    vec.close()
+
+
+@pytest.mark.parametrize(
+    ("action", "message"),
+    [
+        (np.full(2, np.nan), "NaN"),
+        (np.zeros(3), "shape"),
+        (np.array([1000.0, 0.0]), "limits"),
+    ],
+)
+def test_bad_actions_raise(action: np.ndarray, message: str) -> None:
+    env = gym.make("wip_gym/WIP-v0")
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=message):
+        env.unwrapped.step(action)
+
+
+def test_bad_kwargs_raise() -> None:
+    with pytest.raises(ValueError, match="goal"):
+        gym.make("wip_gym/Planar-v0", goal=(1.0, 2.0))
+    with pytest.raises(ValueError, match="cup_friction"):
+        gym.make("wip_gym/PlanarTray-v0", cup_friction=-1.0)
+    with pytest.raises(ValueError, match="mass_randomization"):
+        gym.make("wip_gym/Krang-v0", mass_randomization=2.0)
+
+
+@pytest.mark.parametrize("env_id", TRAY_IDS)
+def test_tray_starts_level_with_cup_on_it(env_id: str) -> None:
+    env = gym.make(env_id, reset_noise_scale=0.0)
+    obs, info = env.reset(seed=0)
+    assert info["tray_tilt_deg"] < 1e-6
+    assert info["cup_on_tray"]
+    assert obs["cup_pose"].shape == (7,)
+
+
+def test_wheel_torque_limit_and_cup_friction_kwargs() -> None:
+    env = gym.make("wip_gym/KrangTray-v0", wheel_torque_limit=63.6, cup_friction=0.5)
+    np.testing.assert_allclose(env.action_space.high[:2], 63.6, rtol=1e-6)
+    assert env.unwrapped.cup_friction == 0.5
+
+
+def test_push_moves_the_robot_along_the_heading() -> None:
+    def final_x(force: float) -> float:
+        env = gym.make(
+            "wip_gym/WIP-v0",
+            push_force=force,
+            push_time=0.0,
+            push_duration=0.2,
+            reset_noise_scale=0.0,
+        )
+        env.reset(seed=0)
+        for _ in range(150):
+            _, _, _, _, info = env.step(np.zeros(2))
+        return info["x"]
+
+    assert final_x(200.0) > final_x(0.0) + 1e-3
+    assert final_x(-200.0) < final_x(0.0) - 1e-3
+
+
+def test_payload_changes_the_mass_when_it_appears() -> None:
+    env = gym.make("wip_gym/Krang-v0", payload_mass=2.0, payload_time=0.05)
+    env.reset(seed=0)
+    model = env.unwrapped.model
+    payload = model.body("payload").id
+    assert model.body_mass[payload] == 0.0
+    for _ in range(60):
+        env.step(np.zeros(env.action_space.shape))
+    assert model.body_mass[payload] == 2.0
+
+
+def test_mass_randomization_is_seeded() -> None:
+    env = gym.make("wip_gym/Krang-v0", mass_randomization=0.1)
+    env.reset(seed=3)
+    first = env.unwrapped.model.body_mass.copy()
+    env.reset(seed=4)
+    assert not np.allclose(first, env.unwrapped.model.body_mass)
+    env.reset(seed=3)
+    np.testing.assert_array_equal(first, env.unwrapped.model.body_mass)

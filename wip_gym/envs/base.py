@@ -1,0 +1,403 @@
+"""The common Gymnasium environment of every wip-gym robot and task (DESIGN 6).
+
+Subclasses (``wip_gym/envs/tasks.py``) fix the robot and whether there is a tray and a cup; the
+class docstrings there hold the tables of spaces, rewards and arguments.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import mujoco
+import numpy as np
+from gymnasium import spaces, utils
+from gymnasium.envs.mujoco.mujoco_env import MujocoEnv
+from numpy.typing import NDArray
+
+from wip_gym.assets import mjcf_path
+from wip_gym.robot_model import RobotModel
+from wip_gym.robots import robot_spec
+from wip_gym.scene import CUP_HALF_HEIGHT, TRAY_HALF_SIZE, SceneOptions, build_model, reset_qpos
+
+DEFAULT_CAMERA_CONFIG: dict[str, Any] = {}
+
+
+def _goal_array(goal: Any, planar: bool) -> NDArray[np.float64]:
+    arr = np.atleast_1d(np.asarray(goal, dtype=float))
+    if arr.shape == (1,):
+        arr = np.array([arr[0], 0.0])
+    if arr.shape != (2,) or not np.all(np.isfinite(arr)):
+        raise ValueError(f"goal must be a finite x or (x, y), got {goal!r}")
+    if planar and arr[1] != 0.0:
+        raise ValueError(f"a planar robot's goal has y = 0, got {goal!r}")
+    return arr
+
+
+class WIPEnv(MujocoEnv, utils.EzPickle):
+    """A WIP robot on flat ground driving to a goal, optionally carrying a cup on a tray.
+
+    See the task classes in ``wip_gym.envs.tasks`` for the documentation tables.
+    """
+
+    metadata = {"render_modes": ["human", "rgb_array", "depth_array"]}
+
+    def __init__(
+        self,
+        robot: str,
+        tray: bool = False,
+        goal: float | tuple[float, float] = 2.0,
+        cup_friction: float = 0.3,
+        payload_mass: float = 0.0,
+        payload_time: float = 0.0,
+        push_force: float = 0.0,
+        push_time: float = 1.0,
+        push_duration: float = 0.1,
+        reset_noise_scale: float = 0.01,
+        mass_randomization: float = 0.0,
+        wheel_torque_limit: float = 150.0,
+        terminate_on_cup_loss: bool = True,
+        fall_angle: float = 0.8,
+        progress_weight: float = 1.0,
+        ctrl_cost_weight: float = 0.1,
+        fall_penalty: float = 10.0,
+        cup_loss_penalty: float = 10.0,
+        frame_skip: int = 1,
+        width: int = 480,
+        height: int = 320,
+        **kwargs: Any,
+    ) -> None:
+        if not hasattr(self, "_ezpickle_kwargs"):  # the task classes pickle their own kwargs
+            utils.EzPickle.__init__(
+                self, robot, tray, goal, cup_friction, payload_mass, payload_time, push_force,
+                push_time, push_duration, reset_noise_scale, mass_randomization,
+                wheel_torque_limit, terminate_on_cup_loss, fall_angle, progress_weight,
+                ctrl_cost_weight, fall_penalty, cup_loss_penalty, frame_skip, width, height,
+                **kwargs,
+            )  # fmt: skip
+        self._spec = robot_spec(robot)
+        self._goal = _goal_array(goal, self._spec.planar)
+        for name, value in (
+            ("payload_time", payload_time), ("push_time", push_time),
+            ("push_duration", push_duration), ("reset_noise_scale", reset_noise_scale),
+            ("fall_angle", fall_angle), ("ctrl_cost_weight", ctrl_cost_weight),
+            ("fall_penalty", fall_penalty), ("cup_loss_penalty", cup_loss_penalty),
+        ):  # fmt: skip
+            if not np.isfinite(value) or value < 0:
+                raise ValueError(f"{name} must be finite and >= 0, got {value}")
+        if not np.isfinite(push_force):
+            raise ValueError(f"push_force must be finite, got {push_force}")
+        if not 0.0 <= mass_randomization < 1.0:
+            raise ValueError(f"mass_randomization must be in [0, 1), got {mass_randomization}")
+        if not isinstance(frame_skip, int | np.integer) or frame_skip < 1:
+            raise ValueError(f"frame_skip must be a positive integer, got {frame_skip!r}")
+        self._scene = SceneOptions(
+            robot=robot, tray=tray, cup=tray, cup_friction=cup_friction,
+            payload_mass=payload_mass, wheel_torque_limit=wheel_torque_limit,
+        )  # fmt: skip
+        self._tray = tray
+        self._payload_mass = payload_mass
+        self._payload_time = payload_time
+        self._push = (push_force, push_time, push_duration)
+        self._reset_noise_scale = reset_noise_scale
+        self._mass_randomization = mass_randomization
+        self._terminate_on_cup_loss = terminate_on_cup_loss
+        self._fall_angle = fall_angle
+        self._weights = (progress_weight, ctrl_cost_weight, fall_penalty, cup_loss_penalty)
+
+        MujocoEnv.__init__(
+            self,
+            str(mjcf_path(self._spec.scene_file)),
+            frame_skip,
+            observation_space=None,
+            default_camera_config=DEFAULT_CAMERA_CONFIG,
+            width=width,
+            height=height,
+            camera_name=kwargs.pop("camera_name", "track"),
+            **kwargs,
+        )
+        self.metadata = {
+            "render_modes": ["human", "rgb_array", "depth_array"],
+            "render_fps": int(np.round(1.0 / self.dt)),
+        }
+        self.robot = RobotModel(self.model)
+        lay = self.robot.layout
+        self._nq, self._nv = lay.nq, lay.nv
+        obs = {
+            "qpos": spaces.Box(-np.inf, np.inf, (lay.nq,), np.float64),
+            "qvel": spaces.Box(-np.inf, np.inf, (lay.nv,), np.float64),
+            "goal": spaces.Box(-np.inf, np.inf, (2,), np.float64),
+        }
+        if tray:
+            obs["cup_pose"] = spaces.Box(-np.inf, np.inf, (7,), np.float64)
+        self.observation_space = spaces.Dict(obs)
+        m = self.model
+        self._robot_bodies = np.array(
+            [b for b in range(m.nbody) if m.body_rootid[b] == lay.base_body]
+        )
+        self._nominal_mass = m.body_mass.copy()
+        self._nominal_inertia = m.body_inertia.copy()
+        self._push_body = m.body(self._spec.push_body).id
+        self._goal_site = m.site("goal").id
+        self._floor = m.geom("floor").id
+        wheel_geoms = {m.geom("wheel_left").id, m.geom("wheel_right").id}
+        self._body_geoms = np.array(
+            [g for g in range(m.ngeom)
+             if m.geom_bodyid[g] in self._robot_bodies and g not in wheel_geoms
+             and (m.geom_contype[g] or m.geom_conaffinity[g])]
+        )  # fmt: skip
+        self._ee_site = m.site("ee").id if self._spec.tray_capable else -1
+        if tray:
+            self._tray_body = m.body("tray").id
+            self._cup_body = m.body("cup").id
+            self._cup_qpos = m.jnt_qposadr[m.joint("cup").id]
+            self._cup_dof = m.jnt_dofadr[m.joint("cup").id]
+            self._cup_geom = m.geom("cup").id
+            self._tray_geom = m.geom("tray").id
+            self._cup_friction = float(cup_friction)
+        if payload_mass > 0:
+            self._payload_body = m.body("payload").id
+        self._action_low = self.action_space.low.astype(np.float64)
+        self._action_high = self.action_space.high.astype(np.float64)
+        self._prev_distance = 0.0
+        self._ee_reference = np.zeros(3)
+        self._cup_lost = False
+        self._payload_attached = True
+
+    # ----------------------------------------------------------------- model
+    def _initialize_simulation(self) -> tuple[mujoco.MjModel, mujoco.MjData]:
+        model = build_model(self._scene)
+        model.vis.global_.offwidth = max(model.vis.global_.offwidth, self.width)
+        model.vis.global_.offheight = max(model.vis.global_.offheight, self.height)
+        return model, mujoco.MjData(model)
+
+    @property
+    def scene_options(self) -> SceneOptions:
+        """What the model was built from (a controller builds its nominal model from it)."""
+        return self._scene
+
+    @property
+    def goal(self) -> NDArray[np.float64]:
+        """The goal ``(X, Y)`` in world (planar: ``(x, 0)``)."""
+        return self._goal.copy()
+
+    @property
+    def cup_friction(self) -> float | None:
+        """Tray-cup friction coefficient, or None without a cup."""
+        return self._cup_friction if self._tray else None
+
+    # ----------------------------------------------------------------- reset
+    def reset_model(self) -> dict[str, NDArray[np.float64]]:
+        m, d, lay = self.model, self.data, self.robot.layout
+        rng = self.np_random
+        m.body_mass[:] = self._nominal_mass
+        m.body_inertia[:] = self._nominal_inertia
+        if self._mass_randomization > 0:
+            scale = 1.0 + rng.uniform(
+                -self._mass_randomization, self._mass_randomization, len(self._robot_bodies)
+            )
+            m.body_mass[self._robot_bodies] *= scale
+            m.body_inertia[self._robot_bodies] *= scale[:, None]
+        self._payload_attached = self._payload_time <= 0.0
+        if self._payload_mass > 0 and not self._payload_attached:
+            m.body_mass[self._payload_body] = 0.0
+            m.body_inertia[self._payload_body] = 0.0
+        mujoco.mj_setConst(m, d)
+
+        qpos0 = reset_qpos(m, self.robot)
+        self.robot.update(qpos0, np.zeros(lay.nv), dynamics=False)
+        q = self.robot.q.copy()
+        nu = np.zeros(lay.n_min)
+        s = self._reset_noise_scale
+        first = lay.index_q1
+        q[first:] += rng.uniform(-s, s, lay.n_min - first)
+        nu[first:] += rng.uniform(-s, s, lay.n_min - first)
+        qpos_robot, qvel_robot = self.robot.full_state(q, nu)
+        qpos = self.init_qpos.copy()
+        qvel = np.zeros(m.nv)
+        qpos[: lay.nq] = qpos_robot
+        qvel[: lay.nv] = qvel_robot
+        if self._tray:
+            d.qpos[:] = qpos
+            mujoco.mj_kinematics(m, d)
+            top = d.xpos[self._tray_body] + d.xmat[self._tray_body].reshape(3, 3) @ np.array(
+                [0.0, 0.0, 2 * TRAY_HALF_SIZE[2] + CUP_HALF_HEIGHT]
+            )
+            quat = np.zeros(4)
+            mujoco.mju_mat2Quat(quat, d.xmat[self._tray_body])
+            qpos[self._cup_qpos : self._cup_qpos + 3] = top
+            qpos[self._cup_qpos + 3 : self._cup_qpos + 7] = quat
+        self.set_state(qpos, qvel)
+        m.site_pos[self._goal_site, :2] = self._goal
+        d.xfrc_applied[:] = 0.0
+        self.robot.update(d.qpos[: lay.nq], d.qvel[: lay.nv], dynamics=False)
+        self._prev_distance = self._goal_distance()
+        self._ee_reference = self._ee_in_axle_frame()
+        self._cup_lost = False
+        return self._get_obs()
+
+    def _get_reset_info(self) -> dict[str, Any]:
+        return self._info(fallen=False, cup_on_tray=True)
+
+    # ------------------------------------------------------------------ step
+    def step(
+        self, action: NDArray[np.floating]
+    ) -> tuple[dict[str, NDArray[np.float64]], float, bool, bool, dict[str, Any]]:
+        action = self._check_action(action)
+        m, d, lay = self.model, self.data, self.robot.layout
+        t = d.time
+        force, start, duration = self._push
+        d.xfrc_applied[self._push_body, :] = 0.0
+        if force != 0.0 and start <= t < start + duration:
+            heading = self.robot.heading_rotation[:, 0]
+            d.xfrc_applied[self._push_body, :3] = force * heading
+        if not self._payload_attached and t >= self._payload_time:
+            m.body_mass[self._payload_body] = self._payload_mass
+            m.body_inertia[self._payload_body] = self._nominal_inertia[self._payload_body]
+            mujoco.mj_setConst(m, d)
+            self._payload_attached = True
+        self.do_simulation(action, self.frame_skip)
+        self.robot.update(d.qpos[: lay.nq], d.qvel[: lay.nv], dynamics=False)
+        fallen = self._fallen()
+        cup_on_tray = self._cup_on_tray() if self._tray else True
+        newly_lost = self._tray and not cup_on_tray and not self._cup_lost
+        self._cup_lost = self._cup_lost or not cup_on_tray
+        distance = self._goal_distance()
+        progress_w, ctrl_w, fall_pen, cup_pen = self._weights
+        scaled = action / np.maximum(np.abs(self._action_high), 1e-12)
+        rewards = {
+            "reward_progress": progress_w * (self._prev_distance - distance),
+            "reward_ctrl": -ctrl_w * float(scaled @ scaled) * self.dt,
+            "reward_fall": -fall_pen if fallen else 0.0,
+            "reward_cup_loss": -cup_pen if newly_lost else 0.0,
+        }
+        self._prev_distance = distance
+        reward = float(sum(rewards.values()))
+        terminated = bool(fallen or (self._tray and self._terminate_on_cup_loss and self._cup_lost))
+        info = self._info(fallen=fallen, cup_on_tray=cup_on_tray)
+        info.update(rewards)
+        if self.render_mode == "human":
+            self.render()
+        return self._get_obs(), reward, terminated, False, info
+
+    def _check_action(self, action: Any) -> NDArray[np.float64]:
+        a = np.asarray(action, dtype=np.float64)
+        if a.shape != self.action_space.shape:
+            raise ValueError(
+                f"action must have shape {self.action_space.shape} (one torque per actuator: "
+                f"{[self.model.actuator(i).name for i in range(self.model.nu)]}), got {a.shape}"
+            )
+        if not np.all(np.isfinite(a)):
+            raise ValueError(
+                f"action contains NaN or inf at indices {np.flatnonzero(~np.isfinite(a))}"
+            )
+        tol = 1e-6 * (self._action_high - self._action_low)
+        outside = (a < self._action_low - tol) | (a > self._action_high + tol)
+        if np.any(outside):
+            bad = {self.model.actuator(i).name: (float(a[i]), float(self._action_high[i]))
+                   for i in np.flatnonzero(outside)}  # fmt: skip
+            raise ValueError(f"action beyond the torque limits (value, limit): {bad}")
+        return a
+
+    # ------------------------------------------------------------- measures
+    def _goal_distance(self) -> float:
+        axle = self.robot.axle_position
+        if self._spec.planar:
+            return float(abs(self._goal[0] - axle[0]))
+        return float(np.hypot(*(self._goal - axle[:2])))
+
+    def _ee_in_axle_frame(self) -> NDArray[np.float64]:
+        if self._ee_site < 0:
+            return np.zeros(3)
+        d = self.data
+        return self.robot.heading_rotation.T @ (
+            d.site_xpos[self._ee_site] - self.robot.axle_position
+        )
+
+    def _fallen(self) -> bool:
+        if abs(self.robot.theta) > self._fall_angle:
+            return True
+        d = self.data
+        for c in d.contact[: d.ncon]:
+            if (c.geom1 == self._floor and c.geom2 in self._body_geoms) or (
+                c.geom2 == self._floor and c.geom1 in self._body_geoms
+            ):
+                return True
+        return False
+
+    def _cup_in_tray_frame(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        d = self.data
+        R = d.xmat[self._tray_body].reshape(3, 3)
+        position = R.T @ (d.xpos[self._cup_body] - d.xpos[self._tray_body])
+        tray_quat, cup_quat, rel = np.zeros(4), np.zeros(4), np.zeros(4)
+        mujoco.mju_mat2Quat(tray_quat, d.xmat[self._tray_body])
+        mujoco.mju_negQuat(tray_quat, tray_quat)
+        mujoco.mju_mat2Quat(cup_quat, d.xmat[self._cup_body])
+        mujoco.mju_mulQuat(rel, tray_quat, cup_quat)
+        return position, rel
+
+    def _cup_on_tray(self) -> bool:
+        """The cup's centre is above the tray's plate (within its outline) and near it."""
+        p, _ = self._cup_in_tray_frame()
+        top = 2 * TRAY_HALF_SIZE[2]
+        return bool(
+            abs(p[0]) <= TRAY_HALF_SIZE[0] and abs(p[1]) <= TRAY_HALF_SIZE[1]
+            and top < p[2] < top + 2.5 * CUP_HALF_HEIGHT
+        )  # fmt: skip
+
+    def _cup_friction_use(self) -> float:
+        """Tangential over mu times normal contact force, summed over the tray-cup contacts
+        (1 means the cup slides); 0 with no contact."""
+        d, m = self.data, self.model
+        normal = 0.0
+        tangential = np.zeros(3)
+        frame = np.zeros(6)
+        for i, c in enumerate(d.contact[: d.ncon]):
+            if {c.geom1, c.geom2} == {self._cup_geom, self._tray_geom}:
+                mujoco.mj_contactForce(m, d, i, frame)
+                R = c.frame.reshape(3, 3)  # rows: normal, tangent 1, tangent 2
+                normal += frame[0]
+                tangential += frame[1] * R[1] + frame[2] * R[2]
+        if normal <= 0.0:
+            return 0.0
+        return float(np.linalg.norm(tangential) / (self._cup_friction * normal))
+
+    def _tray_tilt_deg(self) -> float:
+        z = self.data.xmat[self._tray_body].reshape(3, 3)[:, 2]
+        return float(np.degrees(np.arccos(np.clip(z[2], -1.0, 1.0))))
+
+    def _info(self, *, fallen: bool, cup_on_tray: bool) -> dict[str, Any]:
+        robot = self.robot
+        axle = robot.axle_position
+        info: dict[str, Any] = {
+            "x": float(robot.q[0]),
+            "xd": float(robot.nu[0]),
+            "theta": robot.theta,
+            "thetad": robot.thetad,
+            "axle_position": axle,
+            "goal_distance": self._goal_distance(),
+            "fallen": bool(fallen),
+        }
+        if not self._spec.planar:
+            info["psi"] = robot.psi
+            info["psid"] = float(robot.nu[1])
+        if self._ee_site >= 0:
+            info["ee_error"] = float(np.linalg.norm(self._ee_in_axle_frame() - self._ee_reference))
+        if self._tray:
+            offset, _ = self._cup_in_tray_frame()
+            info["tray_tilt_deg"] = self._tray_tilt_deg()
+            info["cup_offset"] = offset
+            info["cup_on_tray"] = bool(cup_on_tray)
+            info["cup_friction_use"] = self._cup_friction_use()
+        return info
+
+    def _get_obs(self) -> dict[str, NDArray[np.float64]]:
+        d = self.data
+        obs = {
+            "qpos": d.qpos[: self._nq].astype(np.float64, copy=True),
+            "qvel": d.qvel[: self._nv].astype(np.float64, copy=True),
+            "goal": self._goal.copy(),
+        }
+        if self._tray:
+            position, quat = self._cup_in_tray_frame()
+            obs["cup_pose"] = np.concatenate([position, quat])
+        return obs

@@ -1,0 +1,29 @@
+"""Gymnasium registration of the wip-gym environments (DESIGN 6)."""
+
+from __future__ import annotations
+
+import gymnasium
+
+# 25 s at the 1 ms control step: the plan horizon (20 s) plus 5 s to settle (issue 3).
+EPISODE_SECONDS = 25.0
+CONTROL_DT = 0.001
+
+ENV_IDS: dict[str, str] = {
+    "wip_gym/WIP-v0": "wip_gym.envs.tasks:WIPDriveEnv",
+    "wip_gym/Planar-v0": "wip_gym.envs.tasks:PlanarEnv",
+    "wip_gym/PlanarTray-v0": "wip_gym.envs.tasks:PlanarTrayEnv",
+    "wip_gym/Krang-v0": "wip_gym.envs.tasks:KrangEnv",
+    "wip_gym/KrangTray-v0": "wip_gym.envs.tasks:KrangTrayEnv",
+}
+
+
+def register_envs() -> None:
+    """Register every environment (idempotent)."""
+    for env_id, entry_point in ENV_IDS.items():
+        if env_id in gymnasium.registry:
+            continue
+        gymnasium.register(
+            id=env_id,
+            entry_point=entry_point,
+            max_episode_steps=int(round(EPISODE_SECONDS / CONTROL_DT)),
+        )
