@@ -52,6 +52,7 @@ def test_dynamics_equal_exact_constrained_dynamics(robot: RobotModel) -> None:
     """Level 1: A nu_dot + h = B tau reproduces MuJoCo's constrained dynamics to 1e-9."""
     rng = np.random.default_rng(1)
     model = robot.model
+    worst = 0.0
     for _ in range(20):
         q, nu = random_minimal_state(robot, rng)
         qpos, qvel = robot.full_state(q, nu)
@@ -60,11 +61,13 @@ def test_dynamics_equal_exact_constrained_dynamics(robot: RobotModel) -> None:
         nu_dot = robot.accelerations(ctrl)
         reference = constrained_accelerations(model, qpos, qvel, ctrl, robot)
         qacc = robot.full_accelerations(nu_dot)
+        worst = max(worst, np.linalg.norm(qacc - reference) / np.linalg.norm(reference))
         assert np.linalg.norm(qacc - reference) <= 1e-9 * np.linalg.norm(reference)
         # and the equation itself, in minimal coordinates
         nu_dot_ref = np.linalg.lstsq(robot.J_tf, reference - robot.Jdot_tf_nu, rcond=None)[0]
         residual = robot.A @ nu_dot_ref + robot.h - robot.B @ ctrl
         assert np.linalg.norm(residual) <= 1e-9 * np.linalg.norm(robot.B @ ctrl - robot.h)
+    print(f"exact level: worst relative error {worst:.1e}")
 
 
 def test_dynamics_match_mujoco_contact(robot: RobotModel) -> None:
@@ -87,6 +90,7 @@ def test_dynamics_match_mujoco_contact(robot: RobotModel) -> None:
         nu_dot_mj = np.linalg.lstsq(robot.J_tf, data.qacc - robot.Jdot_tf_nu, rcond=None)[0]
         errors.append(np.linalg.norm(nu_dot - nu_dot_mj) / max(np.linalg.norm(nu_dot_mj), 1.0))
     errors = np.array(errors)
+    print(f"contact level: median {np.median(errors):.1e}, max {errors.max():.1e}")
     assert np.median(errors) < 2e-3, np.median(errors)
     assert errors.max() < 2e-2, errors.max()
 
