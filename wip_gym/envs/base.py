@@ -220,7 +220,8 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             d.qpos[:] = qpos
             mujoco.mj_kinematics(m, d)
             top = d.xpos[self._tray_body] + d.xmat[self._tray_body].reshape(3, 3) @ np.array(
-                [0.0, 0.0, 2 * TRAY_HALF_SIZE[2] + CUP_HALF_HEIGHT]
+                # 1 micron into the tray: a contact exactly at distance 0 is not yet active
+                [0.0, 0.0, 2 * TRAY_HALF_SIZE[2] + CUP_HALF_HEIGHT - 1e-6]
             )
             quat = np.zeros(4)
             mujoco.mju_mat2Quat(quat, d.xmat[self._tray_body])
