@@ -1,5 +1,5 @@
 # The two commands that do everything on a fresh machine:
-#   make demo   the main job (unified vs decoupled on the default scenario: table + video)
+#   make demo   the main job: wip-bench compare on PlanarTray-v0 (table, summary.json, video)
 #   make test   create .venv if missing, install the project with its pinned deps, run pytest
 VENV   ?= .venv
 PYTHON ?= python3
@@ -26,8 +26,8 @@ lint: $(STAMP)
 	$(VENV)/bin/ruff format --check .
 
 demo: $(STAMP)
-	@echo "The main job (wip-bench compare, unified vs decoupled) arrives with the benchmark issue;"
-	@echo "until then, try: $(PY) -m wip_gym.video --env wip_gym/KrangTray-v0 --out out/krang_tray.mp4"
+	MUJOCO_GL=$${MUJOCO_GL:-egl} $(VENV)/bin/wip-bench compare --env wip_gym/PlanarTray-v0 \
+		--episodes 1 --video --out out/demo
 
 clean:
 	rm -rf $(VENV) build dist *.egg-info

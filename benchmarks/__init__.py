@@ -1,0 +1,1 @@
+"""wip-bench: benchmarks of wip-gym controllers (the ``wip-bench`` command)."""

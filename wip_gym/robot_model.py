@@ -390,7 +390,13 @@ class RobotModel:
         self._com = rel
         self._J_com = J_rel
         self._theta = float(np.arctan2(X, Z))
-        self._J_theta = (Z * J_rel[0] - X * J_rel[2]) / (X * X + Z * Z)
+        # theta is undefined with the CoM on the axle: its Jacobian is then set to zero
+        distance_sq = X * X + Z * Z
+        self._J_theta = (
+            (Z * J_rel[0] - X * J_rel[2]) / distance_sq
+            if distance_sq > 1e-18
+            else (np.zeros_like(J_rel[0]))
+        )
         self._thetad = float(self._J_theta @ self._nu)
 
     def _require(self) -> None:

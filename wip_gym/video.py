@@ -9,6 +9,7 @@ Frames are decimated to ``fps`` (a frame every ``round(1 / (fps dt))`` steps) an
 from __future__ import annotations
 
 import argparse
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -20,6 +21,23 @@ import numpy as np
 import wip_gym  # noqa: F401  (registers the environments, sets MUJOCO_GL)
 
 Policy = Callable[[dict[str, np.ndarray]], np.ndarray]
+
+
+def open_video(path: str | Path, fps: float, first_frame: np.ndarray) -> Any:
+    """An imageio mp4 writer (H.264) with its first frame written.
+
+    imageio-ffmpeg starts ffmpeg with ``subprocess`` (fork + exec), which JAX warns about once
+    JAX has started threads; the child execs ffmpeg at once, so the warning is silenced here.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    writer = imageio.get_writer(path, fps=fps, codec="libx264", quality=7, macro_block_size=16)
+    with warnings.catch_warnings():
+        warnings.filterwarnings(
+            "ignore", message=r"os\.fork\(\) was called", category=RuntimeWarning
+        )
+        writer.append_data(first_frame)
+    return writer
 
 
 def frame_interval(dt: float, fps: float) -> int:
@@ -43,8 +61,6 @@ def record_episode(
     after ``seconds``. Returns the last ``info`` with ``frames`` and ``steps`` added."""
     if env.render_mode != "rgb_array":
         raise ValueError("record_episode needs an env made with render_mode='rgb_array'")
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     dt = env.unwrapped.dt
     every = frame_interval(dt, fps)
     max_steps = None if seconds is None else int(round(seconds / dt))
@@ -54,8 +70,7 @@ def record_episode(
     zero = np.zeros(env.action_space.shape)
     frames = 0
     steps = 0
-    with imageio.get_writer(path, fps=fps, codec="libx264", quality=7, macro_block_size=16) as out:
-        out.append_data(env.render())
+    with open_video(path, fps, env.render()) as out:
         frames += 1
         while max_steps is None or steps < max_steps:
             action = zero if policy is None else policy(obs)

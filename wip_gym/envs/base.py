@@ -68,20 +68,42 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
     ) -> None:
         if not hasattr(self, "_ezpickle_kwargs"):  # the task classes pickle their own kwargs
             utils.EzPickle.__init__(
-                self, robot, tray, goal, cup_friction, payload_mass, payload_time, push_force,
-                push_time, push_duration, reset_noise_scale, mass_randomization,
-                wheel_torque_limit, terminate_on_cup_loss, fall_angle, progress_weight,
-                ctrl_cost_weight, fall_penalty, cup_loss_penalty, frame_skip, width, height,
+                self,
+                robot,
+                tray,
+                goal,
+                cup_friction,
+                payload_mass,
+                payload_time,
+                push_force,
+                push_time,
+                push_duration,
+                reset_noise_scale,
+                mass_randomization,
+                wheel_torque_limit,
+                terminate_on_cup_loss,
+                fall_angle,
+                progress_weight,
+                ctrl_cost_weight,
+                fall_penalty,
+                cup_loss_penalty,
+                frame_skip,
+                width,
+                height,
                 **kwargs,
-            )  # fmt: skip
+            )
         self._spec = robot_spec(robot)
         self._goal = _goal_array(goal, self._spec.planar)
         for name, value in (
-            ("payload_time", payload_time), ("push_time", push_time),
-            ("push_duration", push_duration), ("reset_noise_scale", reset_noise_scale),
-            ("fall_angle", fall_angle), ("ctrl_cost_weight", ctrl_cost_weight),
-            ("fall_penalty", fall_penalty), ("cup_loss_penalty", cup_loss_penalty),
-        ):  # fmt: skip
+            ("payload_time", payload_time),
+            ("push_time", push_time),
+            ("push_duration", push_duration),
+            ("reset_noise_scale", reset_noise_scale),
+            ("fall_angle", fall_angle),
+            ("ctrl_cost_weight", ctrl_cost_weight),
+            ("fall_penalty", fall_penalty),
+            ("cup_loss_penalty", cup_loss_penalty),
+        ):
             if not np.isfinite(value) or value < 0:
                 raise ValueError(f"{name} must be finite and >= 0, got {value}")
         if not np.isfinite(push_force):
@@ -91,9 +113,13 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         if not isinstance(frame_skip, int | np.integer) or frame_skip < 1:
             raise ValueError(f"frame_skip must be a positive integer, got {frame_skip!r}")
         self._scene = SceneOptions(
-            robot=robot, tray=tray, cup=tray, cup_friction=cup_friction,
-            payload_mass=payload_mass, wheel_torque_limit=wheel_torque_limit,
-        )  # fmt: skip
+            robot=robot,
+            tray=tray,
+            cup=tray,
+            cup_friction=cup_friction,
+            payload_mass=payload_mass,
+            wheel_torque_limit=wheel_torque_limit,
+        )
         self._tray = tray
         self._payload_mass = payload_mass
         self._payload_time = payload_time
@@ -141,10 +167,14 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         self._floor = m.geom("floor").id
         wheel_geoms = {m.geom("wheel_left").id, m.geom("wheel_right").id}
         self._body_geoms = np.array(
-            [g for g in range(m.ngeom)
-             if m.geom_bodyid[g] in self._robot_bodies and g not in wheel_geoms
-             and (m.geom_contype[g] or m.geom_conaffinity[g])]
-        )  # fmt: skip
+            [
+                g
+                for g in range(m.ngeom)
+                if m.geom_bodyid[g] in self._robot_bodies
+                and g not in wheel_geoms
+                and (m.geom_contype[g] or m.geom_conaffinity[g])
+            ]
+        )
         self._ee_site = m.site("ee").id if self._spec.tray_capable else -1
         if tray:
             self._tray_body = m.body("tray").id
@@ -179,6 +209,15 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
     def goal(self) -> NDArray[np.float64]:
         """The goal ``(X, Y)`` in world (planar: ``(x, 0)``)."""
         return self._goal.copy()
+
+    @property
+    def push(self) -> tuple[float, float, float]:
+        """``(force N, start s, duration s)`` of the push along the heading."""
+        return self._push
+
+    @property
+    def reset_noise_scale(self) -> float:
+        return self._reset_noise_scale
 
     @property
     def cup_friction(self) -> float | None:
@@ -294,8 +333,10 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         tol = 1e-6 * (self._action_high - self._action_low)
         outside = (a < self._action_low - tol) | (a > self._action_high + tol)
         if np.any(outside):
-            bad = {self.model.actuator(i).name: (float(a[i]), float(self._action_high[i]))
-                   for i in np.flatnonzero(outside)}  # fmt: skip
+            bad = {
+                self.model.actuator(i).name: (float(a[i]), float(self._action_high[i]))
+                for i in np.flatnonzero(outside)
+            }
             raise ValueError(f"action beyond the torque limits (value, limit): {bad}")
         return a
 
@@ -341,9 +382,10 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         p, _ = self._cup_in_tray_frame()
         top = 2 * TRAY_HALF_SIZE[2]
         return bool(
-            abs(p[0]) <= TRAY_HALF_SIZE[0] and abs(p[1]) <= TRAY_HALF_SIZE[1]
+            abs(p[0]) <= TRAY_HALF_SIZE[0]
+            and abs(p[1]) <= TRAY_HALF_SIZE[1]
             and top < p[2] < top + 2.5 * CUP_HALF_HEIGHT
-        )  # fmt: skip
+        )
 
     def _cup_friction_use(self) -> float:
         """Tangential over mu times normal contact force, summed over the tray-cup contacts

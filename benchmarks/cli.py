@@ -1,0 +1,34 @@
+"""``wip-bench``: the benchmark command line.
+
+wip-bench compare --env PlanarTray-v0 --controllers decoupled --episodes 3 --video
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from benchmarks import compare
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="wip-bench", description=__doc__.splitlines()[0])
+    commands = parser.add_subparsers(dest="command", required=True)
+    compare_parser = commands.add_parser("compare", help="controllers x seeds on one scenario")
+    compare.add_arguments(compare_parser)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        if args.command == "compare":
+            compare.run(args)
+    except ValueError as error:
+        parser.error(str(error))  # exits with status 2 and the message
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

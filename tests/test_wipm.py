@@ -1,0 +1,403 @@
+"""The WIPM (controllers/wipm.py) against MuJoCo.
+
+The ``wip`` robot is one rigid body on two wheels: the WIPM is exact for it. Level 1: MuJoCo's
+rigid-body dynamics with the rolling constraints imposed exactly (a KKT solve,
+tests/dynamics_reference.py), to round-off; level 2: ``mj_forward`` with the wheels rolling on
+the floor through MuJoCo's soft contacts, to the contact's softness. A "skewed" wip (its CoM
+moved ahead and sideways, its inertia tensor rotated off the axes) exercises the lateral CoM, the
+products of inertia and the rotation of ``lambda(q)``'s inertia into the CoM frame.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+import pytest
+from dynamics_reference import (
+    constrained_accelerations,
+    random_minimal_state,
+    sample_contact_states,
+)
+
+from controllers import wipm
+from wip_gym.assets import mjcf_path
+from wip_gym.robot_model import RobotModel
+from wip_gym.wheel_torques import generalized_to_wheel, wheel_to_generalized
+
+spatial_torque_dynamics = jax.jit(wipm.spatial_torque_dynamics)
+spatial_dynamics = jax.jit(wipm.spatial_dynamics)
+inverse_dynamics = jax.jit(wipm.inverse_dynamics)
+planar_dynamics = jax.jit(wipm.planar_dynamics)
+planar_torque_dynamics = jax.jit(wipm.planar_torque_dynamics)
+planar_inverse_dynamics = jax.jit(wipm.planar_inverse_dynamics)
+paper_printed_planar_dynamics = jax.jit(wipm.paper_printed_planar_dynamics)
+linearize = jax.jit(wipm.linearize, static_argnums=0)
+
+
+def _wip_model(skewed: bool = False) -> mujoco.MjModel:
+    model = mujoco.MjModel.from_xml_path(str(mjcf_path("scene_wip.xml")))
+    if skewed:
+        base = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "base")
+        model.body_ipos[base] = (0.07, 0.04, 0.30)
+        quat = np.array([0.9, 0.2, -0.3, 0.25])
+        model.body_iquat[base] = quat / np.linalg.norm(quat)
+        model.body_inertia[base] = (21.0, 15.0, 9.0)
+    return model
+
+
+@pytest.fixture(scope="module")
+def wip() -> RobotModel:
+    return RobotModel(_wip_model())
+
+
+def _spatial_state(robot: RobotModel) -> np.ndarray:
+    """WIPM state ``[x, psi, theta, xd, psid, thetad, X0, Y0]`` of the robot's last update."""
+    x, psi = robot.q[0], robot.q[1]
+    xd, psid = robot.nu[0], robot.nu[1]
+    X0, Y0 = robot.axle_position[:2]
+    return np.array([x, psi, robot.theta, xd, psid, robot.thetad, X0, Y0])
+
+
+def _minimal_accelerations(robot: RobotModel, qacc: np.ndarray) -> np.ndarray:
+    return np.linalg.lstsq(robot.J_tf, qacc - robot.Jdot_tf_nu, rcond=None)[0]
+
+
+def _wheel_ctrl(robot: RobotModel, tau_left: float, tau_right: float) -> np.ndarray:
+    ctrl = np.zeros(robot.model.nu)
+    ctrl[robot.layout.wheel_actuators[0]] = tau_left
+    ctrl[robot.layout.wheel_actuators[1]] = tau_right
+    return ctrl
+
+
+# ------------------------------------------------------------------------- level 1, 3-D
+@pytest.mark.parametrize("skewed", [False, True], ids=["wip", "wip_skewed"])
+def test_spatial_wipm_equals_exact_constrained_dynamics(skewed: bool) -> None:
+    """Level 1 (round-off), turning states included: the 3-D WIPM with the wheel torques as
+    input gives MuJoCo's constrained accelerations; with ``u = [thdd, tau_0]`` it gives the same
+    ``xdd``, ``psidd``; and the inverse dynamics return the applied wheel torques."""
+    model = _wip_model(skewed)
+    robot = RobotModel(model)
+    lay = robot.layout
+    rng = np.random.default_rng(10)
+    worst = {"torque": 0.0, "thdd": 0.0, "inverse": 0.0}
+    for _ in range(30):
+        q, nu = random_minimal_state(robot, rng, turning=True)
+        nu[1] = rng.normal() * 1.5  # turning fast enough for the centripetal terms to matter
+        qpos, qvel = robot.full_state(q, nu)
+        tau_left, tau_right = rng.uniform(-150.0, 150.0, 2)
+        ctrl = _wheel_ctrl(robot, tau_left, tau_right)
+        robot.update(qpos, qvel)
+        reference = _minimal_accelerations(
+            robot, constrained_accelerations(model, qpos, qvel, ctrl, robot)
+        )  # [xdd, psidd, q1dd]; theta = q1 + const on a rigid body, so thdd = q1dd
+        params = wipm.params_from_lambda(robot.wipm_parameters())
+        s = _spatial_state(robot)
+        scale = np.linalg.norm(reference)
+
+        sdot = np.asarray(spatial_torque_dynamics(s, np.array([tau_left, tau_right]), params))
+        np.testing.assert_allclose(sdot[:3], s[3:6], rtol=0, atol=0)
+        c, sn = np.cos(s[1]), np.sin(s[1])
+        np.testing.assert_allclose(sdot[6:], [s[3] * c, s[3] * sn], rtol=1e-14, atol=1e-14)
+        error = np.linalg.norm(sdot[3:6] - reference) / scale
+        worst["torque"] = max(worst["torque"], error)
+        assert error < 1e-9, error
+
+        tau_0, _ = wheel_to_generalized(tau_left, tau_right, lay.wheel_radius, lay.wheel_separation)
+        u = np.array([reference[2], tau_0])
+        sdot_u = np.asarray(spatial_dynamics(s, u, params))
+        error = np.linalg.norm(sdot_u[3:6] - reference) / scale
+        worst["thdd"] = max(worst["thdd"], error)
+        assert error < 1e-9, error
+
+        tau = np.array(inverse_dynamics(s, u, params))
+        error = np.linalg.norm(tau - [tau_left, tau_right]) / np.linalg.norm([tau_left, tau_right])
+        worst["inverse"] = max(worst["inverse"], error)
+        assert error < 1e-9, error
+    print(f"level 1 ({'skewed' if skewed else 'wip'}): worst relative errors {worst}")
+
+
+def test_inverse_dynamics_uses_the_wheel_torque_map_of_wip_gym(wip: RobotModel) -> None:
+    """The torque split of inverse_dynamics is wip_gym.wheel_torques' (ERRATA 3 convention)."""
+    rng = np.random.default_rng(11)
+    q, nu = random_minimal_state(wip, rng)
+    wip.update(*wip.full_state(q, nu))
+    params = wipm.params_from_lambda(wip.wipm_parameters())
+    s = _spatial_state(wip)
+    A, h, B = (np.asarray(m) for m in jax.jit(wipm.spatial_equations)(s, params))
+    for _ in range(5):
+        u = np.array([rng.normal() * 3.0, rng.normal() * 50.0])
+        tau_left, tau_right = inverse_dynamics(s, u, params)
+        nu_dot = np.asarray(spatial_dynamics(s, u, params))[3:6]
+        tau_1 = A[2] @ nu_dot + h[2]
+        expected = generalized_to_wheel(
+            u[1], tau_1, wip.layout.wheel_radius, wip.layout.wheel_separation
+        )
+        np.testing.assert_allclose([tau_left, tau_right], expected, rtol=1e-12)
+        # and the three rows hold with these torques
+        residual = A @ nu_dot + h - B @ np.array([tau_left, tau_right])
+        assert np.linalg.norm(residual) < 1e-9 * np.linalg.norm(h)
+
+
+# ----------------------------------------------------------------------- level 1, planar
+def _planar_samples(robot: RobotModel, count: int, seed: int) -> list[tuple]:
+    """``(s_planar, tau_w, params, [xdd, thdd] of MuJoCo)`` with psi = psid = 0, tau_L = tau_R."""
+    rng = np.random.default_rng(seed)
+    model = robot.model
+    samples = []
+    for _ in range(count):
+        q, nu = random_minimal_state(robot, rng, turning=False)
+        q[1], nu[1] = 0.0, 0.0
+        qpos, qvel = robot.full_state(q, nu)
+        tau = rng.uniform(-150.0, 150.0)
+        ctrl = _wheel_ctrl(robot, tau, tau)
+        robot.update(qpos, qvel)
+        xdd, psidd, q1dd = _minimal_accelerations(
+            robot, constrained_accelerations(model, qpos, qvel, ctrl, robot)
+        )
+        assert abs(psidd) < 1e-9 * (abs(xdd) + abs(q1dd))  # a symmetric robot goes straight
+        s = np.array([robot.theta, robot.thetad, robot.q[0], robot.nu[0]])
+        params = wipm.params_from_lambda(robot.wipm_parameters())
+        samples.append((s, 2.0 * tau, params, np.array([xdd, q1dd])))
+    return samples
+
+
+@pytest.fixture(scope="module")
+def planar_samples(wip: RobotModel) -> list[tuple]:
+    return _planar_samples(wip, 40, seed=12)
+
+
+def test_planar_wipm_equals_exact_constrained_dynamics(planar_samples: list[tuple]) -> None:
+    """ERRATA 1's zero dynamics (u = MuJoCo's thdd) give MuJoCo's xdd, and the two rows with the
+    torque give (thdd, xdd) from tau_w, both to round-off."""
+    worst_zero, worst_torque = 0.0, 0.0
+    for s, tau_w, params, (xdd, thdd) in planar_samples:
+        scale = np.hypot(xdd, thdd)
+        sdot = np.asarray(planar_dynamics(s, thdd, params))
+        np.testing.assert_allclose(sdot[[0, 2]], s[[1, 3]], rtol=0, atol=0)
+        assert sdot[1] == thdd
+        worst_zero = max(worst_zero, abs(sdot[3] - xdd) / scale)
+        assert abs(sdot[3] - xdd) < 1e-9 * scale
+        sdot = np.asarray(planar_torque_dynamics(s, tau_w, params))
+        error = np.hypot(sdot[1] - thdd, sdot[3] - xdd) / scale
+        worst_torque = max(worst_torque, error)
+        assert error < 1e-9, error
+        tau_back = float(planar_inverse_dynamics(s, thdd, params))
+        assert tau_back == pytest.approx(tau_w, rel=1e-9, abs=1e-9)
+    print(f"planar level 1: zero dynamics {worst_zero:.1e}, torque form {worst_torque:.1e}")
+
+
+def test_paper_printed_planar_form_is_wrong(planar_samples: list[tuple]) -> None:
+    """The printed eq. WIPdyn misses MuJoCo's xdd by orders of magnitude more than ERRATA 1's."""
+    printed, corrected = [], []
+    for s, _, params, (xdd, thdd) in planar_samples:
+        scale = max(abs(xdd), 1.0)
+        printed.append(abs(float(paper_printed_planar_dynamics(s, thdd, params)[3]) - xdd) / scale)
+        corrected.append(abs(float(planar_dynamics(s, thdd, params)[3]) - xdd) / scale)
+    printed_median = float(np.median(printed))
+    corrected_worst = max(float(np.max(corrected)), 1e-16)
+    print(
+        f"xdd relative error: printed median {printed_median:.2e} (max {np.max(printed):.2e}), "
+        f"corrected median {np.median(corrected):.1e} (max {np.max(corrected):.1e})"
+    )
+    assert printed_median > 1e-1
+    assert printed_median > 100.0 * corrected_worst
+    assert np.median(printed) > 100.0 * np.median(corrected)
+
+
+# ------------------------------------------------------------------------ level 2, contact
+def test_spatial_wipm_matches_mujoco_contact(wip: RobotModel) -> None:
+    """Level 2: against mj_forward with the wheels on the floor (MuJoCo's soft contacts)."""
+    model = wip.model
+    lay = wip.layout
+    rng = np.random.default_rng(13)
+    errors = []
+    for qpos, qvel, ctrl, data in sample_contact_states(wip, model, rng, 100, turning=False):
+        wip.update(qpos, qvel)
+        params = wipm.params_from_lambda(wip.wipm_parameters())
+        tau = ctrl[list(lay.wheel_actuators)]
+        nu_dot = np.asarray(spatial_torque_dynamics(_spatial_state(wip), tau, params))[3:6]
+        nu_dot_mj = _minimal_accelerations(wip, data.qacc)
+        errors.append(np.linalg.norm(nu_dot - nu_dot_mj) / max(np.linalg.norm(nu_dot_mj), 1.0))
+    errors = np.array(errors)
+    print(f"contact level: median {np.median(errors):.1e}, max {errors.max():.1e}")
+    assert np.median(errors) < 2e-3, np.median(errors)
+    assert errors.max() < 2e-2, errors.max()
+
+
+# ------------------------------------------------------------------------- linearisation
+def _finite_difference(f, s: np.ndarray, u: np.ndarray, params, eps: float = 1e-6):
+    """Central differences of ``f(s, u, params)`` (a jitted dynamics)."""
+    columns = []
+    for x, index in ((s, 0), (u, 1)):
+        derivative = np.zeros((s.size, x.size))
+        for j in range(x.size):
+            step = np.zeros(x.size)
+            step[j] = eps
+            plus = [s, u]
+            minus = [s, u]
+            plus[index] = x + step
+            minus[index] = x - step
+            derivative[:, j] = (np.asarray(f(*plus, params)) - np.asarray(f(*minus, params))) / (
+                2 * eps
+            )
+        columns.append(derivative)
+    return columns
+
+
+@pytest.mark.parametrize(
+    "name", ["planar_dynamics", "planar_torque_dynamics", "spatial_dynamics", "spatial_torque"]
+)
+def test_linearize_matches_finite_differences(wip: RobotModel, name: str) -> None:
+    """``linearize`` (jax.jacfwd) against central differences; ``discretize`` is explicit Euler
+    and its Jacobians are ``I + dt A``, ``dt B``."""
+    rng = np.random.default_rng(14)
+    q, nu = random_minimal_state(wip, rng)
+    wip.update(*wip.full_state(q, nu))
+    params = wipm.params_from_lambda(wip.wipm_parameters())
+    s3 = _spatial_state(wip)
+    s2 = np.array([s3[2], s3[5], s3[0], s3[3]])
+    dynamics, jitted, s, u = {
+        "planar_dynamics": (wipm.planar_dynamics, planar_dynamics, s2, np.array([1.3])),
+        "planar_torque_dynamics": (
+            wipm.planar_torque_dynamics,
+            planar_torque_dynamics,
+            s2,
+            np.array([40.0]),
+        ),
+        "spatial_dynamics": (wipm.spatial_dynamics, spatial_dynamics, s3, np.array([1.3, 20.0])),
+        "spatial_torque": (
+            wipm.spatial_torque_dynamics,
+            spatial_torque_dynamics,
+            s3,
+            np.array([30.0, -50.0]),
+        ),
+    }[name]
+    A, B = (np.asarray(m) for m in linearize(dynamics, s, u, params))
+    A_fd, B_fd = _finite_difference(jitted, s, u, params)
+    assert A.shape == (s.size, s.size) and B.shape == (s.size, u.size)
+    scale = max(1.0, np.abs(A_fd).max(), np.abs(B_fd).max())
+    np.testing.assert_allclose(A, A_fd, atol=1e-6 * scale)
+    np.testing.assert_allclose(B, B_fd, atol=1e-6 * scale)
+    dt = 0.01
+    step = wipm.discretize(jitted, dt)
+    np.testing.assert_allclose(
+        np.asarray(step(s, u, params)), s + dt * np.asarray(jitted(s, u, params)), rtol=1e-14
+    )
+    if name == "planar_torque_dynamics":  # (compiling each Euler map costs time: one suffices)
+        A_d, B_d = (np.asarray(m) for m in linearize(wipm.discretize(dynamics, dt), s, u, params))
+        np.testing.assert_allclose(A_d, np.eye(s.size) + dt * A, atol=1e-12 * scale)
+        np.testing.assert_allclose(B_d, dt * B, atol=1e-12 * scale)
+
+
+def test_balance_is_an_unstable_controllable_pendulum(wip: RobotModel) -> None:
+    """At balance (theta = 0, all rates 0) the torque-driven planar WIPM has an unstable
+    eigenvalue (an inverted pendulum) and is controllable from the wheel torque."""
+    wip.update(*wip.full_state(np.zeros(3), np.zeros(3)))
+    params = wipm.params_from_lambda(wip.wipm_parameters())
+    A, B = (np.asarray(m) for m in linearize(wipm.planar_torque_dynamics, np.zeros(4), 0.0, params))
+    eigenvalues = np.linalg.eigvals(A)
+    print(f"balance eigenvalues: {np.sort_complex(eigenvalues)}")
+    assert eigenvalues.real.max() > 1.0  # sqrt(g/L)-like, a few 1/s
+    controllability = np.hstack([np.linalg.matrix_power(A, k) @ B for k in range(4)])
+    assert np.linalg.matrix_rank(controllability) == 4
+    # and the zero dynamics with u = thdd is controllable too (x, xd reachable through theta)
+    A, B = (np.asarray(m) for m in linearize(wipm.planar_dynamics, np.zeros(4), 0.0, params))
+    controllability = np.hstack([np.linalg.matrix_power(A, k) @ B for k in range(4)])
+    assert np.linalg.matrix_rank(controllability) == 4
+
+
+# --------------------------------------------------------------------------- parameters
+def test_params_from_lambda_on_krang() -> None:
+    """On Krang at ``home``: the pitch inertia is A[q1, q1], and the rotation into the CoM frame
+    puts the CoM at (0, com_lateral, com_distance)."""
+    model = mujoco.MjModel.from_xml_path(str(mjcf_path("scene_krang.xml")))
+    robot = RobotModel(model)
+    key = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, "home")
+    states = [(model.key_qpos[key][: robot.layout.nq], np.zeros(robot.layout.nv))]
+    rng = np.random.default_rng(15)
+    for _ in range(3):
+        states.append(robot.full_state(*random_minimal_state(robot, rng)))
+    for qpos, qvel in states:
+        robot.update(qpos, qvel)
+        lam = robot.wipm_parameters()
+        params = wipm.params_from_lambda(lam)
+        inertia_body = np.asarray(params.inertia_body)
+        assert inertia_body[1, 1] == pytest.approx(lam.pitch_inertia, rel=1e-12)
+        assert inertia_body[1, 1] == pytest.approx(robot.A[2, 2], rel=1e-12)
+        np.testing.assert_allclose(inertia_body, inertia_body.T, atol=1e-14)
+        rot = np.asarray(wipm.rotation_y(lam.theta))
+        com_B = rot.T @ lam.com
+        np.testing.assert_allclose(
+            com_B, [0.0, float(params.com_lateral), float(params.com_distance)], atol=1e-12
+        )
+        # rotating back gives lambda's axle-frame tensor
+        np.testing.assert_allclose(rot @ inertia_body @ rot.T, lam.inertia_axle, atol=1e-12)
+        assert float(params.wheel_mass) == pytest.approx(4.66)
+        assert float(params.wheel_damping) == pytest.approx(0.5)
+
+
+def test_wrong_inertia_rotation_breaks_the_skewed_wip() -> None:
+    """The sign of the rotation in params_from_lambda matters: rotating the other way (I_B =
+    Ry(theta) I_axle Ry(theta)^T) misses MuJoCo's accelerations on the skewed wip."""
+    model = _wip_model(skewed=True)
+    robot = RobotModel(model)
+    rng = np.random.default_rng(16)
+    q, nu = random_minimal_state(robot, rng)
+    qpos, qvel = robot.full_state(q, nu)
+    ctrl = _wheel_ctrl(robot, 60.0, -20.0)
+    robot.update(qpos, qvel)
+    reference = _minimal_accelerations(
+        robot, constrained_accelerations(model, qpos, qvel, ctrl, robot)
+    )
+    lam = robot.wipm_parameters()
+    params = wipm.params_from_lambda(lam)
+    rot = np.asarray(wipm.rotation_y(lam.theta))
+    wrong = params._replace(inertia_body=jnp.asarray(rot @ np.asarray(lam.inertia_axle) @ rot.T))
+    s = _spatial_state(robot)
+    tau = np.array([60.0, -20.0])
+    right_error = np.linalg.norm(
+        np.asarray(spatial_torque_dynamics(s, tau, params))[3:6] - reference
+    )
+    wrong_error = np.linalg.norm(
+        np.asarray(spatial_torque_dynamics(s, tau, wrong))[3:6] - reference
+    )
+    scale = np.linalg.norm(reference)
+    assert right_error < 1e-9 * scale
+    assert wrong_error > 1e-3 * scale
+
+
+# ------------------------------------------------------------------------------ damping
+def test_wheel_damping_cancels_from_the_zero_dynamics_only(wip: RobotModel) -> None:
+    """Damping acts on the wheels' rotation relative to the body, like the motor torque: it
+    cancels out of ``R * (x row) + (th row)`` (planar_dynamics) but not out of the torque form."""
+    rng = np.random.default_rng(17)
+    q, nu = random_minimal_state(wip, rng, turning=False)
+    wip.update(*wip.full_state(q, nu))
+    base = wipm.params_from_lambda(wip.wipm_parameters())
+    R = float(base.wheel_radius)
+    s = np.array([0.2, -0.7, 0.0, 1.5])  # relative wheel rate xd/R - thd = 6.7 rad/s
+    relative = s[3] / R - s[1]
+    zero_dynamics, torque_form, inverse = [], [], []
+    for damping in (0.0, 0.5, 5.0):
+        params = base._replace(wheel_damping=jnp.asarray(damping))
+        zero_dynamics.append(np.asarray(planar_dynamics(s, 2.0, params)))
+        torque_form.append(np.asarray(planar_torque_dynamics(s, 40.0, params)))
+        inverse.append(float(planar_inverse_dynamics(s, 2.0, params)))
+    np.testing.assert_array_equal(zero_dynamics[0], zero_dynamics[1])
+    np.testing.assert_array_equal(zero_dynamics[0], zero_dynamics[2])
+    # damping 5 at 6.7 rad/s on two wheels is a 67 N m torque: thdd changes by order 1 rad/s^2
+    assert abs(torque_form[2][1] - torque_form[0][1]) > 0.1
+    assert abs(torque_form[2][3] - torque_form[0][3]) > 0.01
+    # it acts exactly like a wheel torque -2 d (xd/R - thd): equivalent inputs give equal rates
+    equivalent = np.asarray(
+        planar_torque_dynamics(s, 40.0 - 2 * 5.0 * relative, base._replace(wheel_damping=0.0))
+    )
+    np.testing.assert_allclose(torque_form[2], equivalent, rtol=1e-12, atol=1e-12)
+    # and the torque that realises a thdd grows by exactly the damping torque
+    assert inverse[2] - inverse[0] == pytest.approx(2 * 5.0 * relative, rel=1e-12)
+    print(
+        f"damping 0 -> 5 N m s/rad: zero dynamics change 0, torque-form thdd change "
+        f"{torque_form[2][1] - torque_form[0][1]:.3f} rad/s^2"
+    )
