@@ -1,0 +1,655 @@
+"""Differential dynamic programming (DDP) and iLQR in JAX, jit-compiled, for MPC reuse.
+
+Problem
+-------
+Minimise over the control sequence ``U = (u_0, ..., u_{N-1})`` the cost
+
+    J(U) = sum_{k=0}^{N-1} running(x_k, u_k, ref_k) + terminal(x_N, ref_N),       (1)
+    x_{k+1} = dynamics(x_k, u_k, params),  x_0 given.
+
+``dynamics`` is *discrete* (the caller wraps a continuous model, e.g. explicit Euler
+``x + dt * f(x, u, params)`` as the authors did, krang_facts section 3.1). ``refs`` is an array
+or pytree whose leaves have a leading axis of length ``N + 1``: ``running`` sees ``refs[k]`` for
+``k < N`` and ``terminal`` sees ``refs[N]``. A ``dt`` factor on the running cost is the caller's
+business (put it inside ``running``).
+
+Algorithm (Jacobson & Mayne 1970 DDP; regularisation and line search after Tassa, Erez &
+Todorov 2012, "Synthesis and stabilization of complex behaviors through online trajectory
+optimization", section II). All derivatives come from autodiff (``jax.jacfwd`` of the
+dynamics, ``jax.grad``/``jax.hessian`` of the costs, ``jax.hessian`` of the dynamics for the
+second-order terms), vmapped over the trajectory.
+
+Backward pass (a reverse ``lax.scan``), with ``V'`` the value expansion at step ``k + 1``,
+``V_x(N) = terminal_x``, ``V_xx(N) = terminal_xx``:
+
+    Q_x  = l_x  + f_x^T V'_x                                                     (2)
+    Q_u  = l_u  + f_u^T V'_x
+    Q_xx = l_xx + f_x^T V'_xx f_x + [V'_x . f_xx]
+    Q_ux = l_ux + f_u^T V'_xx f_x + [V'_x . f_ux]
+    Q_uu = l_uu + f_u^T V'_xx f_u + [V'_x . f_uu]
+
+The bracketed tensor terms (``V'_x`` contracted with the dynamics' output index) make it true
+DDP; ``DDPConfig.second_order=False`` drops them, giving iLQR (Gauss-Newton on the dynamics,
+what the authors' ``ddp.hpp`` does). Levenberg-Marquardt regularisation acts on ``Q_uu`` only
+(the "control" regularisation of the authors' 46 ``ddp.hpp``; no ``V_xx`` / state
+regularisation is used):
+
+    k = -(Q_uu + mu I)^{-1} Q_u,   K = -(Q_uu + mu I)^{-1} Q_ux                   (3)
+
+solved through a Cholesky factor. A Cholesky factor containing NaN (``Q_uu + mu I`` not positive
+definite) at any step makes the pass fail; ``mu`` is then increased and the pass repeated
+(inner ``lax.while_loop``). The value update uses the unregularised ``Q`` terms (Tassa 2012's
+"improved value update", consistent with the step actually taken):
+
+    V_x  = Q_x  + K^T Q_uu k + K^T Q_u + Q_ux^T k                                (4)
+    V_xx = Q_xx + K^T Q_uu K + K^T Q_ux + Q_ux^T K          (then symmetrised)
+
+and the expected cost change of a step of size ``alpha`` is
+
+    dV(alpha) = alpha sum_k k^T Q_u + alpha^2 / 2 sum_k k^T Q_uu k.              (5)
+
+The same scan also propagates the exact adjoint ``lam_k = l_x + f_x^T lam_{k+1}`` and so
+returns the true gradient ``dJ/du_k = l_u + f_u^T lam_{k+1}`` of (1), used by the optional
+gradient-norm stop.
+
+Forward pass / line search: for every ``alpha`` in ``DDPConfig.alphas`` (default
+``1, 1/2, ..., 2^-10``), evaluated in parallel with ``jax.vmap``,
+
+    x^_0 = x_0,  u^_k = u_k + alpha k_k + K_k (x^_k - x_k),  x^_{k+1} = f(x^_k, u^_k)   (6)
+
+and the largest ``alpha`` is accepted whose actual reduction satisfies
+
+    J - J(alpha) >= c * (-dV(alpha))   and   J - J(alpha) > 0,  J(alpha) finite,   (7)
+
+with ``c = DDPConfig.line_search_c`` (default 1e-4, an Armijo-type test on the expected
+reduction; Tassa 2012 accepts any positive ratio, the authors accept any cost decrease and
+otherwise the last alpha).
+
+Regularisation schedule (the authors' 46 ``ddp.hpp``, krang_facts section 3.1), with ``f =
+mu_factor`` and ``dmu`` starting at 1:
+
+    increase (failed backward pass or failed line search):                        (8)
+        dmu = max(dmu f, f);   mu = max(mu dmu, mu_min)
+    decrease (accepted step):
+        dmu = min(dmu / f, 1 / f);   mu = mu dmu;   mu = 0 if mu < mu_min
+
+If an increase would exceed ``mu_max``, or cannot change ``mu`` (``mu = mu_min = 0``:
+regularisation switched off, as in the authors' 13b which had none), the solve stops with
+``converged = False``.
+
+Iterations and stopping. A backward pass is done on the initial rollout before the loop. One
+*iteration* is then one line search (6)-(7) followed by the backward pass at the resulting
+trajectory (with any regularisation retries). So the gains returned always belong to the returned
+``(X, U)``. After every backward pass the solve stops as converged if
+
+    -dV(1) <= tolerance * |J| + abs_tolerance    or    max_k |dJ/du_k| <= grad_tolerance.  (9)
+
+i.e. the predicted relative decrease of a full step is below ``tolerance``. Consequences: an
+already-optimal warm start returns with ``iterations = 0``; a linear-quadratic problem with
+``mu = 0`` takes exactly one iteration (the full Newton step is exact, and the backward pass at
+the new trajectory predicts no further decrease). Note that (9) is evaluated at the current
+``mu``: a large ``mu`` damps the predicted decrease, as in any Levenberg-Marquardt scheme.
+
+jit. ``make_ddp_solver(dynamics, running, terminal, config)`` returns a ``DDPSolver`` whose
+``jitted`` attribute is one ``jax.jit`` function ``(x0, U_init, params, refs) -> DDPResult``.
+The horizon comes from the array shapes, so a new ``N`` (or new pytree structure/dtypes)
+retraces and everything else reuses the compiled code: MPC calls it every tick with the
+previous (shifted) controls as ``U_init`` (warm start). ``DDPSolver.solve`` (also
+``__call__``) validates the inputs in Python first and raises ``ValueError``. ``ddp_solve`` is
+the one-shot form; it caches solvers by ``(dynamics, running, terminal, config)`` identity.
+
+Float64 is switched on at import (``jax_enable_x64``): DDP's convergence tests and the
+Riccati recursion need it.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.scipy.linalg import cho_solve
+
+jax.config.update("jax_enable_x64", True)
+
+__all__ = [
+    "DDPConfig",
+    "DDPResult",
+    "DDPSolver",
+    "ddp_solve",
+    "make_ddp_solver",
+    "rollout",
+    "trajectory_cost",
+]
+
+Array = jax.Array
+PyTree = Any
+Dynamics = Callable[[Array, Array, PyTree], Array]
+RunningCost = Callable[[Array, Array, PyTree], Array]
+TerminalCost = Callable[[Array, PyTree], Array]
+
+
+def _default_alphas() -> tuple[float, ...]:
+    return tuple(2.0**-i for i in range(11))
+
+
+@dataclass(frozen=True)
+class DDPConfig:
+    """Solver settings. Defaults and the authors' values (krang_facts section 3).
+
+    Attributes:
+        max_iterations: Iteration budget (one iteration = line search + backward pass, see the
+            module docstring). Authors: 50 for the offline DDP (15 in older versions) and 50 per
+            MPC call (13b), with no other stopping rule. An MPC caller sets its own budget.
+        tolerance: Stop when the predicted decrease of a full step, ``-dV(1)``, is at most
+            ``tolerance * |J| + abs_tolerance``. Default 1e-8 (the authors have no tolerance;
+            1e-8 is their unused box-QP "min relative improvement").
+        abs_tolerance: Absolute part of that test, for costs whose optimum is near 0.
+        grad_tolerance: Also stop when ``max |dJ/dU| <= grad_tolerance`` (exact gradient of the
+            total cost from the adjoint recursion). 0 disables it.
+        second_order: True: DDP with the ``V_x . f_xx, f_ux, f_uu`` terms; False: iLQR (the
+            authors' choice).
+        mu_init: Initial ``Q_uu`` regularisation. Authors (46): 1.0. 13b had none (0).
+        mu_factor: Schedule factor. Authors (46): 1.6.
+        mu_min: Below this ``mu`` is set to 0 on decrease, and an increase starts from it.
+            Authors (46): 1e-6. 0 together with ``mu_init = 0`` turns regularisation off.
+        mu_max: Give up (``converged = False``) when ``mu`` would exceed it. Authors (46): 1e10.
+        alphas: Line-search step sizes, tried in parallel, the largest acceptable one wins.
+            Default ``2^0 ... 2^-10``. Authors: halve from 1 until the cost decreases, or accept
+            the step anyway once alpha < 1e-4.
+        line_search_c: Minimum ratio of actual to expected reduction (7). Default 1e-4.
+    """
+
+    max_iterations: int = 50
+    tolerance: float = 1e-8
+    abs_tolerance: float = 0.0
+    grad_tolerance: float = 0.0
+    second_order: bool = True
+    mu_init: float = 1.0
+    mu_factor: float = 1.6
+    mu_min: float = 1e-6
+    mu_max: float = 1e10
+    alphas: tuple[float, ...] = _default_alphas()
+    line_search_c: float = 1e-4
+
+    def __post_init__(self) -> None:
+        if self.max_iterations < 0:
+            raise ValueError(f"max_iterations must be >= 0, got {self.max_iterations}")
+        if self.tolerance < 0 or self.abs_tolerance < 0 or self.grad_tolerance < 0:
+            raise ValueError("tolerance, abs_tolerance and grad_tolerance must be >= 0")
+        if self.mu_factor <= 1.0:
+            raise ValueError(f"mu_factor must be > 1, got {self.mu_factor}")
+        if not 0.0 <= self.mu_min <= self.mu_max or self.mu_init < 0:
+            raise ValueError("need 0 <= mu_min <= mu_max and mu_init >= 0")
+        if len(self.alphas) == 0 or any(not 0.0 < a <= 1.0 for a in self.alphas):
+            raise ValueError(f"alphas must be a non-empty tuple in (0, 1], got {self.alphas}")
+        if list(self.alphas) != sorted(self.alphas, reverse=True):
+            raise ValueError("alphas must be sorted in decreasing order")
+        if not 0.0 <= self.line_search_c < 1.0:
+            raise ValueError(f"line_search_c must be in [0, 1), got {self.line_search_c}")
+
+
+class DDPResult(NamedTuple):
+    """Solver output (all JAX arrays).
+
+    Attributes:
+        X: (N+1, n) states of the returned trajectory.
+        U: (N, m) controls.
+        K: (N, m, n) feedback gains of the last backward pass, which is taken at ``(X, U)``
+            (unless the solve stopped on a failure, then NaN is possible; see ``converged``).
+            The local policy is ``u = U[k] + K[k] (x - X[k])`` (plus ``k[k]`` if not converged).
+        k: (N, m) feedforward terms of that pass (about 0 at convergence).
+        cost_history: (max_iterations+1,) cost before the first iteration and after each one;
+            entries past the stop repeat the final cost.
+        mu_history: (max_iterations+1,) ``mu`` used by the backward pass after each iteration
+            (entry 0: the initial pass, after any increases); entries past the stop repeat.
+        iterations: Number of iterations done (0 if the warm start was already converged).
+        converged: True iff the stopping test (9) held at the last backward pass.
+        cost: Final cost ``J(U)``.
+        grad_norm: ``max |dJ/dU|`` at the returned ``U``.
+    """
+
+    X: Array
+    U: Array
+    K: Array
+    k: Array
+    cost_history: Array
+    mu_history: Array
+    iterations: Array
+    converged: Array
+    cost: Array
+    grad_norm: Array
+
+
+def rollout(dynamics: Dynamics, x0: Array, U: Array, params: PyTree) -> Array:
+    """States ``X`` (N+1, n) from ``x0`` under the controls ``U`` (N, m)."""
+
+    def step(x: Array, u: Array) -> tuple[Array, Array]:
+        x_next = dynamics(x, u, params)
+        return x_next, x_next
+
+    _, xs = jax.lax.scan(step, x0, U)
+    return jnp.concatenate([x0[None], xs], axis=0)
+
+
+def _head(refs: PyTree) -> PyTree:
+    return jax.tree.map(lambda r: r[:-1], refs)
+
+
+def _last(refs: PyTree) -> PyTree:
+    return jax.tree.map(lambda r: r[-1], refs)
+
+
+def trajectory_cost(
+    running: RunningCost, terminal: TerminalCost, X: Array, U: Array, refs: PyTree
+) -> Array:
+    """Total cost (1): ``sum_k running(X[k], U[k], refs[k]) + terminal(X[N], refs[N])``."""
+    stage = jax.vmap(running)(X[:-1], U, _head(refs))
+    return jnp.sum(stage) + terminal(X[-1], _last(refs))
+
+
+class _Derivatives(NamedTuple):
+    lx: Array  # (N, n)
+    lu: Array  # (N, m)
+    lxx: Array  # (N, n, n)
+    lux: Array  # (N, m, n)
+    luu: Array  # (N, m, m)
+    fx: Array  # (N, n, n)
+    fu: Array  # (N, n, m)
+    fxx: Array | None  # (N, n, n, n), output index first
+    fux: Array | None  # (N, n, m, n)
+    fuu: Array | None  # (N, n, m, m)
+    vx: Array  # (n,) terminal gradient
+    vxx: Array  # (n, n) terminal Hessian
+
+
+class _Backward(NamedTuple):
+    K: Array
+    k: Array
+    dv1: Array  # sum k^T Q_u
+    dv2: Array  # 1/2 sum k^T Q_uu k
+    grad_norm: Array
+    ok: Array
+
+
+class _LoopState(NamedTuple):
+    X: Array
+    U: Array
+    cost: Array
+    bp: _Backward
+    mu: Array
+    dmu: Array
+    iteration: Array
+    started: Array
+    done: Array
+    converged: Array
+    cost_history: Array
+    mu_history: Array
+
+
+class DDPSolver:
+    """A compiled DDP solver for fixed functions and config.
+
+    ``solver(x0, U_init, params, refs)`` (= ``solver.solve``) validates the inputs and calls
+    ``solver.jitted``, the raw ``jax.jit`` function (usable inside other traced code).
+    ``trace_count`` counts how often the solver body has been traced (one per new shape).
+    """
+
+    def __init__(
+        self,
+        dynamics: Dynamics,
+        running: RunningCost,
+        terminal: TerminalCost,
+        config: DDPConfig,
+    ) -> None:
+        self.dynamics = dynamics
+        self.running = running
+        self.terminal = terminal
+        self.config = config
+        self.trace_count = 0
+        self.jitted: Callable[[Array, Array, PyTree, PyTree], DDPResult] = jax.jit(self._solve)
+
+    def __call__(self, x0: Any, U_init: Any, params: PyTree, refs: PyTree) -> DDPResult:
+        return self.solve(x0, U_init, params, refs)
+
+    def solve(self, x0: Any, U_init: Any, params: PyTree, refs: PyTree) -> DDPResult:
+        """Validate (outside jit; raises ValueError) and solve, warm-started from ``U_init``."""
+        x0_np = np.asarray(x0, dtype=np.float64)
+        U_np = np.asarray(U_init, dtype=np.float64)
+        if x0_np.ndim != 1 or x0_np.size == 0:
+            raise ValueError(f"x0 must be a non-empty 1-D state vector, got shape {x0_np.shape}")
+        if not np.all(np.isfinite(x0_np)):
+            raise ValueError(f"x0 contains non-finite values: {x0_np}")
+        if U_np.ndim != 2 or U_np.shape[0] < 1 or U_np.shape[1] < 1:
+            raise ValueError(
+                f"U_init must have shape (N, m) with N >= 1 and m >= 1, got {U_np.shape}"
+            )
+        if not np.all(np.isfinite(U_np)):
+            raise ValueError("U_init contains non-finite values")
+        horizon = U_np.shape[0]
+        leaves = jax.tree.leaves(refs)
+        if not leaves:
+            raise ValueError("refs must contain at least one array with leading axis N+1")
+        for leaf in leaves:
+            shape = np.shape(leaf)
+            if len(shape) == 0 or shape[0] != horizon + 1:
+                raise ValueError(
+                    f"every refs leaf needs a leading axis of length N+1 = {horizon + 1} "
+                    f"(U_init has N = {horizon}), got a leaf of shape {shape}"
+                )
+            arr = np.asarray(leaf)
+            if np.issubdtype(arr.dtype, np.floating) and not np.all(np.isfinite(arr)):
+                raise ValueError("refs contains non-finite values")
+        return self.jitted(jnp.asarray(x0_np), jnp.asarray(U_np), params, refs)
+
+    # ---------------------------------------------------------------- traced internals
+    def _check_signatures(self, x0: Array, U: Array, params: PyTree, refs: PyTree) -> None:
+        n = x0.shape[0]
+        x_next = jax.eval_shape(self.dynamics, x0, U[0], params)
+        if getattr(x_next, "shape", None) != (n,):
+            raise ValueError(
+                f"dynamics(x, u, params) must return shape ({n},) like x0, got "
+                f"{getattr(x_next, 'shape', type(x_next))}"
+            )
+        ref0 = jax.tree.map(lambda r: r[0], refs)
+        stage = jax.eval_shape(self.running, x0, U[0], ref0)
+        if getattr(stage, "shape", None) != ():
+            raise ValueError("running(x, u, ref) must return a scalar")
+        final = jax.eval_shape(self.terminal, x0, ref0)
+        if getattr(final, "shape", None) != ():
+            raise ValueError("terminal(x, ref) must return a scalar")
+
+    def _derivatives(self, X: Array, U: Array, params: PyTree, refs: PyTree) -> _Derivatives:
+        dyn, run = self.dynamics, self.running
+
+        def stage(x: Array, u: Array, r: PyTree) -> tuple[Array, ...]:
+            fx, fu = jax.jacfwd(dyn, argnums=(0, 1))(x, u, params)
+            lx, lu = jax.grad(run, argnums=(0, 1))(x, u, r)
+            (lxx, _), (lux, luu) = jax.hessian(run, argnums=(0, 1))(x, u, r)
+            out: tuple[Array, ...] = (lx, lu, lxx, lux, luu, fx, fu)
+            if self.config.second_order:
+                (fxx, _), (fux, fuu) = jax.hessian(dyn, argnums=(0, 1))(x, u, params)
+                out = (*out, fxx, fux, fuu)
+            return out
+
+        parts = jax.vmap(stage)(X[:-1], U, _head(refs))
+        xN, refN = X[-1], _last(refs)
+        vx = jax.grad(self.terminal)(xN, refN)
+        vxx = jax.hessian(self.terminal)(xN, refN)
+        if self.config.second_order:
+            return _Derivatives(*parts, vx=vx, vxx=vxx)
+        return _Derivatives(*parts, fxx=None, fux=None, fuu=None, vx=vx, vxx=vxx)
+
+    def _backward(self, d: _Derivatives, mu: Array) -> _Backward:
+        m = d.lu.shape[1]
+        eye = jnp.eye(m, dtype=d.luu.dtype)
+        second = self.config.second_order
+
+        def step(carry: tuple[Array, ...], z: tuple[Array, ...]) -> tuple[tuple, tuple]:
+            vx, vxx, lam, dv1, dv2, ok, gmax = carry
+            lx, lu, lxx, lux, luu, fx, fu = z[:7]
+            qx = lx + fx.T @ vx
+            qu = lu + fu.T @ vx
+            qxx = lxx + fx.T @ vxx @ fx
+            qux = lux + fu.T @ vxx @ fx
+            quu = luu + fu.T @ vxx @ fu
+            if second:
+                fxx, fux, fuu = z[7:]
+                qxx = qxx + jnp.einsum("i,ijk->jk", vx, fxx)
+                qux = qux + jnp.einsum("i,ijk->jk", vx, fux)
+                quu = quu + jnp.einsum("i,ijk->jk", vx, fuu)
+            qxx = 0.5 * (qxx + qxx.T)
+            quu = 0.5 * (quu + quu.T)
+            chol = jnp.linalg.cholesky(quu + mu * eye)
+            step_ok = jnp.all(jnp.isfinite(chol))
+            sol = cho_solve((chol, True), jnp.concatenate([qu[:, None], qux], axis=1))
+            k, K = -sol[:, 0], -sol[:, 1:]
+            vx_new = qx + K.T @ quu @ k + K.T @ qu + qux.T @ k
+            vxx_new = qxx + K.T @ quu @ K + K.T @ qux + qux.T @ K
+            vxx_new = 0.5 * (vxx_new + vxx_new.T)
+            grad_u = lu + fu.T @ lam
+            lam_new = lx + fx.T @ lam
+            carry = (
+                vx_new,
+                vxx_new,
+                lam_new,
+                dv1 + k @ qu,
+                dv2 + 0.5 * k @ quu @ k,
+                ok & step_ok,
+                jnp.maximum(gmax, jnp.max(jnp.abs(grad_u))),
+            )
+            return carry, (K, k)
+
+        zs: tuple[Array, ...] = (d.lx, d.lu, d.lxx, d.lux, d.luu, d.fx, d.fu)
+        if second:
+            zs = (*zs, d.fxx, d.fux, d.fuu)
+        zero = jnp.zeros((), d.vx.dtype)
+        init = (d.vx, d.vxx, d.vx, zero, zero, jnp.array(True), zero)
+        (_, _, _, dv1, dv2, ok, gmax), (K, k) = jax.lax.scan(step, init, zs, reverse=True)
+        ok = ok & jnp.isfinite(dv1) & jnp.isfinite(dv2)
+        return _Backward(K=K, k=k, dv1=dv1, dv2=dv2, grad_norm=gmax, ok=ok)
+
+    def _increase(self, mu: Array, dmu: Array) -> tuple[Array, Array]:
+        f = self.config.mu_factor
+        dmu = jnp.maximum(dmu * f, f)
+        return jnp.maximum(mu * dmu, self.config.mu_min), dmu
+
+    def _decrease(self, mu: Array, dmu: Array) -> tuple[Array, Array]:
+        f = self.config.mu_factor
+        dmu = jnp.minimum(dmu / f, 1.0 / f)
+        mu = mu * dmu
+        return jnp.where(mu < self.config.mu_min, 0.0, mu), dmu
+
+    def _backward_regularised(
+        self, d: _Derivatives, mu: Array, dmu: Array
+    ) -> tuple[_Backward, Array, Array]:
+        """Backward pass, increasing mu until Q_uu + mu I is PD everywhere (8).
+
+        One ``_backward`` in the loop body (so it is compiled once). Returns the last pass (its
+        ``ok`` is False if mu hit ``mu_max`` or could not grow) and the mu it used.
+        """
+        n, m = d.lx.shape[1], d.lu.shape[1]
+        horizon = d.lx.shape[0]
+        zero = jnp.zeros((), d.lx.dtype)
+        placeholder = _Backward(
+            K=jnp.zeros((horizon, m, n), d.lx.dtype),
+            k=jnp.zeros((horizon, m), d.lx.dtype),
+            dv1=zero,
+            dv2=zero,
+            grad_norm=zero,
+            ok=jnp.array(False),
+        )
+
+        def cond(s: tuple) -> Array:
+            bp_, _, _, give_up = s
+            return ~bp_.ok & ~give_up
+
+        def body(s: tuple) -> tuple:
+            _, mu_, dmu_, _ = s
+            bp_ = self._backward(d, mu_)
+            mu2, dmu2 = self._increase(mu_, dmu_)
+            give_up = ~bp_.ok & ((mu2 > self.config.mu_max) | (mu2 <= mu_))
+            advance = ~bp_.ok & ~give_up
+            return (
+                bp_,
+                jnp.where(advance, mu2, mu_),
+                jnp.where(advance, dmu2, dmu_),
+                give_up,
+            )
+
+        bp, mu, dmu, _ = jax.lax.while_loop(cond, body, (placeholder, mu, dmu, jnp.array(False)))
+        return bp, mu, dmu
+
+    def _converged(self, bp: _Backward, cost: Array) -> Array:
+        cfg = self.config
+        predicted = -(bp.dv1 + bp.dv2)
+        small_step = predicted <= cfg.tolerance * jnp.abs(cost) + cfg.abs_tolerance
+        small_grad = bp.grad_norm <= cfg.grad_tolerance
+        return bp.ok & (small_step | small_grad)
+
+    def _solve(self, x0: Array, U_init: Array, params: PyTree, refs: PyTree) -> DDPResult:
+        self.trace_count += 1
+        cfg = self.config
+        x0 = jnp.asarray(x0, dtype=jnp.float64)
+        U0 = jnp.asarray(U_init, dtype=jnp.float64)
+        self._check_signatures(x0, U0, params, refs)
+        dyn, run, term = self.dynamics, self.running, self.terminal
+
+        def cost_of(X: Array, U: Array) -> Array:
+            return trajectory_cost(run, term, X, U, refs)
+
+        alphas = jnp.asarray(cfg.alphas, dtype=jnp.float64)
+
+        def forward(X: Array, U: Array, bp: _Backward, alpha: Array) -> tuple[Array, Array]:
+            def step(x: Array, z: tuple[Array, ...]) -> tuple[Array, tuple[Array, Array]]:
+                x_ref, u_ref, K, k = z
+                u = u_ref + alpha * k + K @ (x - x_ref)
+                x_next = dyn(x, u, params)
+                return x_next, (x_next, u)
+
+            _, (xs, us) = jax.lax.scan(step, x0, (X[:-1], U, bp.K, bp.k))
+            return jnp.concatenate([x0[None], xs], axis=0), us
+
+        X = rollout(dyn, x0, U0, params)
+        cost = cost_of(X, U0)
+        mu = jnp.asarray(cfg.mu_init, dtype=jnp.float64)
+        length = cfg.max_iterations + 1
+        n, (horizon, m) = x0.shape[0], U0.shape
+        zero = jnp.zeros((), jnp.float64)
+        state = _LoopState(
+            X=X,
+            U=U0,
+            cost=cost,
+            bp=_Backward(
+                K=jnp.zeros((horizon, m, n)),
+                k=jnp.zeros((horizon, m)),
+                dv1=zero,
+                dv2=zero,
+                grad_norm=zero,
+                ok=jnp.array(False),
+            ),
+            mu=mu,
+            dmu=jnp.asarray(1.0, dtype=jnp.float64),
+            iteration=jnp.asarray(0),
+            started=jnp.array(False),
+            done=jnp.array(False),
+            converged=jnp.array(False),
+            cost_history=jnp.full((length,), cost),
+            mu_history=jnp.full((length,), mu),
+        )
+
+        def line_search(s: _LoopState) -> tuple[Array, Array, Array, Array, Array, Array]:
+            """(6)-(7); returns X, U, cost, mu, dmu for the next backward pass and `stuck`."""
+            Xs, Us = jax.vmap(lambda a: forward(s.X, s.U, s.bp, a))(alphas)
+            costs = jax.vmap(cost_of)(Xs, Us)
+            actual = s.cost - costs
+            expected = -(alphas * s.bp.dv1 + alphas**2 * s.bp.dv2)
+            good = jnp.isfinite(costs) & (actual > 0) & (actual >= cfg.line_search_c * expected)
+            accepted = jnp.any(good)
+            best = jnp.argmax(good)
+            mu_dn, dmu_dn = self._decrease(s.mu, s.dmu)
+            mu_up, dmu_up = self._increase(s.mu, s.dmu)
+            # A failed line search that cannot raise mu any further ends the solve.
+            stuck = ~accepted & ((mu_up > cfg.mu_max) | (mu_up <= s.mu))
+            return (
+                jnp.where(accepted, Xs[best], s.X),
+                jnp.where(accepted, Us[best], s.U),
+                jnp.where(accepted, costs[best], s.cost),
+                jnp.where(accepted, mu_dn, jnp.where(stuck, s.mu, mu_up)),
+                jnp.where(accepted, dmu_dn, jnp.where(stuck, s.dmu, dmu_up)),
+                stuck,
+            )
+
+        def initial(s: _LoopState) -> tuple[Array, Array, Array, Array, Array, Array]:
+            return s.X, s.U, s.cost, s.mu, s.dmu, jnp.array(False)
+
+        def cond(s: _LoopState) -> Array:
+            return ~s.started | (~s.done & (s.iteration < cfg.max_iterations))
+
+        def body(s: _LoopState) -> _LoopState:
+            # The first pass only does the backward pass on the initial rollout.
+            X_new, U_new, cost_new, mu_new, dmu_new, stuck = jax.lax.cond(
+                s.started, line_search, initial, s
+            )
+
+            def redo() -> tuple[_Backward, Array, Array]:
+                d = self._derivatives(X_new, U_new, params, refs)
+                return self._backward_regularised(d, mu_new, dmu_new)
+
+            def keep() -> tuple[_Backward, Array, Array]:
+                return s.bp._replace(ok=jnp.array(False)), mu_new, dmu_new
+
+            bp_new, mu_new, dmu_new = jax.lax.cond(stuck, keep, redo)
+            conv = self._converged(bp_new, cost_new)
+            it = s.iteration + s.started.astype(s.iteration.dtype)
+            tail = jnp.arange(length) >= it
+            return _LoopState(
+                X=X_new,
+                U=U_new,
+                cost=cost_new,
+                bp=bp_new,
+                mu=mu_new,
+                dmu=dmu_new,
+                iteration=it,
+                started=jnp.array(True),
+                done=conv | ~bp_new.ok,
+                converged=conv,
+                cost_history=jnp.where(tail, cost_new, s.cost_history),
+                mu_history=jnp.where(tail, mu_new, s.mu_history),
+            )
+
+        final = jax.lax.while_loop(cond, body, state)
+        return DDPResult(
+            X=final.X,
+            U=final.U,
+            K=final.bp.K,
+            k=final.bp.k,
+            cost_history=final.cost_history,
+            mu_history=final.mu_history,
+            iterations=final.iteration,
+            converged=final.converged,
+            cost=final.cost,
+            grad_norm=final.bp.grad_norm,
+        )
+
+
+def make_ddp_solver(
+    dynamics: Dynamics,
+    running: RunningCost,
+    terminal: TerminalCost,
+    config: DDPConfig | None = None,
+) -> DDPSolver:
+    """Build a solver; call it as ``solver(x0, U_init, params, refs) -> DDPResult``.
+
+    One compilation per distinct input shape (horizon) and pytree structure; reuse the same
+    solver object in an MPC loop so that every call after the first runs compiled code.
+    """
+    return DDPSolver(dynamics, running, terminal, config if config is not None else DDPConfig())
+
+
+@functools.lru_cache(maxsize=32)
+def _cached_solver(
+    dynamics: Dynamics, running: RunningCost, terminal: TerminalCost, config: DDPConfig
+) -> DDPSolver:
+    return DDPSolver(dynamics, running, terminal, config)
+
+
+def ddp_solve(
+    dynamics: Dynamics,
+    running: RunningCost,
+    terminal: TerminalCost,
+    x0: Any,
+    U_init: Any,
+    params: PyTree,
+    refs: PyTree,
+    config: DDPConfig | None = None,
+) -> DDPResult:
+    """One-shot solve (validated). Solvers are cached by function identity and config, so
+    repeated calls with the same (module-level, not freshly created lambda) functions reuse the
+    compiled code."""
+    solver = _cached_solver(dynamics, running, terminal, config or DDPConfig())
+    return solver.solve(x0, U_init, params, refs)
