@@ -14,15 +14,18 @@ ours come from the LQR solve, with weights below.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
-from typing import Any
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, Literal
 
 import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
 from controllers.lqr import dlqr, zero_order_hold
+from controllers.planning import Plan, PlanConfig, plan_to_goal
 from controllers.policy import DiagnosticsRecorder, ModelChoice, TaskInfo, make_robot, task_info
+from controllers.posture import PostureHold
 from controllers.reference import GoalReference
 from controllers.wipm import (
     linearize,
@@ -30,6 +33,7 @@ from controllers.wipm import (
     planar_torque_dynamics,
     spatial_torque_dynamics,
 )
+from controllers.wipm_problem import wipm_state
 from wip_gym.robot_model import RobotModel
 
 Array = NDArray[np.float64]
@@ -46,9 +50,13 @@ class DecoupledConfig:
             wheel radians with R = 500 on amps; ours are in SI units on the WIPM's state.
         q_psi, q_psid: heading weights (3-D).
         r_torque: weight on each wheel torque (N m)^-2.
-        max_acceleration: peak acceleration of the reference (m/s^2): gentle, a cup on a tray
-            (mu = 0.3) tolerates about 0.5 mu g = 1.5 m/s^2.
-        max_spin_acceleration: peak heading acceleration of the reference (rad/s^2).
+        reference: ``plan`` (default): track the offline DDP plan of the WIPM (the one every
+            compared controller follows, so only the execution differs), states ``theta``,
+            ``x``, ``psi`` and their rates; ``minimum_jerk``: Krang 2014's style, ``theta_ref =
+            0`` and a smooth position profile (turn to face the goal, then drive).
+        plan: the offline plan's settings (``reference = "plan"``).
+        max_acceleration: peak acceleration of the minimum-jerk reference (m/s^2).
+        max_spin_acceleration: peak heading acceleration of that reference (rad/s^2).
         posture_frequency_hz, posture_damping_ratio: the joint PD holding the upper body, set per
             joint from its inertia at reset (``Kp = A_jj w^2``, ``Kd = 2 zeta A_jj w``).
     """
@@ -62,6 +70,8 @@ class DecoupledConfig:
     q_psi: float = 100.0
     q_psid: float = 10.0
     r_torque: float = 1e-3
+    reference: Literal["plan", "minimum_jerk"] = "plan"
+    plan: PlanConfig = field(default_factory=PlanConfig)
     max_acceleration: float = 0.3
     max_spin_acceleration: float = 0.5
     posture_frequency_hz: float = 5.0
@@ -80,7 +90,8 @@ class DecoupledController:
         self._recorder = DiagnosticsRecorder()
         self._planar = robot.layout.planar
         self._K = np.zeros((0, 0))
-        self._reference: GoalReference | None = None
+        self._reference: Callable[[float], dict[str, float]] | None = None
+        self._posture = PostureHold(config.posture_frequency_hz, config.posture_damping_ratio)
         self._step = 0
 
     @classmethod
@@ -90,7 +101,7 @@ class DecoupledController:
 
     # ----------------------------------------------------------------- reset
     def reset(self, observation: dict[str, Array], info: dict[str, Any]) -> None:
-        robot, lay, cfg = self.robot, self.robot.layout, self.config
+        robot, cfg = self.robot, self.config
         robot.update(observation["qpos"], observation["qvel"])
         self._recorder.clear()
         self._step = 0
@@ -132,8 +143,23 @@ class DecoupledController:
         self._K, _ = dlqr(Ad, Bd, Q, R)
         self._closed_loop = Ad - Bd @ self._K
         self._x_index = x_index
+        self._posture.reset(robot)
 
         axle = robot.axle_position
+        if cfg.reference == "plan":
+            self.plan: Plan | None = plan_to_goal(
+                wipm_state(robot),
+                params,
+                self.task.goal,
+                planar=self._planar,
+                cup_friction=self.task.cup_friction,
+                config=cfg.plan,
+            )
+            self._reference = self.plan.sample
+            return
+        if cfg.reference != "minimum_jerk":
+            raise ValueError(f"reference must be 'plan' or 'minimum_jerk', got {cfg.reference!r}")
+        self.plan = None
         self._reference = GoalReference.to_goal(
             axle[:2],
             robot.psi,
@@ -143,14 +169,6 @@ class DecoupledController:
             max_spin_acceleration=cfg.max_spin_acceleration,
             planar=self._planar,
         )
-        # upper body: hold the posture of reset
-        first = lay.index_q1 + 1
-        self._posture = robot.q[first:].copy()
-        inertia = np.diag(robot.A)[first:]
-        w = 2 * np.pi * cfg.posture_frequency_hz
-        self._kp = inertia * w**2
-        self._kd = 2 * cfg.posture_damping_ratio * inertia * w
-        self._first_body = first
 
     @property
     def gains(self) -> Array:
@@ -163,7 +181,9 @@ class DecoupledController:
         return self._closed_loop
 
     @property
-    def reference(self) -> GoalReference:
+    def reference(self) -> Callable[[float], dict[str, float]]:
+        """The reference as a function of time: the plan's states, or the minimum-jerk
+        profile (``theta_ref = 0``)."""
         if self._reference is None:
             raise RuntimeError("reset() first")
         return self._reference
@@ -177,17 +197,19 @@ class DecoupledController:
         ref = self.reference(t)
         q, nu = robot.q, robot.nu
         x_error = q[0] - ref["x"]
+        theta_error = robot.theta - ref.get("theta", 0.0)
+        thetad_error = robot.thetad - ref.get("thetad", 0.0)
         if self._planar:
-            error = np.array([robot.theta, robot.thetad, x_error, nu[0] - ref["xd"]])
+            error = np.array([theta_error, thetad_error, x_error, nu[0] - ref["xd"]])
         else:
             error = np.array(
                 [
                     x_error,
                     q[1] - ref["psi"],
-                    robot.theta,
+                    theta_error,
                     nu[0] - ref["xd"],
                     nu[1] - ref["psid"],
-                    robot.thetad,
+                    thetad_error,
                 ]
             )
         u = -self._K @ np.append(error, self._integral)
@@ -198,10 +220,7 @@ class DecoupledController:
             action[wl] = action[wr] = 0.5 * u[0]
         else:
             action[wl], action[wr] = u
-        first = self._first_body
-        posture_error = q[first:] - self._posture
-        torques = robot.h[first:] - self._kp * posture_error - self._kd * nu[first:]
-        action[list(lay.joint_actuators)] = torques
+        action[list(lay.joint_actuators)] = self._posture.torques(robot)
         clipped = np.clip(action, self.task.torque_low, self.task.torque_high)
         saturated = bool(np.any(clipped != action))
         self._saturated += saturated
@@ -215,7 +234,8 @@ class DecoupledController:
             theta=robot.theta,
             thetad=robot.thetad,
             psi=robot.psi,
-            psi_ref=ref["psi"],
+            psi_ref=ref.get("psi", 0.0),
+            theta_ref=ref.get("theta", 0.0),
             torque=clipped,
             saturated=saturated,
             compute_time=time.perf_counter() - start,
@@ -224,7 +244,8 @@ class DecoupledController:
 
     @property
     def diagnostics(self) -> dict[str, Array]:
-        """Per-step ``t, x, x_ref, xd, xd_ref, theta, thetad, psi, psi_ref, torque, saturated,
+        """Per-step ``t, x, x_ref, xd, xd_ref, theta, theta_ref, thetad, psi, psi_ref, torque,
+        saturated,
         compute_time`` (torques after saturation; ``saturated`` marks steps where the
         controller limited a torque to the actuator's range itself)."""
         return self._recorder.as_arrays()

@@ -46,6 +46,19 @@ each joint's damping ``-d (phi_dot - thetad)``) enters through the column
 wip_gym.wheel_torques) and ``tau_1 = -(tau_L + tau_R)`` the torque on the body pitch (paper
 eq. ``dyn``, ``simple1``/``simple2`` for the lumped model).
 
+That derivation is kept as the reference, :func:`spatial_equations_kane`; the model itself uses
+its closed form (:func:`spatial_terms`, derived symbolically from it and tested against it to
+round-off), plain scalar arithmetic that is far cheaper to compile and to differentiate inside a
+DDP. ``A`` depends on ``theta`` only, ``h`` on ``theta`` and ``nu`` (not on ``x``, ``psi``,
+``X0``, ``Y0``); with ``J`` the body's inertia about the axle midpoint in its CoM frame,
+
+    A = [[M + 2 m_r,   -M c_y,                                 M L cos th         ],
+         [-M c_y,      J_xx s^2 + J_zz c^2 - 2 J_xz s c + C,   J_yz c - J_xy s    ],
+         [M L cos th,  J_yz c - J_xy s,                        J_yy               ]]
+
+(``m_r = m_w + I_a/R^2`` one wheel's rolling mass, ``C = 2 ((sep/2)^2 m_r + I_t)``), and ``h``
+as given in :func:`spatial_terms`.
+
 With the pitch acceleration ``thdd`` as control (the MPC's ``u = [thdd, tau_0]``),
 :func:`spatial_dynamics` eliminates ``tau_1`` by ``R * (x row) + (theta row)`` and keeps the
 ``psi`` row with ``tau_0``; :func:`inverse_dynamics` recovers the wheel torques.
@@ -156,13 +169,6 @@ def _solve2(A: Array, b: Array) -> Array:
     return jnp.stack([A[1, 1] * b[0] - A[0, 1] * b[1], A[0, 0] * b[1] - A[1, 0] * b[0]]) / det
 
 
-def _solve3(A: Array, b: Array) -> Array:
-    """``A^-1 b`` for a 3x3 ``A`` by its adjugate: the columns of ``A^-1 det(A)`` are
-    ``r1 x r2, r2 x r0, r0 x r1`` for the rows ``r0, r1, r2`` of ``A``."""
-    c0, c1, c2 = jnp.cross(A[1], A[2]), jnp.cross(A[2], A[0]), jnp.cross(A[0], A[1])
-    return (b[0] * c0 + b[1] * c1 + b[2] * c2) / jnp.dot(A[0], c0)
-
-
 # --------------------------------------------------------------------------------- planar
 def _planar_alpha_beta(params: WIPMParams) -> tuple[Array, Array]:
     M, L, R = params.body_mass, params.com_distance, params.wheel_radius
@@ -254,6 +260,94 @@ def planar_inverse_dynamics(s: ArrayLike, u: ArrayLike, params: WIPMParams) -> A
 
 
 # ------------------------------------------------------------------------------------ 3-D
+class SpatialTerms(NamedTuple):
+    """The scalar entries of :func:`spatial_equations`' ``A`` (symmetric: the upper triangle)
+    and ``h``, rows and columns ``[x, psi, theta]``."""
+
+    a_xx: Array
+    a_xp: Array
+    a_xt: Array
+    a_pp: Array
+    a_pt: Array
+    a_tt: Array
+    h_x: Array
+    h_p: Array
+    h_t: Array
+
+
+def spatial_terms(s: ArrayLike, params: WIPMParams) -> SpatialTerms:
+    """The closed form of the 3-D WIPM's ``A`` and ``h`` (see :func:`spatial_equations`), as
+    scalars: ``sin``/``cos`` of ``theta`` once and a few products, no matrices.
+
+    With ``J = inertia_body`` (about the axle midpoint, CoM frame ``B``; symmetric), ``c, s`` the
+    cosine and sine of ``theta``, ``m_r = m_w + I_a/R^2`` one wheel's rolling mass and ``k =
+    sep/2``:
+
+        a_xx = M + 2 m_r        a_xp = -M c_y        a_xt = M L c        a_tt = J_yy
+        a_pp = J_xx s^2 + J_zz c^2 - 2 J_xz s c + 2 (k^2 m_r + I_t)
+        a_pt = J_yz c - J_xy s
+        p    = (J_xx - J_zz) s c - J_xz (c^2 - s^2)     (= 1/2 d a_pp / d theta)
+        h_x  = -M L s (thd^2 + psid^2) + 2 d (xd/R - thd) / R
+        h_p  = M L s xd psid + 2 p psid thd - (J_xy c + J_yz s) thd^2 + 2 d k^2 psid / R^2
+        h_t  = -M g L s - p psid^2 - 2 d (xd/R - thd)
+
+    (``d`` the damping of one wheel joint; ``-(J_xy c + J_yz s) = d a_pt / d theta``). The
+    lateral CoM offset enters only through ``a_xp``, the wheels' transverse inertia only through
+    ``a_pp``. Derived from :func:`spatial_equations_kane` symbolically and checked against it
+    (tests/test_wipm.py).
+    """
+    s = jnp.asarray(s)
+    theta, xd, psid, thd = s[2], s[3], s[4], s[5]
+    M, L, R, g = params.body_mass, params.com_distance, params.wheel_radius, params.gravity
+    J = jnp.asarray(params.inertia_body)
+    J_xx, J_xy, J_xz, J_yy, J_yz, J_zz = J[0, 0], J[0, 1], J[0, 2], J[1, 1], J[1, 2], J[2, 2]
+    c, sn = jnp.cos(theta), jnp.sin(theta)
+    cc, ss, sc = c * c, sn * sn, sn * c
+    k = 0.5 * params.wheel_separation
+    rolling_mass = params.wheel_mass + params.wheel_inertia / R**2  # one wheel's
+    ML_s = M * L * sn
+    p = (J_xx - J_zz) * sc - J_xz * (cc - ss)
+    damping = 2.0 * params.wheel_damping * (xd / R - thd)  # both joints', on x and theta
+    a_pp = (
+        J_xx * ss + J_zz * cc - 2.0 * J_xz * sc
+        + 2.0 * (k * k * rolling_mass + params.wheel_inertia_transverse)
+    )  # fmt: skip
+    h_p = (
+        ML_s * xd * psid + 2.0 * p * psid * thd - (J_xy * c + J_yz * sn) * thd * thd
+        + 2.0 * params.wheel_damping * (k / R) ** 2 * psid
+    )  # fmt: skip
+    return SpatialTerms(
+        a_xx=M + 2.0 * rolling_mass,
+        a_xp=-M * params.com_lateral,
+        a_xt=M * L * c,
+        a_pp=a_pp,
+        a_pt=J_yz * c - J_xy * sn,
+        a_tt=J_yy,
+        h_x=-ML_s * (thd * thd + psid * psid) + damping / R,
+        h_p=h_p,
+        h_t=-ML_s * g - p * psid * psid - damping,
+    )
+
+
+def spatial_equations(s: ArrayLike, params: WIPMParams) -> tuple[Array, Array, Array]:
+    """The 3-D WIPM's equations ``A nu_dot + h = B [tau_L, tau_R]`` over
+    ``nu = [xd, psid, thetad]`` at state ``s = [x, psi, theta, xd, psid, thetad, X0, Y0]``, in
+    closed form (:func:`spatial_terms`; the same equations as :func:`spatial_equations_kane`, to
+    round-off). ``A`` depends on ``theta`` only, ``h`` on ``theta`` and ``nu``; ``x``, ``psi``,
+    ``X0``, ``Y0`` do not enter. Returns ``(A, h, B)`` with ``B`` from
+    :func:`wheel_torque_matrix`.
+    """
+    t = spatial_terms(s, params)
+    A = jnp.stack(
+        [
+            jnp.stack([t.a_xx, t.a_xp, t.a_xt]),
+            jnp.stack([t.a_xp, t.a_pp, t.a_pt]),
+            jnp.stack([t.a_xt, t.a_pt, t.a_tt]),
+        ]
+    )
+    return A, jnp.stack([t.h_x, t.h_p, t.h_t]), wheel_torque_matrix(params)
+
+
 def _heading_jacobians(theta: Array, params: WIPMParams) -> tuple[Array, Array]:
     """Jacobians ``(Jv, Jw)`` (each ``3 bodies x 3 x 3``) of the body's CoM velocity and angular
     velocity and of each wheel's (left, right), in the heading frame, with respect to
@@ -301,12 +395,12 @@ def wheel_torque_matrix(params: WIPMParams) -> Array:
     return jnp.stack([jnp.stack([1.0 / R, 1.0 / R]), jnp.stack([-k, k]), jnp.stack([-one, -one])])
 
 
-def spatial_equations(s: ArrayLike, params: WIPMParams) -> tuple[Array, Array, Array]:
-    """The 3-D WIPM's equations ``A nu_dot + h = B [tau_L, tau_R]`` over
-    ``nu = [xd, psid, thetad]`` at state ``s = [x, psi, theta, xd, psid, thetad, X0, Y0]``.
+def spatial_equations_kane(s: ArrayLike, params: WIPMParams) -> tuple[Array, Array, Array]:
+    """The reference derivation of :func:`spatial_equations` by Kane's method (slow to compile
+    and to run: kept to check the closed form against).
 
-    Kane's method (paper eq. ``dyn`` for the lumped three-body system: body, left and right
-    wheel, each with the twist ``[v_i; w_i] = J_i nu``):
+    Paper eq. ``dyn`` for the lumped three-body system (body, left and right wheel, each with
+    the twist ``[v_i; w_i] = J_i nu``):
 
         A = sum_i m_i Jv_i^T Jv_i + Jw_i^T I_i Jw_i
         h = sum_i Jv_i^T (m_i a_i - F_gravity,i) + Jw_i^T (I_i al_i + w_i x I_i w_i) - Q_damping
@@ -353,11 +447,9 @@ def spatial_equations(s: ArrayLike, params: WIPMParams) -> tuple[Array, Array, A
     return A, h, B
 
 
-def _spatial_sdot(s: Array, nu_dot: Array) -> Array:
+def _spatial_sdot(s: Array, xdd: Array, psidd: Array, thdd: Array) -> Array:
     xd, psid, thd, psi = s[3], s[4], s[5], s[1]
-    return jnp.stack(
-        [xd, psid, thd, nu_dot[0], nu_dot[1], nu_dot[2], xd * jnp.cos(psi), xd * jnp.sin(psi)]
-    )
+    return jnp.stack([xd, psid, thd, xdd, psidd, thdd, xd * jnp.cos(psi), xd * jnp.sin(psi)])
 
 
 def spatial_torque_dynamics(s: ArrayLike, tau_wheels: ArrayLike, params: WIPMParams) -> Array:
@@ -365,25 +457,49 @@ def spatial_torque_dynamics(s: ArrayLike, tau_wheels: ArrayLike, params: WIPMPar
 
     ``s = [x, psi, theta, xd, psid, thetad, X0, Y0]``; returns
     ``[xd, psid, thetad, xdd, psidd, thdd, xd cos psi, xd sin psi]`` (solving the three rows of
-    :func:`spatial_equations`).
+    :func:`spatial_equations` by the adjugate of the symmetric ``A``).
     """
     s = jnp.asarray(s)
-    A, h, B = spatial_equations(s, params)
-    nu_dot = _solve3(A, B @ jnp.asarray(tau_wheels) - h)
-    return _spatial_sdot(s, nu_dot)
+    tau = jnp.asarray(tau_wheels)
+    t = spatial_terms(s, params)
+    R = params.wheel_radius
+    total = tau[0] + tau[1]
+    b0 = total / R - t.h_x
+    b1 = 0.5 * params.wheel_separation / R * (tau[1] - tau[0]) - t.h_p
+    b2 = -total - t.h_t
+    # cofactors of A = [[a_xx, a_xp, a_xt], [a_xp, a_pp, a_pt], [a_xt, a_pt, a_tt]]
+    c00 = t.a_pp * t.a_tt - t.a_pt * t.a_pt
+    c01 = t.a_xt * t.a_pt - t.a_xp * t.a_tt
+    c02 = t.a_xp * t.a_pt - t.a_xt * t.a_pp
+    c11 = t.a_xx * t.a_tt - t.a_xt * t.a_xt
+    c12 = t.a_xp * t.a_xt - t.a_xx * t.a_pt
+    c22 = t.a_xx * t.a_pp - t.a_xp * t.a_xp
+    det = t.a_xx * c00 + t.a_xp * c01 + t.a_xt * c02
+    xdd = (c00 * b0 + c01 * b1 + c02 * b2) / det
+    psidd = (c01 * b0 + c11 * b1 + c12 * b2) / det
+    thdd = (c02 * b0 + c12 * b1 + c22 * b2) / det
+    return _spatial_sdot(s, xdd, psidd, thdd)
 
 
-def _spatial_zero_dynamics(s: Array, u: Array, params: WIPMParams) -> tuple[Array, Array, Array]:
-    """``(nu_dot, A, h)`` for ``u = [thdd, tau_0]``: ``tau_1`` eliminated by
-    ``R * (x row) + (theta row)``, the psi row kept with ``tau_0`` (krang_facts 2.3)."""
-    A, h, _ = spatial_equations(s, params)
+def _spatial_zero_dynamics(
+    s: Array, u: Array, params: WIPMParams
+) -> tuple[Array, Array, SpatialTerms]:
+    """``(xdd, psidd, terms)`` for ``u = [thdd, tau_0]``: ``tau_1`` eliminated by
+    ``R * (x row) + (theta row)``, the psi row kept with ``tau_0`` (krang_facts 2.3). The wheel
+    damping cancels from the combined row (``R h_x + h_t``) as the torque does."""
+    t = spatial_terms(s, params)
     R = params.wheel_radius
     thdd, tau_0 = u[0], u[1]
-    row = R * A[0] + A[2]
-    lhs = jnp.array([[row[0], row[1]], [A[1, 0], A[1, 1]]])
-    rhs = jnp.stack([-row[2] * thdd - (R * h[0] + h[2]), tau_0 - A[1, 2] * thdd - h[1]])
-    xdd, psidd = _solve2(lhs, rhs)
-    return jnp.stack([xdd, psidd, thdd]), A, h
+    r0 = R * t.a_xx + t.a_xt  # the combined row over [xdd, psidd, thdd]
+    r1 = R * t.a_xp + t.a_pt
+    r2 = R * t.a_xt + t.a_tt
+    combined_h = R * t.h_x + t.h_t
+    e0 = -r2 * thdd - combined_h
+    e1 = tau_0 - t.a_pt * thdd - t.h_p
+    det = r0 * t.a_pp - r1 * t.a_xp
+    xdd = (t.a_pp * e0 - r1 * e1) / det
+    psidd = (r0 * e1 - t.a_xp * e0) / det
+    return xdd, psidd, t
 
 
 def spatial_dynamics(s: ArrayLike, u: ArrayLike, params: WIPMParams) -> Array:
@@ -395,8 +511,9 @@ def spatial_dynamics(s: ArrayLike, u: ArrayLike, params: WIPMParams) -> Array:
     xd sin psi]``.
     """
     s = jnp.asarray(s)
-    nu_dot, _, _ = _spatial_zero_dynamics(s, jnp.asarray(u), params)
-    return _spatial_sdot(s, nu_dot)
+    u = jnp.asarray(u)
+    xdd, psidd, _ = _spatial_zero_dynamics(s, u, params)
+    return _spatial_sdot(s, xdd, psidd, u[0])
 
 
 def inverse_dynamics(s: ArrayLike, u: ArrayLike, params: WIPMParams) -> tuple[Array, Array]:
@@ -408,8 +525,8 @@ def inverse_dynamics(s: ArrayLike, u: ArrayLike, params: WIPMParams) -> tuple[Ar
     """
     s = jnp.asarray(s)
     u = jnp.asarray(u)
-    nu_dot, A, h = _spatial_zero_dynamics(s, u, params)
-    tau_1 = A[2] @ nu_dot + h[2]
+    xdd, psidd, t = _spatial_zero_dynamics(s, u, params)
+    tau_1 = t.a_xt * xdd + t.a_pt * psidd + t.a_tt * u[0] + t.h_t
     difference = 2.0 * params.wheel_radius / params.wheel_separation * u[1]  # tau_R - tau_L
     return 0.5 * (-tau_1 - difference), 0.5 * (-tau_1 + difference)
 

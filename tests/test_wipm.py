@@ -401,3 +401,98 @@ def test_wheel_damping_cancels_from_the_zero_dynamics_only(wip: RobotModel) -> N
         f"damping 0 -> 5 N m s/rad: zero dynamics change 0, torque-form thdd change "
         f"{torque_form[2][1] - torque_form[0][1]:.3f} rad/s^2"
     )
+
+
+# ------------------------------------------------------------------- closed form vs Kane
+def _random_params(rng: np.random.Generator) -> wipm.WIPMParams:
+    """Random WIPM parameters: lateral CoM, a rotated (non-diagonal) body inertia about the
+    axle, damped wheels."""
+    rotation, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    inertia = rotation @ np.diag(rng.uniform(0.5, 25.0, 3)) @ rotation.T
+    values = (
+        rng.uniform(5.0, 150.0),  # body_mass
+        rng.uniform(0.1, 1.0),  # com_distance
+        rng.normal() * 0.1,  # com_lateral
+        0.5 * (inertia + inertia.T),  # inertia_body
+        rng.uniform(0.5, 5.0),  # wheel_mass
+        rng.uniform(0.01, 0.5),  # wheel_inertia
+        rng.uniform(0.01, 0.3),  # wheel_inertia_transverse
+        rng.uniform(0.0, 5.0),  # wheel_damping
+        rng.uniform(0.1, 0.4),  # wheel_radius
+        rng.uniform(0.3, 1.0),  # wheel_separation
+        rng.uniform(9.0, 10.0),  # gravity
+    )
+    return wipm.WIPMParams(*(jnp.asarray(v, dtype=jnp.float64) for v in values))
+
+
+def _random_batch(count: int, seed: int) -> tuple[np.ndarray, wipm.WIPMParams]:
+    """``count`` random turning states (any pitch, fast rates) with their own parameters."""
+    rng = np.random.default_rng(seed)
+    states = rng.normal(size=(count, 8)) * np.array([3.0, 3.0, 0.8, 2.0, 2.0, 2.0, 5.0, 5.0])
+    params = [_random_params(rng) for _ in range(count)]
+    return states, jax.tree_util.tree_map(lambda *leaves: jnp.stack(leaves), *params)
+
+
+def _relative(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.abs(a - b).max() / np.abs(b).max())
+
+
+def test_closed_form_equals_kane() -> None:
+    """The closed-form ``spatial_equations`` (what the dynamics use) and the Kane derivation
+    agree to round-off on random turning states and parameters (lateral CoM, products of
+    inertia, damping), and so do the dynamics and inverse dynamics solved from either; ``A`` is
+    symmetric and the equations do not depend on ``x``, ``psi``, ``X0``, ``Y0``."""
+    count = 200
+    states, params = _random_batch(count, seed=20)
+    closed = jax.jit(jax.vmap(wipm.spatial_equations))
+    kane = jax.jit(jax.vmap(wipm.spatial_equations_kane))
+    A, h, B = (np.asarray(m) for m in closed(states, params))
+    A_k, h_k, B_k = (np.asarray(m) for m in kane(states, params))
+    worst = {"A": 0.0, "h": 0.0, "B": 0.0}
+    for i in range(count):
+        worst["A"] = max(worst["A"], _relative(A[i], A_k[i]))
+        worst["h"] = max(worst["h"], _relative(h[i], h_k[i]))
+        worst["B"] = max(worst["B"], _relative(B[i], B_k[i]))
+    print(f"closed form vs Kane: worst relative differences {worst}")
+    assert max(worst.values()) < 1e-12, worst
+    np.testing.assert_array_equal(A, np.swapaxes(A, 1, 2))
+    moved = states.copy()
+    moved[:, [0, 1, 6, 7]] = np.random.default_rng(21).normal(size=(count, 4)) * 10.0
+    A_m, h_m, _ = (np.asarray(m) for m in closed(moved, params))
+    np.testing.assert_array_equal(A_m, A)
+    np.testing.assert_array_equal(h_m, h)
+
+    # the dynamics built on the closed form against dense solves of Kane's equations
+    rng = np.random.default_rng(22)
+    tau = rng.uniform(-150.0, 150.0, (count, 2))
+    u = np.stack([rng.normal(size=count) * 3.0, rng.normal(size=count) * 50.0], axis=1)
+    torque_sdot = np.asarray(jax.jit(jax.vmap(wipm.spatial_torque_dynamics))(states, tau, params))
+    sdot = np.asarray(jax.jit(jax.vmap(wipm.spatial_dynamics))(states, u, params))
+    tau_back = np.stack(jax.jit(jax.vmap(wipm.inverse_dynamics))(states, u, params), axis=1)
+    for i in range(count):
+        nu_dot = np.linalg.solve(A_k[i], B_k[i] @ tau[i] - h_k[i])
+        assert _relative(torque_sdot[i, 3:6], nu_dot) < 1e-12
+        # u = [thdd, tau_0]: B tau = [-tau_1/R, tau_0, tau_1]; unknowns [xdd, psidd, tau_1]
+        R, sep = float(params.wheel_radius[i]), float(params.wheel_separation[i])
+        system = np.column_stack([A_k[i][:, :2], [1.0 / R, 0.0, -1.0]])
+        rhs = np.array([0.0, u[i, 1], 0.0]) - h_k[i] - A_k[i][:, 2] * u[i, 0]
+        xdd, psidd, tau_1 = np.linalg.solve(system, rhs)
+        assert _relative(sdot[i, 3:6], np.array([xdd, psidd, u[i, 0]])) < 1e-12
+        expected = generalized_to_wheel(u[i, 1], tau_1, R, sep)
+        assert _relative(tau_back[i], np.asarray(expected)) < 1e-12
+
+
+def test_closed_form_derivatives_equal_kane() -> None:
+    """The state Jacobians of ``A`` and ``h`` (what the DDP differentiates) agree too."""
+    states, params = _random_batch(50, seed=23)
+
+    def jacobian(equations):  # noqa: ANN001, ANN202
+        return jax.jit(jax.vmap(jax.jacfwd(lambda s, p: equations(s, p)[:2])))
+
+    ours = jacobian(wipm.spatial_equations)(states, params)
+    reference = jacobian(wipm.spatial_equations_kane)(states, params)
+    for name, a, b in zip(("dA/ds", "dh/ds"), ours, reference, strict=True):
+        a, b = np.asarray(a), np.asarray(b)
+        worst = max(_relative(a[i], b[i]) for i in range(len(b)))
+        print(f"{name}: worst relative difference {worst:.1e}")
+        assert worst < 1e-12, (name, worst)

@@ -1,0 +1,118 @@
+"""The high-level controller (DESIGN 3): the offline plan at reset, MPC every ``mpc_dt``, and
+what the low level reads between two MPC steps.
+
+Between MPC steps the low level tracks the *current MPC solution's* predicted ``theta`` and
+``thetad``, interpolated linearly inside the 10 ms, with the MPC's ``thdd`` as feed-forward;
+the offline plan is only the MPC's reference, so the low level never fights a re-plan.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from controllers.mpc import ModelPredictiveController, MPCConfig, MPCStep
+from controllers.planning import Plan, PlanConfig, plan_to_goal
+from controllers.wipm import params_from_lambda
+from controllers.wipm_problem import wipm_state
+from wip_gym.robot_model import RobotModel
+
+
+@dataclass(frozen=True)
+class HighLevelConfig:
+    """Plan and MPC settings (see :class:`PlanConfig`, :class:`MPCConfig`)."""
+
+    plan: PlanConfig = field(default_factory=PlanConfig)
+    mpc: MPCConfig = field(default_factory=MPCConfig)
+
+
+@dataclass(frozen=True)
+class HighLevelReference:
+    """What the low level tracks at one control step."""
+
+    theta: float
+    thetad: float
+    thdd: float
+    tau_0: float
+    mpc_index: int
+    psi: float = 0.0
+    psid: float = 0.0
+    psidd: float = 0.0
+    axle_acceleration: tuple[float, float] = (0.0, 0.0)
+
+
+class HighLevel:
+    """Offline DDP plan + MPC on the WIPM for one robot (see the module docstring)."""
+
+    def __init__(self, config: HighLevelConfig, control_dt: float) -> None:
+        self.config = config
+        ratio = config.mpc.dt / control_dt
+        if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
+            raise ValueError(f"mpc dt {config.mpc.dt} is not a whole number of control steps "
+                             f"of {control_dt}")  # fmt: skip
+        self.steps_per_mpc = int(round(ratio))
+        self.control_dt = control_dt
+        self.plan: Plan | None = None
+        self.mpc: ModelPredictiveController | None = None
+        self._last: MPCStep | None = None
+
+    def reset(self, robot: RobotModel, goal_xy: np.ndarray, cup_friction: float | None) -> Plan:
+        """Plan from the robot's current state to the goal, build the MPC and run (and so
+        compile) its first step. ``robot`` must be updated with dynamics."""
+        self.params = params_from_lambda(robot.wipm_parameters())
+        state = wipm_state(robot)
+        self.plan = plan_to_goal(state, self.params, goal_xy, planar=robot.layout.planar,
+                                 cup_friction=cup_friction, config=self.config.plan)  # fmt: skip
+        # one solve now compiles the MPC (reset does the slow work); then start afresh
+        ModelPredictiveController(self.plan, self.config.mpc).step(0, state, self.params)
+        self.mpc = ModelPredictiveController(self.plan, self.config.mpc)
+        self._step = 0
+        self._last = None
+        return self.plan
+
+    def reference(self, robot: RobotModel) -> HighLevelReference:
+        """Advance one control step: run the MPC when it is due (``lambda(q)`` from the robot's
+        current state), and return the references interpolated inside the MPC step, and the
+        axle's predicted horizontal acceleration ``(xdd, xd psid)`` in the axle frame."""
+        if self.mpc is None or self.plan is None:
+            raise RuntimeError("HighLevel.reset() first")
+        phase = self._step % self.steps_per_mpc
+        index = self._step // self.steps_per_mpc
+        if phase == 0 or self._last is None:
+            self.params = params_from_lambda(robot.wipm_parameters())
+            self._last = self.mpc.step(index, wipm_state(robot), self.params)
+        self._step += 1
+        last = self._last
+        fraction = phase / self.steps_per_mpc
+        ti, tdi = (0, 1) if robot.layout.planar else (2, 5)
+        s0, s1 = last.predicted_states[0], last.predicted_states[1]
+        theta = (1 - fraction) * s0[ti] + fraction * s1[ti]
+        thetad = (1 - fraction) * s0[tdi] + fraction * s1[tdi]
+        control = last.control
+        dt = self.config.mpc.dt
+        xdd = (s1[3] - s0[3]) / dt  # xd is index 3 in both state layouts
+        if robot.layout.planar:
+            return HighLevelReference(
+                theta=float(theta),
+                thetad=float(thetad),
+                thdd=float(control[0]),
+                tau_0=0.0,
+                mpc_index=index,
+                axle_acceleration=(float(xdd), 0.0),
+            )
+        return HighLevelReference(
+            theta=float(theta),
+            thetad=float(thetad),
+            thdd=float(control[0]),
+            tau_0=float(control[1]),
+            mpc_index=index,
+            psi=float((1 - fraction) * s0[1] + fraction * s1[1]),
+            psid=float((1 - fraction) * s0[4] + fraction * s1[4]),
+            psidd=float((s1[4] - s0[4]) / dt),
+            axle_acceleration=(float(xdd), float(s0[3] * s0[4])),
+        )
+
+    @property
+    def last_solution(self) -> MPCStep | None:
+        return self._last

@@ -1,0 +1,253 @@
+"""The offline plan: DDP on the WIPM over the whole horizon (paper section "Receding Horizon
+Control"; issue 4).
+
+From the current state and ``lambda(q)`` to the goal over ``t_f`` (20 s at 10 ms: 2000 steps),
+weights as the paper describes (a high weight on ``theta`` for heavy robots, terminal weights)
+plus a penalty on the control's rate of change (the authors' later code), and penalties that
+keep the axle's horizontal acceleration under ``a_max`` and ``|theta|`` under ``theta_max``.
+Every plan is checked against those bounds and against arrival (within 1 cm of the goal with
+speeds near zero by ``0.6 t_f``); a violation is reported in ``Plan.violations``.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass, field
+
+import jax
+import numpy as np
+
+from controllers.ddp import DDPConfig, DDPSolver, make_ddp_solver
+from controllers.wipm import WIPMParams
+from controllers.wipm_problem import (
+    PLANAR_STATE,
+    SPATIAL_STATE,
+    Weights,
+    WIPMProblem,
+    refs_for,
+)
+
+
+@dataclass(frozen=True)
+class PlanConfig:
+    """Offline plan settings. Authors' values (krang_facts 3.2) for comparison.
+
+    Attributes:
+        horizon_s, dt: ``t_f`` and the step: 20 s at 10 ms (authors: the same).
+        a_max: bound on the axle's horizontal acceleration (m/s^2); None = ``0.5 mu g`` in tray
+            tasks (``mu`` the scenario's cup friction) and ``default_a_max`` otherwise.
+        default_a_max: the bound without a cup (1 m/s^2: a gentle drive for a 160 kg robot).
+        theta_max: bound on ``|theta|`` (rad); 0.25 rad (14 deg).
+        arrival_fraction: the plan must arrive by this fraction of ``t_f`` (0.6).
+        q_theta, q_thetad, q_position, q_speed: running weights on the WIPM state (the paper:
+            higher on positions and ``theta`` than on speeds; authors' 3-D Q = [0, 0.1, 1.0,
+            0.1, 0.1, 0.1, 0.1, 0.1] over [x, psi, theta, xd, psid, thetad, X0, Y0]).
+        q_heading: running weight on ``psi`` (3-D): toward the given final heading, or, with
+            the heading free, toward the bearing of the goal from the start (so the plan turns
+            to face the goal and drives forward rather than spinning or reversing); the
+            terminal weight on ``psi`` is zero when the heading is free.
+        r_control: weights on ``[thdd, tau_0]`` (authors R = 0.01, 0.01).
+        r_rate: weights on the control's rate (authors 0.01, 0.01 on u-dot).
+        q_terminal: terminal weight on every tracked state (authors 1e4).
+        ddp: solver settings (authors: 50 iterations, iLQR).
+    """
+
+    horizon_s: float = 20.0
+    dt: float = 0.01
+    a_max: float | None = None
+    default_a_max: float = 1.0
+    theta_max: float = 0.25
+    arrival_fraction: float = 0.6
+    q_theta: float = 10.0
+    q_thetad: float = 0.1
+    q_position: float = 10.0
+    q_speed: float = 0.1
+    q_heading: float = 5.0
+    r_control: float = 0.01
+    r_rate: float = 0.01
+    q_terminal: float = 1e4
+    ddp: DDPConfig = field(
+        default_factory=lambda: DDPConfig(max_iterations=100, tolerance=1e-9, second_order=False)
+    )
+
+    @property
+    def steps(self) -> int:
+        steps = self.horizon_s / self.dt
+        if abs(steps - round(steps)) > 1e-9:
+            raise ValueError(f"horizon {self.horizon_s} s is not a whole number of {self.dt} s")
+        return int(round(steps))
+
+    def acceleration_bound(self, cup_friction: float | None, gravity: float = 9.81) -> float:
+        if self.a_max is not None:
+            return self.a_max
+        return 0.5 * cup_friction * gravity if cup_friction is not None else self.default_a_max
+
+
+@dataclass(frozen=True)
+class Plan:
+    """An offline plan of the WIPM.
+
+    Attributes:
+        times: (N+1,) s. states: (N+1, n) WIPM states. controls: (N, m) ``thdd`` (``tau_0``).
+        goal_state: the target state. planar: model variant.
+        cost, iterations, converged: from the DDP.
+        peak_acceleration, peak_theta: measured on the plan.
+        arrival_time: first time from which the plan stays within 1 cm of the goal with speeds
+            under 1 cm/s (and 0.01 rad/s), None if never.
+        a_max, theta_max: the bounds it was planned under. violations: human-readable list.
+    """
+
+    times: np.ndarray
+    states: np.ndarray
+    controls: np.ndarray
+    goal_state: np.ndarray
+    planar: bool
+    cost: float
+    iterations: int
+    converged: bool
+    peak_acceleration: float
+    peak_theta: float
+    arrival_time: float | None
+    a_max: float
+    theta_max: float
+    violations: tuple[str, ...]
+
+    @property
+    def dt(self) -> float:
+        return float(self.times[1] - self.times[0])
+
+    def window(self, start: int, count: int) -> np.ndarray:
+        """``count`` states from index ``start``, padded with the goal state past the end."""
+        out = np.tile(self.goal_state, (count, 1))
+        available = self.states[start : start + count]
+        out[: len(available)] = available
+        return out
+
+    def sample(self, t: float) -> dict[str, float]:
+        """The plan's state at time ``t`` (linear interpolation; the goal state after the end),
+        by name: ``theta, thetad, x, xd`` (3-D also ``psi, psid, X0, Y0``)."""
+        if t >= self.times[-1]:
+            state = self.goal_state
+        else:
+            state = np.array([np.interp(t, self.times, column) for column in self.states.T])
+        names = PLANAR_STATE if self.planar else SPATIAL_STATE
+        return {name: float(v) for name, v in zip(names, state, strict=True)}
+
+    def control_window(self, start: int, count: int) -> np.ndarray:
+        out = np.zeros((count, self.controls.shape[1]))
+        available = self.controls[start : start + count]
+        out[: len(available)] = available
+        return out
+
+
+def planning_problem(planar: bool, config: PlanConfig, a_max: float, heading_given: bool
+                     ) -> WIPMProblem:  # fmt: skip
+    c = config
+    if planar:
+        q = (c.q_theta, c.q_thetad, c.q_position, c.q_speed)
+        q_terminal = (c.q_terminal,) * 4
+        r = (c.r_control,)
+        r_rate = (c.r_rate,)
+    else:
+        # x (odometry) is not tracked: the position is (X0, Y0)
+        q = (0.0, c.q_heading, c.q_theta, c.q_speed, c.q_speed, c.q_thetad, c.q_position,
+             c.q_position)  # fmt: skip
+        q_terminal = (0.0, c.q_terminal if heading_given else 0.0, *(c.q_terminal,) * 6)
+        r = (c.r_control, c.r_control)
+        r_rate = (c.r_rate, c.r_rate)
+    weights = Weights(q=q, r=r, r_rate=r_rate, q_terminal=q_terminal, a_max=a_max,
+                      theta_max=c.theta_max)  # fmt: skip
+    return WIPMProblem(planar=planar, dt=c.dt, weights=weights)
+
+
+@functools.lru_cache(maxsize=16)
+def _accelerations(problem: WIPMProblem):  # noqa: ANN202 (a jitted function)
+    return jax.jit(jax.vmap(problem.horizontal_acceleration, in_axes=(0, 0, None)))
+
+
+@functools.lru_cache(maxsize=16)
+def _solver(problem: WIPMProblem, ddp: DDPConfig) -> DDPSolver:
+    running, terminal = problem.costs()
+    return make_ddp_solver(problem.dynamics(), running, terminal, ddp)
+
+
+def arrival_time(times: np.ndarray, states: np.ndarray, goal: np.ndarray, planar: bool
+                 ) -> float | None:  # fmt: skip
+    """First time from which the plan stays within 1 cm of the goal, slower than 1 cm/s and
+    0.01 rad/s."""
+    if planar:
+        distance = np.abs(states[:, 2] - goal[2])
+        speeds = np.abs(states[:, [1, 3]]).max(axis=1)
+    else:
+        distance = np.hypot(states[:, 6] - goal[6], states[:, 7] - goal[7])
+        speeds = np.abs(states[:, [3, 4, 5]]).max(axis=1)
+    ok = (distance < 0.01) & (speeds < 0.01)
+    if not ok[-1]:
+        return None
+    bad = np.flatnonzero(~ok)
+    return float(times[0 if len(bad) == 0 else bad[-1] + 1])
+
+
+def plan_to_goal(
+    state: np.ndarray,
+    params: WIPMParams,
+    goal_xy: np.ndarray,
+    *,
+    planar: bool,
+    cup_friction: float | None = None,
+    goal_heading: float | None = None,
+    config: PlanConfig | None = None,
+) -> Plan:
+    """DDP from ``state`` (a WIPM state) to the goal (planar: ``x = goal_xy[0]``; 3-D:
+    ``(X0, Y0) = goal_xy``, heading free unless ``goal_heading``), at rest and upright."""
+    config = config or PlanConfig()
+    state = np.asarray(state, dtype=float)
+    n = 4 if planar else 8
+    if state.shape != (n,) or not np.all(np.isfinite(state)):
+        raise ValueError(f"state must be {n} finite numbers, got {state!r}")
+    goal_xy = np.asarray(goal_xy, dtype=float)
+    if goal_xy.shape != (2,) or not np.all(np.isfinite(goal_xy)):
+        raise ValueError(f"goal must be a finite (x, y), got {goal_xy!r}")
+    a_max = config.acceleration_bound(cup_friction, float(params.gravity))
+    problem = planning_problem(planar, config, a_max, goal_heading is not None)
+    if planar:
+        goal = np.array([0.0, 0.0, goal_xy[0], 0.0])
+    else:
+        if goal_heading is None:
+            delta = goal_xy - state[6:8]
+            bearing = np.arctan2(delta[1], delta[0]) if np.hypot(*delta) > 1e-6 else state[1]
+            # the bearing closest to the current heading (no full turns)
+            heading = state[1] + np.angle(np.exp(1j * (bearing - state[1])))
+        else:
+            heading = goal_heading
+        goal = np.array([0.0, heading, 0.0, 0.0, 0.0, 0.0, *goal_xy])
+    steps = config.steps
+    m = problem.n_control
+    z0 = np.concatenate([state, np.zeros(m)])
+    refs = refs_for(np.tile(goal, (steps + 1, 1)), params)
+    solver = _solver(problem, config.ddp)
+    result = solver(z0, np.zeros((steps, m)), params, refs)
+    Z = np.asarray(result.X)
+    states, controls = Z[:, :n], Z[:-1, n:]
+    accelerations = np.asarray(_accelerations(problem)(states[:-1], controls, params))
+    peak_a = float(accelerations.max())
+    peak_theta = float(np.abs(states[:, problem.theta_index]).max())
+    times = np.arange(steps + 1) * config.dt
+    arrival = arrival_time(times, states, goal, planar)
+    violations = []
+    if peak_a > a_max:
+        violations.append(f"peak acceleration {peak_a:.3f} m/s^2 > a_max {a_max:.3f}")
+    if peak_theta > config.theta_max:
+        violations.append(f"peak |theta| {peak_theta:.3f} rad > theta_max {config.theta_max}")
+    deadline = config.arrival_fraction * config.horizon_s
+    if arrival is None or arrival > deadline:
+        violations.append(f"arrives at {arrival} s, after {deadline:.1f} s")
+    if not np.all(np.isfinite(Z)):
+        violations.append("non-finite plan")
+    return Plan(
+        times=times, states=states, controls=controls, goal_state=goal, planar=planar,
+        cost=float(result.cost), iterations=int(result.iterations),
+        converged=bool(result.converged), peak_acceleration=peak_a, peak_theta=peak_theta,
+        arrival_time=arrival, a_max=a_max, theta_max=config.theta_max,
+        violations=tuple(violations),
+    )  # fmt: skip

@@ -1,0 +1,183 @@
+"""The whole-body task QP on the isolated manipulator dynamics, solved by ProxQP (issue 5).
+
+Decision variable ``qdd`` (every minimal acceleration but ``xdd``). Cost
+``0.5 ||T qdd - b||^2 + 0.5 eps ||qdd||^2`` stacked from weighted tasks (``controllers.tasks``;
+``T`` is the paper's task matrix, renamed: ``P`` is eq. ``iso3``'s, ERRATA 2). Constraints:
+
+* every actuator's torque within its limits, ``tau_min <= M_act (calA qdd + P h) <= tau_max``,
+  where ``M_act`` maps ``Gamma`` to the actuators: the wheels through the tested
+  ``(tau_0, tau_1) -> (tau_L, tau_R)`` map (box limits on ``tau_0``, ``tau_1`` would not bound
+  the wheels), the joints one to one. Nothing is left for MuJoCo to clip.
+* joint position limits as acceleration bounds that stop each limited joint inside its range
+  within ``limit_horizon`` s: ``2 (q_min - q - qd h) / h^2 <= qdd <= 2 (q_max - q - qd h) / h^2``.
+
+One dense ProxQP object per controller, reused and warm-started step to step; its status is
+checked every step, and an unsolved QP falls back to the last feasible torques (counted).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import proxsuite
+from numpy.typing import NDArray
+
+from controllers.isolated_dynamics import IsolatedDynamics
+from controllers.tasks import Task
+from wip_gym.robot_model import RobotModel
+from wip_gym.wheel_torques import generalized_to_wheel_matrix
+
+Array = NDArray[np.float64]
+_SOLVED = proxsuite.proxqp.QPSolverOutput.PROXQP_SOLVED
+
+
+@dataclass(frozen=True)
+class QPSettings:
+    """Attributes:
+    regularization: ``eps`` on ``||qdd||^2`` (keeps the Hessian positive definite).
+    eps_abs: ProxQP's absolute tolerance. Its default (1e-5 on the KKT residual) can stop
+        with constraint errors of order 1e-3 N m here; 1e-9 gives answers that are right.
+    limit_horizon: ``h`` of the joint-limit acceleration bounds (s).
+    fd_step: time step of the finite difference giving ``Jdot nu`` (s).
+    """
+
+    regularization: float = 1e-6
+    eps_abs: float = 1e-9
+    limit_horizon: float = 0.05
+    fd_step: float = 1e-6
+
+
+@dataclass(frozen=True)
+class QPSolution:
+    qdd: Array
+    nu_dot: Array
+    generalized: Array
+    actuators: Array
+    solved: bool
+    iterations: int
+
+
+def actuator_map(robot: RobotModel) -> Array:
+    """``M_act`` with ``actuator torques = M_act Gamma`` (``Gamma`` over ``q``: 3-D
+    ``[tau_0, tau_1, joints]``, planar ``[tau_1, joints]``)."""
+    lay = robot.layout
+    n_q = lay.n_min - 1
+    k = lay.index_q1 - 1
+    M = np.zeros((robot.model.nu, n_q))
+    wl, wr = lay.wheel_actuators
+    if lay.planar:
+        M[wl, k] = M[wr, k] = -0.5  # tau_L = tau_R = -tau_1 / 2
+    else:
+        W = generalized_to_wheel_matrix(lay.wheel_radius, lay.wheel_separation)
+        M[[wl, wr], 0] = W[:, 0]
+        M[[wl, wr], k] = W[:, 1]
+    for j, actuator in enumerate(lay.joint_actuators):
+        M[actuator, k + 1 + j] = 1.0
+    return M
+
+
+class TaskQP:
+    """Assemble and solve the task QP for one robot (see the module docstring)."""
+
+    def __init__(
+        self, robot: RobotModel, torque_low: Array, torque_high: Array, settings: QPSettings
+    ) -> None:
+        self.settings = settings
+        self.torque_low = np.asarray(torque_low, dtype=float)
+        self.torque_high = np.asarray(torque_high, dtype=float)
+        self.M_act = actuator_map(robot)
+        lay, m = robot.layout, robot.model
+        k = lay.index_q1 - 1
+        limited = []
+        for j, dof in enumerate(lay.body_dof):
+            joint = m.dof_jntid[dof]
+            if m.jnt_limited[joint]:
+                limited.append((k + 1 + j, lay.index_q1 + 1 + j, *m.jnt_range[joint]))
+        self._limited = limited
+        self.n = lay.n_min - 1
+        self._qp: proxsuite.proxqp.dense.QP | None = None
+        self.failures = 0
+        self.probe = RobotModel(robot.model)
+        self._last_actuators: Array | None = None
+
+    def task_rows(self, robot: RobotModel, iso: IsolatedDynamics, tasks: Sequence[Task]
+                  ) -> tuple[Array, Array]:  # fmt: skip
+        """``T`` and ``b`` of the stacked weighted tasks."""
+        J = np.vstack([task.jacobian(robot) for task in tasks])
+        target = np.concatenate([task.reference_acceleration(robot) for task in tasks])
+        w = np.concatenate([task.weights() for task in tasks])
+        bias = self._jdot_nu(robot, tasks)
+        T = w[:, None] * (J @ iso.E)
+        b = w * (target - bias - J @ iso.e)
+        return T, b
+
+    def _jdot_nu(self, robot: RobotModel, tasks: Sequence[Task]) -> Array:
+        """``Jdot nu`` = d/dt of ``J(q) nu`` at fixed ``nu``, by a central difference."""
+        eps = self.settings.fd_step
+        q, nu = robot.q, robot.nu
+        xy = robot.axle_position[:2]
+        sides = []
+        for sign in (1.0, -1.0):
+            qpos, qvel = robot.full_state(q + sign * eps * nu, nu, xy)
+            self.probe.update(qpos, qvel, dynamics=False)
+            sides.append(np.concatenate([task.jacobian(self.probe) @ nu for task in tasks]))
+        return (sides[0] - sides[1]) / (2 * eps)
+
+    def constraints(self, robot: RobotModel, iso: IsolatedDynamics) -> tuple[Array, Array, Array]:
+        C_torque = self.M_act @ iso.calA
+        offset = self.M_act @ iso.Ph
+        rows = [C_torque]
+        lower = [self.torque_low - offset]
+        upper = [self.torque_high - offset]
+        if self._limited:
+            h = self.settings.limit_horizon
+            C_limit = np.zeros((len(self._limited), self.n))
+            lo = np.zeros(len(self._limited))
+            hi = np.zeros(len(self._limited))
+            for r, (column, index, q_min, q_max) in enumerate(self._limited):
+                C_limit[r, column] = 1.0
+                q, qd = robot.q[index], robot.nu[index]
+                lo[r] = 2.0 * (q_min - q - qd * h) / h**2
+                hi[r] = 2.0 * (q_max - q - qd * h) / h**2
+            rows.append(C_limit)
+            lower.append(lo)
+            upper.append(hi)
+        return np.vstack(rows), np.concatenate(lower), np.concatenate(upper)
+
+    def solve(self, robot: RobotModel, iso: IsolatedDynamics, tasks: Sequence[Task]) -> QPSolution:
+        T, b = self.task_rows(robot, iso, tasks)
+        H = T.T @ T + self.settings.regularization * np.eye(self.n)
+        g = -T.T @ b
+        C, lower, upper = self.constraints(robot, iso)
+        if self._qp is None:
+            self._qp = proxsuite.proxqp.dense.QP(self.n, 0, C.shape[0])
+            self._qp.settings.eps_abs = self.settings.eps_abs
+            self._qp.settings.eps_rel = 0.0
+            self._qp.init(H, g, None, None, C, lower, upper)
+            self._qp.solve()
+            # warm start only once a previous result exists (ProxQP 0.8 crashes otherwise)
+            self._qp.settings.initial_guess = (
+                proxsuite.proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
+            )
+        else:
+            self._qp.update(H=H, g=g, C=C, l=lower, u=upper)
+            self._qp.solve()
+        results = self._qp.results
+        solved = results.info.status == _SOLVED and bool(np.all(np.isfinite(results.x)))
+        if solved:
+            qdd = np.array(results.x)
+            generalized = iso.torques(qdd)
+            actuators = self.M_act @ generalized
+            self._last_actuators = actuators
+        else:
+            self.failures += 1
+            qdd = np.full(self.n, np.nan)
+            generalized = np.full(self.n, np.nan)
+            if self._last_actuators is None:
+                raise RuntimeError("the first task QP was not solved: no feasible torques yet")
+            actuators = self._last_actuators
+        return QPSolution(qdd=qdd, nu_dot=iso.E @ qdd + iso.e if solved else np.full(
+            len(iso.e), np.nan), generalized=generalized, actuators=actuators, solved=solved,
+            iterations=int(results.info.iter))  # fmt: skip

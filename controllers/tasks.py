@@ -1,0 +1,199 @@
+"""Low-level tasks of the whole-body QP (paper section "Optimization Based Control").
+
+Each task is a small object (mink's style): ``jacobian(robot)`` over the minimal velocities
+``nu`` and ``reference_acceleration(robot)``, the PD law of the paper
+
+    xdd* = xdd_d - Kp (x - x_d) - Kv (xd - xd_d)
+
+The QP (``controllers.task_qp``) turns them into rows ``w J E qdd = w (xdd* - Jdot nu - J e)``
+(``nu_dot = E qdd + e`` from the isolated dynamics), with ``Jdot nu`` by a central finite
+difference of ``J nu`` along the motion. Frames: end-effector targets live in the axle frame
+(origin at the axle midpoint, x along the heading, z up; DESIGN 4, ERRATA 5).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+
+from wip_gym.robot_model import RobotModel
+
+Array = NDArray[np.float64]
+
+
+def _skew(v: Array) -> Array:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def rotation_error(R: Array, R_target: Array) -> Array:
+    """Rotation vector ``log(R R_target^T)`` (the rotation taking the target to ``R``)."""
+    quat = np.zeros(4)
+    mujoco.mju_mat2Quat(quat, (R @ R_target.T).reshape(-1))
+    if quat[0] < 0:
+        quat = -quat
+    vector = np.zeros(3)
+    mujoco.mju_quat2Vel(vector, quat, 1.0)
+    return vector
+
+
+def site_in_axle_frame(robot: RobotModel, site: int) -> tuple[Array, Array, Array, Array]:
+    """Position, rotation, and Jacobians (linear, angular) over ``nu`` of a site in the axle
+    frame (which turns with ``psi`` and does not pitch)."""
+    m, d, lay = robot.model, robot.data, robot.layout
+    jacp = np.zeros((3, m.nv))
+    jacr = np.zeros((3, m.nv))
+    mujoco.mj_jacSite(m, d, jacp, jacr, site)
+    origin_jac = np.zeros((3, m.nv))
+    origin = d.xpos[lay.base_body]
+    mujoco.mj_jac(m, d, origin_jac, None, origin, lay.base_body)
+    Rh = robot.heading_rotation
+    rel = Rh.T @ (d.site_xpos[site] - origin)
+    J = robot.J_tf
+    Jp = Rh.T @ ((jacp - origin_jac) @ J)
+    Jr = Rh.T @ (jacr @ J)
+    if lay.index_psi is not None:
+        ipsi = lay.index_psi
+        Jp[0, ipsi] += rel[1]
+        Jp[1, ipsi] -= rel[0]
+        Jr[2, ipsi] -= 1.0
+    R = Rh.T @ d.site_xmat[site].reshape(3, 3)
+    return rel, R, Jp, Jr
+
+
+@dataclass
+class ThetaTask:
+    """Track the CoM pitch ``theta`` (the MPC's prediction, its ``thdd`` as feed-forward).
+    Gains: the authors' COMAngleControl mode, KpCOM 50, KvCOM 100, weight 10."""
+
+    weight: float = 10.0
+    kp: float = 50.0
+    kv: float = 100.0
+    theta_d: float = 0.0
+    thetad_d: float = 0.0
+    thdd_d: float = 0.0
+    name: str = "theta"
+
+    def jacobian(self, robot: RobotModel) -> Array:
+        return robot.J_theta[None, :]
+
+    def error(self, robot: RobotModel) -> Array:
+        return np.array([robot.theta - self.theta_d])
+
+    def reference_acceleration(self, robot: RobotModel) -> Array:
+        return np.array([self.thdd_d - self.kp * (robot.theta - self.theta_d)
+                         - self.kv * (robot.thetad - self.thetad_d)])  # fmt: skip
+
+    def weights(self) -> Array:
+        return np.array([self.weight])
+
+
+@dataclass
+class SpinTask:
+    """Track the heading ``psi`` of the MPC's prediction (3-D)."""
+
+    weight: float = 10.0
+    kp: float = 50.0
+    kv: float = 20.0
+    psi_d: float = 0.0
+    psid_d: float = 0.0
+    psidd_d: float = 0.0
+    name: str = "spin"
+
+    def jacobian(self, robot: RobotModel) -> Array:
+        row = np.zeros((1, robot.layout.n_min))
+        row[0, robot.layout.index_psi] = 1.0
+        return row
+
+    def error(self, robot: RobotModel) -> Array:
+        return np.array([robot.psi - self.psi_d])
+
+    def reference_acceleration(self, robot: RobotModel) -> Array:
+        psid = robot.nu[robot.layout.index_psi]
+        return np.array([self.psidd_d - self.kp * (robot.psi - self.psi_d)
+                         - self.kv * (psid - self.psid_d)])  # fmt: skip
+
+    def weights(self) -> Array:
+        return np.array([self.weight])
+
+
+@dataclass
+class FramePositionTask:
+    """Hold a site's position in the axle frame (authors: KpEE 750, KvEE 250)."""
+
+    site: int
+    target: Array
+    weight: float = 1.0
+    kp: float = 750.0
+    kv: float = 250.0
+    name: str = "ee_position"
+
+    def jacobian(self, robot: RobotModel) -> Array:
+        return site_in_axle_frame(robot, self.site)[2]
+
+    def error(self, robot: RobotModel) -> Array:
+        return site_in_axle_frame(robot, self.site)[0] - self.target
+
+    def reference_acceleration(self, robot: RobotModel) -> Array:
+        position, _, Jp, _ = site_in_axle_frame(robot, self.site)
+        return -self.kp * (position - self.target) - self.kv * (Jp @ robot.nu)
+
+    def weights(self) -> Array:
+        return np.full(3, self.weight)
+
+
+@dataclass
+class FrameOrientationTask:
+    """Hold a site's orientation in the axle frame (authors: KpOr 150, KvOr 50, weight 10).
+    ``target`` may be changed every step (the waiter's tray)."""
+
+    site: int
+    target: Array
+    weight: float = 10.0
+    kp: float = 150.0
+    kv: float = 50.0
+    name: str = "ee_orientation"
+
+    def jacobian(self, robot: RobotModel) -> Array:
+        return site_in_axle_frame(robot, self.site)[3]
+
+    def error(self, robot: RobotModel) -> Array:
+        return rotation_error(site_in_axle_frame(robot, self.site)[1], self.target)
+
+    def reference_acceleration(self, robot: RobotModel) -> Array:
+        _, R, _, Jr = site_in_axle_frame(robot, self.site)
+        return -self.kp * rotation_error(R, self.target) - self.kv * (Jr @ robot.nu)
+
+    def weights(self) -> Array:
+        return np.full(3, self.weight)
+
+
+@dataclass
+class PostureTask:
+    """Regularise the body joints toward a posture (authors: KpPose 10, KvPose 20)."""
+
+    target: Array
+    joint_weights: Array
+    kp: float = 10.0
+    kv: float = 20.0
+    name: str = "posture"
+    columns: Array = field(default_factory=lambda: np.zeros(0, dtype=int))
+
+    def jacobian(self, robot: RobotModel) -> Array:
+        rows = np.zeros((len(self.columns), robot.layout.n_min))
+        rows[np.arange(len(self.columns)), self.columns] = 1.0
+        return rows
+
+    def error(self, robot: RobotModel) -> Array:
+        return robot.q[self.columns] - self.target
+
+    def reference_acceleration(self, robot: RobotModel) -> Array:
+        return -self.kp * (robot.q[self.columns] - self.target) - self.kv * robot.nu[self.columns]
+
+    def weights(self) -> Array:
+        return self.joint_weights
+
+
+Task = ThetaTask | SpinTask | FramePositionTask | FrameOrientationTask | PostureTask

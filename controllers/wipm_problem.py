@@ -1,0 +1,164 @@
+"""The WIPM as an optimal-control problem for the DDP (paper section "Receding Horizon
+Control"): discretised dynamics with the control rate as input, tracking costs, and the
+penalties that keep a plan one a robot carrying a cup can follow.
+
+The state the DDP sees is the WIPM state augmented with the current control,
+``z = [s, u]``, and its input is the control's rate ``w = du/dt`` (the authors' later code, 46
+``mpc_params.cfg``, penalised the control change this way):
+
+    s_{k+1} = s_k + dt f(s_k, u_k)          (explicit Euler, paper eq. after ``WIPdyn``)
+    u_{k+1} = u_k + dt w_k
+
+Planar: ``s = [theta, thetad, x, xd]``, ``u = thdd``. 3-D: ``s = [x, psi, theta, xd, psid,
+thetad, X0, Y0]``, ``u = [thdd, tau_0]``. The running cost is ``dt`` times
+
+    (s - s_ref)^T Q (s - s_ref) + u^T R u + w^T R_rate w
+      + w_acc relu(a - a_lim)^2 + w_theta relu(|theta| - theta_lim)^2
+
+with ``a`` the horizontal acceleration of the axle (planar ``|xdd|``, 3-D
+``sqrt(xdd^2 + (xd psid)^2)``) and the limits a margin inside ``a_max`` and ``theta_max``; the
+terminal cost is ``(s - s_ref)^T Q_f (s - s_ref)``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from controllers.wipm import WIPMParams, planar_dynamics, spatial_dynamics
+from wip_gym.robot_model import RobotModel
+
+Array = jax.Array
+
+PLANAR_STATE = ("theta", "thetad", "x", "xd")
+SPATIAL_STATE = ("x", "psi", "theta", "xd", "psid", "thetad", "X0", "Y0")
+
+
+@dataclass(frozen=True)
+class Weights:
+    """Diagonal weights of one problem (state order of the model; see the module docstring).
+
+    Attributes:
+        q: running state weights. r: control weights. r_rate: control-rate weights.
+        q_terminal: terminal state weights.
+        a_max, theta_max: the bounds the plan must respect (m/s^2, rad).
+        margin: the penalties start at ``margin`` times the bound.
+        w_acceleration, w_theta: penalty weights.
+    """
+
+    q: tuple[float, ...]
+    r: tuple[float, ...]
+    r_rate: tuple[float, ...]
+    q_terminal: tuple[float, ...]
+    a_max: float
+    theta_max: float
+    margin: float = 0.85
+    w_acceleration: float = 1e4
+    w_theta: float = 1e4
+
+
+@dataclass(frozen=True)
+class WIPMProblem:
+    """Discrete dynamics and costs for ``controllers.ddp`` (pure JAX functions)."""
+
+    planar: bool
+    dt: float
+    weights: Weights
+    rate_input: bool = True  # z = [s, u] with input du/dt; False: state s, input u
+
+    @property
+    def n_state(self) -> int:
+        return 4 if self.planar else 8
+
+    @property
+    def n_control(self) -> int:
+        return 1 if self.planar else 2
+
+    @property
+    def theta_index(self) -> int:
+        return 0 if self.planar else 2
+
+    def continuous(self, s: Array, u: Array, params: WIPMParams) -> Array:
+        if self.planar:
+            return planar_dynamics(s, u[0], params)
+        return spatial_dynamics(s, u, params)
+
+    def horizontal_acceleration(self, s: Array, u: Array, params: WIPMParams) -> Array:
+        """Axle acceleration magnitude: planar ``|xdd|``; 3-D with the turn's centripetal part."""
+        sdot = self.continuous(s, u, params)
+        if self.planar:
+            return jnp.sqrt(sdot[3] ** 2 + 1e-12)
+        return jnp.sqrt(sdot[3] ** 2 + (s[3] * s[4]) ** 2 + 1e-12)
+
+    def dynamics(self) -> Callable[[Array, Array, WIPMParams], Array]:
+        n, dt = self.n_state, self.dt
+        if not self.rate_input:
+
+            def plain(s: Array, u: Array, params: WIPMParams) -> Array:
+                return s + dt * self.continuous(s, u, params)
+
+            return plain
+
+        def step(z: Array, w: Array, params: WIPMParams) -> Array:
+            s, u = z[:n], z[n:]
+            return jnp.concatenate([s + dt * self.continuous(s, u, params), u + dt * w])
+
+        return step
+
+    def costs(
+        self,
+    ) -> tuple[Callable[[Array, Array, Array], Array], Callable[[Array, Array], Array]]:
+        """``running(z, w, ref)`` and ``terminal(z, ref)`` with ``ref = (s_ref, params)``: the
+        reference state and the WIPM parameters the acceleration penalty needs."""
+        wts, n, dt = self.weights, self.n_state, self.dt
+        q = jnp.asarray(wts.q)
+        r = jnp.asarray(wts.r)
+        r_rate = jnp.asarray(wts.r_rate)
+        q_terminal = jnp.asarray(wts.q_terminal)
+        a_lim = wts.margin * wts.a_max
+        theta_lim = wts.margin * wts.theta_max
+        ti = self.theta_index
+
+        def running(z: Array, w: Array, ref: tuple[Array, WIPMParams]) -> Array:
+            s_ref, params = ref
+            if self.rate_input:
+                s, u = z[:n], z[n:]
+            else:
+                s, u = z, w
+            e = s - s_ref
+            a = self.horizontal_acceleration(s, u, params)
+            penalty = wts.w_acceleration * jax.nn.relu(a - a_lim) ** 2
+            penalty += wts.w_theta * jax.nn.relu(jnp.abs(s[ti]) - theta_lim) ** 2
+            rate = w @ (r_rate * w) if self.rate_input else 0.0
+            return dt * (e @ (q * e) + u @ (r * u) + rate + penalty)
+
+        def terminal(z: Array, ref: tuple[Array, WIPMParams]) -> Array:
+            s_ref, _ = ref
+            e = z[:n] - s_ref
+            return e @ (q_terminal * e)
+
+        return running, terminal
+
+
+def refs_for(states: np.ndarray, params: WIPMParams) -> tuple[Array, WIPMParams]:
+    """The per-step references ``(s_ref[k], params)`` with the parameters broadcast along the
+    horizon (the DDP wants a leading axis of ``N + 1`` on every leaf)."""
+    count = states.shape[0]
+    broadcast = jax.tree_util.tree_map(
+        lambda leaf: jnp.broadcast_to(jnp.asarray(leaf), (count, *jnp.shape(leaf))), params
+    )
+    return jnp.asarray(states), broadcast
+
+
+def wipm_state(robot: RobotModel) -> np.ndarray:
+    """The WIPM state of the full robot (its ``lambda(q)`` part): planar
+    ``[theta, thetad, x, xd]``, 3-D ``[x, psi, theta, xd, psid, thetad, X0, Y0]``."""
+    q, nu = robot.q, robot.nu
+    if robot.layout.planar:
+        return np.array([robot.theta, robot.thetad, q[0], nu[0]])
+    axle = robot.axle_position
+    return np.array([q[0], q[1], robot.theta, nu[0], nu[1], robot.thetad, axle[0], axle[1]])

@@ -1,0 +1,124 @@
+"""The offline plan, the MPC and the ``decoupled-mpc`` policy (issue 4)."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import wip_gym  # noqa: F401
+from controllers.decoupled import DecoupledController
+from controllers.decoupled_mpc import DecoupledMPCController
+from controllers.mpc import ModelPredictiveController
+from controllers.planning import PlanConfig, plan_to_goal
+from controllers.policy import make_robot
+from controllers.wipm import params_from_lambda
+from controllers.wipm_problem import wipm_state
+
+
+def robot_state(env_id: str, **kwargs):
+    env = gym.make(env_id, **kwargs)
+    obs, _ = env.reset(seed=0)
+    robot = make_robot(env, "nominal")
+    robot.update(obs["qpos"], obs["qvel"])
+    return env, robot, params_from_lambda(robot.wipm_parameters()), wipm_state(robot)
+
+
+def test_planar_plan_arrives_within_bounds() -> None:
+    env, robot, params, state = robot_state("wip_gym/PlanarTray-v0")
+    plan = plan_to_goal(state, params, np.array([2.0, 0.0]), planar=True, cup_friction=0.3)
+    assert plan.violations == ()
+    assert plan.converged
+    assert plan.a_max == pytest.approx(0.5 * 0.3 * 9.81)
+    assert plan.peak_acceleration <= plan.a_max
+    assert plan.peak_theta <= plan.theta_max
+    assert plan.arrival_time is not None and plan.arrival_time <= 0.6 * 20.0
+    final = plan.states[-1]
+    assert abs(final[2] - 2.0) < 0.01 and np.abs(final[[0, 1, 3]]).max() < 0.01
+    assert plan.states.shape == (2001, 4) and plan.controls.shape == (2000, 1)
+
+
+def test_3d_plan_turns_to_an_offset_goal() -> None:
+    env, robot, params, state = robot_state("wip_gym/KrangTray-v0")
+    plan = plan_to_goal(state, params, np.array([2.0, 1.0]), planar=False, cup_friction=0.3)
+    assert plan.violations == (), plan.violations
+    final = plan.states[-1]
+    assert np.hypot(final[6] - 2.0, final[7] - 1.0) < 0.01
+    assert np.abs(final[[2, 3, 4, 5]]).max() < 0.01
+    # it faced the goal (bearing 0.46 rad) and drove about the straight distance forward (no
+    # spin, no detour); a WIP's brief backward lurch before it leans forward is allowed
+    assert 0.2 < final[1] < 0.7
+    assert np.hypot(2.0, 1.0) < final[0] < 1.15 * np.hypot(2.0, 1.0)
+
+
+def test_violations_are_reported() -> None:
+    env, robot, params, state = robot_state("wip_gym/Planar-v0")
+    tight = PlanConfig(a_max=0.05, horizon_s=4.0)  # cannot arrive 3 m away in 2.4 s so gently
+    plan = plan_to_goal(state, params, np.array([3.0, 0.0]), planar=True, config=tight)
+    assert any("arrives" in v or "acceleration" in v for v in plan.violations)
+
+
+def test_plan_rejects_bad_inputs() -> None:
+    env, robot, params, state = robot_state("wip_gym/Planar-v0")
+    with pytest.raises(ValueError, match="state"):
+        plan_to_goal(state[:3], params, np.array([2.0, 0.0]), planar=True)
+    with pytest.raises(ValueError, match="goal"):
+        plan_to_goal(state, params, np.array([np.nan, 0.0]), planar=True)
+
+
+def test_mpc_on_the_plan_reproduces_it_and_warm_starts() -> None:
+    env, robot, params, state = robot_state("wip_gym/Planar-v0")
+    plan = plan_to_goal(state, params, np.array([2.0, 0.0]), planar=True)
+    mpc = ModelPredictiveController(plan)
+    # from a state on the plan, the MPC's prediction follows the plan's positions (its own
+    # weights differ from the plan's, so rates may differ slightly)
+    for index in (0, 100, 300):
+        step = mpc.step(index, plan.states[index], params)
+        assert step.accepted
+        predicted, planned = step.predicted_states[:20], plan.states[index : index + 20]
+        np.testing.assert_allclose(predicted[:, [0, 2]], planned[:, [0, 2]], atol=5e-3)
+    # past the plan's end the reference is the goal: standing still at the goal is optimal
+    assert mpc.rejected == 0 and mpc.solves == 3
+    fresh = ModelPredictiveController(plan)
+    end = fresh.step(len(plan.times) + 50, plan.goal_state, params)
+    assert abs(end.control[0]) < 1e-9
+    np.testing.assert_allclose(end.predicted_states, np.tile(plan.goal_state, (101, 1)), atol=1e-9)
+
+
+def test_decoupled_tracks_the_plan() -> None:
+    env = gym.make("wip_gym/Planar-v0", goal=2.0)
+    obs, info = env.reset(seed=0)
+    policy = DecoupledController.for_env(env)
+    policy.reset(obs, info)
+    assert policy.plan is not None
+    ref = policy.reference(3.0)
+    assert ref == policy.plan.sample(3.0)
+    assert abs(ref["theta"]) > 1e-3  # the plan leans to accelerate: theta_ref is not 0
+
+
+def closed_loop(env_id: str, goal, seconds: float = 14.0) -> dict:
+    env = gym.make(env_id, goal=goal)
+    obs, info = env.reset(seed=0)
+    policy = DecoupledMPCController.for_env(env)
+    policy.reset(obs, info)
+    assert policy.plan_violations == ()
+    for _ in range(int(seconds / env.unwrapped.dt)):
+        obs, _, terminated, _, info = env.step(policy(obs))
+        assert not terminated, info
+    assert policy.diagnostics["mpc_rejected"][-1] == 0
+    return info
+
+
+@pytest.mark.parametrize(
+    ("env_id", "goal"),
+    [
+        ("wip_gym/WIP-v0", (2.5, 1.0)),
+        ("wip_gym/WIP-v0", (2.5, -1.0)),
+        ("wip_gym/Planar-v0", 2.5),
+        ("wip_gym/Krang-v0", (2.5, 0.0)),
+    ],
+)
+def test_decoupled_mpc_drives_to_the_goal_and_stops(env_id: str, goal) -> None:
+    info = closed_loop(env_id, goal)
+    assert info["goal_distance"] < 0.05
+    assert abs(info["xd"]) < 0.05
