@@ -1,6 +1,7 @@
 """``wip-bench``: the benchmark command line.
 
 wip-bench compare --env PlanarTray-v0 --controllers decoupled --episodes 3 --video
+wip-bench figures --env PlanarTray-v0 --out docs/figures
 """
 
 from __future__ import annotations
@@ -8,7 +9,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from benchmarks import compare
+from benchmarks import compare, figures
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -16,6 +17,8 @@ def build_parser() -> argparse.ArgumentParser:
     commands = parser.add_subparsers(dest="command", required=True)
     compare_parser = commands.add_parser("compare", help="controllers x seeds on one scenario")
     compare.add_arguments(compare_parser)
+    figures_parser = commands.add_parser("figures", help="the paper's Figure 3 as PNGs")
+    figures.add_arguments(figures_parser)
     return parser
 
 
@@ -25,6 +28,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.command == "compare":
             compare.run(args)
+        elif args.command == "figures":
+            figures.run(args)
     except ValueError as error:
         parser.error(str(error))  # exits with status 2 and the message
     return 0

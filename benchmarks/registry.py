@@ -15,6 +15,21 @@ _REGISTRY: dict[str, tuple[str, str, dict[str, Any]]] = {
         "controllers.decoupled:DecoupledConfig",
         {},
     ),
+    "decoupled-mpc": (
+        "controllers.decoupled_mpc:DecoupledMPCController",
+        "controllers.decoupled_mpc:DecoupledMPCConfig",
+        {},
+    ),
+    "unified": (
+        "controllers.hierarchical:HierarchicalController",
+        "controllers.hierarchical:HierarchicalConfig",
+        {"tray_mode": "level"},
+    ),
+    "unified-waiter": (
+        "controllers.hierarchical:HierarchicalController",
+        "controllers.hierarchical:HierarchicalConfig",
+        {"tray_mode": "specific_force"},
+    ),
 }
 
 

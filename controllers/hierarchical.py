@@ -57,6 +57,10 @@ class HierarchicalConfig:
         model: ``nominal`` or ``oracle``.
         tray_mode: ``level`` (the paper) or ``specific_force`` (the waiter).
         max_tray_tilt_deg: bound of the waiter's tilt.
+        tray_lead_s: the waiter tilts for the acceleration the MPC predicts this far ahead, to
+            make up for the orientation task's lag (its PD settles in about 0.1 s).
+        tray_window_s: the waiter's acceleration is averaged over this window of the MPC's
+            prediction.
         theta_weight, theta_kp, theta_kv: theta task (authors' COMAngleControl: w 10, Kp 50,
             Kv 100). We weight it 100: balance comes first.
         spin_weight, spin_kp, spin_kv: heading task (3-D).
@@ -70,6 +74,8 @@ class HierarchicalConfig:
     model: ModelChoice = "nominal"
     tray_mode: Literal["level", "specific_force"] = "level"
     max_tray_tilt_deg: float = 20.0
+    tray_lead_s: float = 0.1
+    tray_window_s: float = 0.1
     theta_weight: float = 100.0
     theta_kp: float = 50.0
     theta_kv: float = 100.0
@@ -179,9 +185,22 @@ class HierarchicalController:
             self.spin_task.psid_d = ref.psid
             self.spin_task.psidd_d = ref.psidd
         if self.config.tray_mode == "specific_force" and self.orientation_tasks:
-            tilt = tilt_toward(np.array(ref.axle_acceleration), self.config.max_tray_tilt_deg)
+            tilt = tilt_toward(self._predicted_acceleration(robot), self.config.max_tray_tilt_deg)
             self.orientation_tasks[0].target = tilt @ self._orientation_reset[0]
         self._ref = ref
+
+    def _predicted_acceleration(self, robot: RobotModel) -> Array:
+        """The axle's horizontal acceleration (axle frame, ``(xdd, xd psid)``) that the current
+        MPC solution predicts ``tray_lead_s`` ahead, averaged over ``tray_window_s`` (a
+        velocity difference across the window: the raw 10 ms differences are noisy)."""
+        states = self.high_level.last_solution.predicted_states
+        dt = self.high_level.config.mpc.dt
+        half = max(1, int(round(0.5 * self.config.tray_window_s / dt)))
+        j = int(round(self.config.tray_lead_s / dt))
+        lo, hi = max(j - half, 0), min(j + half, len(states) - 1)
+        xdd = (states[hi, 3] - states[lo, 3]) / ((hi - lo) * dt)
+        lateral = 0.0 if robot.layout.planar else states[j, 3] * states[j, 4]
+        return np.array([xdd, lateral])
 
     # ------------------------------------------------------------------ step
     def __call__(self, observation: dict[str, Array]) -> Array:

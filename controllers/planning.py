@@ -47,7 +47,11 @@ class PlanConfig:
             to face the goal and drives forward rather than spinning or reversing); the
             terminal weight on ``psi`` is zero when the heading is free.
         r_control: weights on ``[thdd, tau_0]`` (authors R = 0.01, 0.01).
-        r_rate: weights on the control's rate (authors 0.01, 0.01 on u-dot).
+        r_rate: weights on the control's rate (authors 0.01, 0.01 on u-dot). We use 1.0: a
+            smoother ``thdd`` gives a smoother axle acceleration, which a cup (and the waiter's
+            tray, which must tilt as fast as the acceleration changes) can follow; with 0.01 the
+            acceleration flips sign within ~0.1 s mid-drive.
+        r_rate_spin: weight on ``tau_0``'s rate (3-D; the authors' 0.01: ``tau_0`` is in N m).
         q_terminal: terminal weight on every tracked state (authors 1e4).
         ddp: solver settings (authors: 50 iterations, iLQR).
     """
@@ -64,7 +68,8 @@ class PlanConfig:
     q_speed: float = 0.1
     q_heading: float = 5.0
     r_control: float = 0.01
-    r_rate: float = 0.01
+    r_rate: float = 1.0
+    r_rate_spin: float = 0.01
     q_terminal: float = 1e4
     ddp: DDPConfig = field(
         default_factory=lambda: DDPConfig(max_iterations=100, tolerance=1e-9, second_order=False)
@@ -154,7 +159,7 @@ def planning_problem(planar: bool, config: PlanConfig, a_max: float, heading_giv
              c.q_position)  # fmt: skip
         q_terminal = (0.0, c.q_terminal if heading_given else 0.0, *(c.q_terminal,) * 6)
         r = (c.r_control, c.r_control)
-        r_rate = (c.r_rate, c.r_rate)
+        r_rate = (c.r_rate, c.r_rate_spin)
     weights = Weights(q=q, r=r, r_rate=r_rate, q_terminal=q_terminal, a_max=a_max,
                       theta_max=c.theta_max)  # fmt: skip
     return WIPMProblem(planar=planar, dt=c.dt, weights=weights)

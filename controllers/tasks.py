@@ -41,7 +41,10 @@ def rotation_error(R: Array, R_target: Array) -> Array:
 
 def site_in_axle_frame(robot: RobotModel, site: int) -> tuple[Array, Array, Array, Array]:
     """Position, rotation, and Jacobians (linear, angular) over ``nu`` of a site in the axle
-    frame (which turns with ``psi`` and does not pitch)."""
+    frame (which turns with ``psi`` and does not pitch). Memoised per robot state."""
+    key = ("site_in_axle_frame", site)
+    if key in robot.cache:
+        return robot.cache[key]  # type: ignore[return-value]
     m, d, lay = robot.model, robot.data, robot.layout
     jacp = np.zeros((3, m.nv))
     jacr = np.zeros((3, m.nv))
@@ -60,6 +63,7 @@ def site_in_axle_frame(robot: RobotModel, site: int) -> tuple[Array, Array, Arra
         Jp[1, ipsi] -= rel[0]
         Jr[2, ipsi] -= 1.0
     R = Rh.T @ d.site_xmat[site].reshape(3, 3)
+    robot.cache[key] = (rel, R, Jp, Jr)
     return rel, R, Jp, Jr
 
 
@@ -155,6 +159,7 @@ class FrameOrientationTask:
     kp: float = 150.0
     kv: float = 50.0
     name: str = "ee_orientation"
+    angular_velocity_d: Array = field(default_factory=lambda: np.zeros(3))
 
     def jacobian(self, robot: RobotModel) -> Array:
         return site_in_axle_frame(robot, self.site)[3]
@@ -164,7 +169,9 @@ class FrameOrientationTask:
 
     def reference_acceleration(self, robot: RobotModel) -> Array:
         _, R, _, Jr = site_in_axle_frame(robot, self.site)
-        return -self.kp * rotation_error(R, self.target) - self.kv * (Jr @ robot.nu)
+        return -self.kp * rotation_error(R, self.target) - self.kv * (
+            Jr @ robot.nu - self.angular_velocity_d
+        )
 
     def weights(self) -> Array:
         return np.full(3, self.weight)

@@ -140,18 +140,20 @@ def params_from_lambda(p: WIPMParameters) -> WIPMParams:
     inertia ``I`` (rotation about y leaves it unchanged).
     """
     theta = float(p.theta)
-    rot = np.asarray(rotation_y(theta))
+    c, s = np.cos(theta), np.sin(theta)
+    rot = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])  # rotation_y, in NumPy
     inertia_body = rot.T @ np.asarray(p.inertia_axle, dtype=float) @ rot
     inertia_body = 0.5 * (inertia_body + inertia_body.T)
 
-    def f(value: float) -> Array:
-        return jnp.asarray(float(value), dtype=jnp.float64)
+    # NumPy values (called once per MPC step, outside jit: eager JAX would cost milliseconds)
+    def f(value: float) -> np.float64:
+        return np.float64(value)
 
     return WIPMParams(
         body_mass=f(p.body_mass),
         com_distance=f(p.com_distance),
         com_lateral=f(p.com[1]),
-        inertia_body=jnp.asarray(inertia_body, dtype=jnp.float64),
+        inertia_body=inertia_body,
         wheel_mass=f(p.wheel_mass),
         wheel_inertia=f(p.wheel_inertia),
         wheel_inertia_transverse=f(p.wheel_inertia_transverse),

@@ -149,9 +149,9 @@ def refs_for(states: np.ndarray, params: WIPMParams) -> tuple[Array, WIPMParams]
     horizon (the DDP wants a leading axis of ``N + 1`` on every leaf)."""
     count = states.shape[0]
     broadcast = jax.tree_util.tree_map(
-        lambda leaf: jnp.broadcast_to(jnp.asarray(leaf), (count, *jnp.shape(leaf))), params
+        lambda leaf: np.broadcast_to(np.asarray(leaf), (count, *np.shape(leaf))), params
     )
-    return jnp.asarray(states), broadcast
+    return np.asarray(states, dtype=float), broadcast
 
 
 def wipm_state(robot: RobotModel) -> np.ndarray:

@@ -271,6 +271,9 @@ class RobotModel:
             self._J[lay.root_dof + 4, 2] = 1.0
         self._updated = False
         self._has_dynamics = False
+        # per-state memo for quantities computed by users of this model (task Jacobians, ...);
+        # cleared by every update
+        self.cache: dict[object, object] = {}
 
     # ------------------------------------------------------------------ state
     def update(self, qpos: ArrayLike, qvel: ArrayLike, *, dynamics: bool = True) -> None:
@@ -291,6 +294,7 @@ class RobotModel:
             raise ValueError("qpos/qvel contain NaN or inf")
         d.qpos[: lay.nq] = qpos
         d.qvel[: lay.nv] = qvel
+        self.cache.clear()
         mujoco.mj_kinematics(m, d)
         mujoco.mj_comPos(m, d)
         self._update_minimal_coordinates()

@@ -359,12 +359,12 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         if abs(self.robot.theta) > self._fall_angle:
             return True
         d = self.data
-        for c in d.contact[: d.ncon]:
-            if (c.geom1 == self._floor and c.geom2 in self._body_geoms) or (
-                c.geom2 == self._floor and c.geom1 in self._body_geoms
-            ):
-                return True
-        return False
+        if d.ncon == 0:
+            return False
+        pairs = d.contact.geom[: d.ncon]
+        with_floor = (pairs == self._floor).any(axis=1)
+        with_body = np.isin(pairs, self._body_geoms).any(axis=1)
+        return bool(np.any(with_floor & with_body))
 
     def _cup_in_tray_frame(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         d = self.data
@@ -394,12 +394,16 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         normal = 0.0
         tangential = np.zeros(3)
         frame = np.zeros(6)
-        for i, c in enumerate(d.contact[: d.ncon]):
-            if {c.geom1, c.geom2} == {self._cup_geom, self._tray_geom}:
-                mujoco.mj_contactForce(m, d, i, frame)
-                R = c.frame.reshape(3, 3)  # rows: normal, tangent 1, tangent 2
-                normal += frame[0]
-                tangential += frame[1] * R[1] + frame[2] * R[2]
+        if d.ncon == 0:
+            return 0.0
+        pairs = d.contact.geom[: d.ncon]
+        cup_tray = ((pairs == self._cup_geom) | (pairs == self._tray_geom)).all(axis=1)
+        frames = d.contact.frame[: d.ncon]
+        for i in np.flatnonzero(cup_tray):
+            mujoco.mj_contactForce(m, d, int(i), frame)
+            R = frames[i].reshape(3, 3)  # rows: normal, tangent 1, tangent 2
+            normal += frame[0]
+            tangential += frame[1] * R[1] + frame[2] * R[2]
         if normal <= 0.0:
             return 0.0
         return float(np.linalg.norm(tangential) / (self._cup_friction * normal))

@@ -1,0 +1,64 @@
+"""The hierarchical (unified) controller closed loop: the cup carried to the goal (issue 5)."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import wip_gym  # noqa: F401
+from controllers.hierarchical import HierarchicalConfig, HierarchicalController, tilt_toward
+
+
+def test_tilt_toward_the_specific_force() -> None:
+    R = tilt_toward(np.array([9.81, 0.0]), max_tilt_deg=90.0)
+    normal = R @ np.array([0.0, 0.0, 1.0])
+    np.testing.assert_allclose(normal, np.array([1.0, 0.0, 1.0]) / np.sqrt(2), atol=1e-12)
+    bounded = tilt_toward(np.array([9.81, 0.0]), max_tilt_deg=10.0) @ np.array([0.0, 0.0, 1.0])
+    assert np.degrees(np.arccos(bounded[2])) == pytest.approx(10.0)
+    np.testing.assert_allclose(tilt_toward(np.zeros(2), 20.0), np.eye(3))
+
+
+def run(env_id: str, goal, mode: str, seconds: float) -> dict:
+    env = gym.make(env_id, goal=goal)
+    obs, info = env.reset(seed=0)
+    policy = HierarchicalController.for_env(env, HierarchicalConfig(tray_mode=mode))
+    policy.reset(obs, info)
+    assert policy.plan.violations == ()
+    peaks = {"tilt": 0.0, "friction": 0.0}
+    for _ in range(int(seconds / env.unwrapped.dt)):
+        obs, _, terminated, _, info = env.step(policy(obs))
+        assert not terminated, info
+        peaks["tilt"] = max(peaks["tilt"], info["tray_tilt_deg"])
+        peaks["friction"] = max(peaks["friction"], info["cup_friction_use"])
+    diagnostics = policy.diagnostics
+    assert diagnostics["qp_failures"][-1] == 0
+    assert diagnostics["mpc_rejected"][-1] == 0
+    return {**info, **peaks}
+
+
+@pytest.fixture(scope="module")
+def planar_runs() -> dict[str, dict]:
+    return {mode: run("wip_gym/PlanarTray-v0", 2.0, mode, 9.0)
+            for mode in ("level", "specific_force")}  # fmt: skip
+
+
+@pytest.mark.parametrize("mode", ["level", "specific_force"])
+def test_planar_tray_reaches_the_goal_with_the_cup(planar_runs: dict, mode: str) -> None:
+    info = planar_runs[mode]
+    assert info["goal_distance"] < 0.05 and abs(info["xd"]) < 0.05
+    assert info["cup_on_tray"]
+
+
+def test_level_mode_keeps_the_tray_level(planar_runs: dict) -> None:
+    assert planar_runs["level"]["tilt"] < 5.0
+
+
+def test_waiter_comes_less_close_to_slipping(planar_runs: dict) -> None:
+    assert planar_runs["specific_force"]["friction"] < planar_runs["level"]["friction"]
+
+
+def test_krang_tray_reaches_the_goal_with_the_cup_level() -> None:
+    info = run("wip_gym/KrangTray-v0", (2.0, 0.0), "level", 9.0)
+    assert info["goal_distance"] < 0.05 and abs(info["xd"]) < 0.05
+    assert info["cup_on_tray"] and info["tilt"] < 5.0
