@@ -9,7 +9,9 @@ For each controller, one seeded closed-loop episode of the scenario, then:
 * ``<controller>_snapshots.png`` (Fig. 3b, "movie"): the full body rendered offscreen at six
   instants from the start to the time the goal is reached (or the end), the body CoM projected
   into each image as a blue dot (with the axle-to-CoM line, whose angle is ``theta``, and the
-  CoM's path over the last half second), the tray's plate as a red line.
+  CoM's path over the last half second), the tray's plate as a red line, and, as in the paper,
+  the body's pose at five earlier instants (0.1 s apart) as grey stick figures, which show the
+  motion the tracking camera hides.
 * ``comparison.png``: every controller side by side: ``theta`` and ``x`` against time, and the
   tray's tilt and the cup's friction use in tray tasks.
 
@@ -470,11 +472,15 @@ def wipm_figure(run: Run, path: Path) -> Path:
     if torque is not None:
         torque = np.atleast_2d(torque)
         palette = colormaps["tab10" if torque.shape[1] <= 10 else "tab20"].colors
-        for i, name in enumerate(run.actuators[: torque.shape[1]]):
-            # an actuator with the torque of an earlier one (a planar robot's two wheels)
-            # is dashed, so both stay visible
-            same = any(np.allclose(torque[:, i], torque[:, j]) for j in range(i))
-            ax.plot(run.diagnostics["t"], torque[:, i], "--" if same else "-", lw=0.9,
+        columns = torque.shape[1]
+        same = np.array([[np.allclose(torque[:, i], torque[:, j]) for j in range(columns)]
+                         for i in range(columns)])  # fmt: skip
+        for i, name in enumerate(run.actuators[:columns]):
+            # an actuator with the torque of an earlier one (a planar robot's two wheels) is
+            # dashed over the earlier one's wider line, so both stay visible
+            copy = same[i, :i].any()
+            width = 2.2 if same[i, i + 1 :].any() else 0.9
+            ax.plot(run.diagnostics["t"], torque[:, i], "--" if copy else "-", lw=width,
                     color=palette[i % len(palette)], label=name)  # fmt: skip
         ax.legend(fontsize=7, ncol=2, loc="best")
     ax.set_ylabel("joint torques (N m)")
