@@ -18,7 +18,14 @@ from tqdm import tqdm
 
 from benchmarks.episode import run_episode
 from benchmarks.registry import controller_names
-from benchmarks.scenario import DEFAULT_DURATION_S, Push, Scenario, resolve_env_id
+from benchmarks.scenario import (
+    DEFAULT_DURATION_S,
+    Push,
+    Scenario,
+    check_task_flags,
+    parse_controllers,
+    resolve_env_id,
+)
 
 DEFAULT_ENV = "wip_gym/PlanarTray-v0"
 
@@ -53,25 +60,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def scenario_from_args(args: argparse.Namespace) -> tuple[Scenario, list[str]]:
     """Validate the flags; raise ValueError with the valid choices."""
     env_id = resolve_env_id(args.env)
-    names = [n.strip() for n in args.controllers.split(",") if n.strip()]
-    unknown = [n for n in names if n not in controller_names()]
-    if unknown or not names:
-        raise ValueError(f"unknown controllers {unknown}; valid: {controller_names()}")
+    names = parse_controllers(args.controllers)
     if args.episodes < 1:
         raise ValueError(f"--episodes must be >= 1, got {args.episodes}")
     if args.jobs < 1:
         raise ValueError(f"--jobs must be >= 1, got {args.jobs}")
-    if args.goal is not None and len(args.goal) not in (1, 2):
-        raise ValueError(f"--goal takes X or X Y, got {len(args.goal)} values")
+    check_task_flags(env_id, args.goal, args.cup_friction)
     for flag, value in (("--payload", args.payload), ("--payload-time", args.payload_time)):
         if not np.isfinite(value) or value < 0:
             raise ValueError(f"{flag} must be finite and >= 0, got {value}")
-    if args.cup_friction is not None and not (
-        np.isfinite(args.cup_friction) and args.cup_friction > 0
-    ):
-        raise ValueError(f"--cup-friction must be positive, got {args.cup_friction}")
-    if args.cup_friction is not None and "Tray" not in env_id:
-        raise ValueError(f"--cup-friction needs a tray task; {env_id} has no cup")
     scenario = Scenario(
         env_id=env_id,
         goal=tuple(args.goal) if args.goal is not None else None,

@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 
 from benchmarks.episode import time_to_goal
 from benchmarks.registry import controller_names, make_policy
-from benchmarks.scenario import Scenario, resolve_env_id
+from benchmarks.scenario import Scenario, check_task_flags, parse_controllers, resolve_env_id
 from controllers.planning import Plan
 from controllers.wipm_problem import PLANAR_STATE, SPATIAL_STATE
 from wip_gym.scene import TRAY_HALF_SIZE
@@ -92,22 +92,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def scenario_from_args(args: argparse.Namespace) -> tuple[Scenario, list[str]]:
     """Validate the flags; raise ValueError naming the valid choices."""
     env_id = resolve_env_id(args.env)
-    names = [n.strip() for n in args.controllers.split(",") if n.strip()]
-    unknown = [n for n in names if n not in controller_names()]
-    if unknown or not names:
-        raise ValueError(f"unknown controllers {unknown}; valid: {controller_names()}")
-    if len(set(names)) != len(names):
-        raise ValueError(f"--controllers lists a controller twice: {names}")
+    names = parse_controllers(args.controllers)
     if not (np.isfinite(args.duration) and args.duration > 0):
         raise ValueError(f"--duration must be positive, got {args.duration}")
-    if args.goal is not None and len(args.goal) not in (1, 2):
-        raise ValueError(f"--goal takes X or X Y, got {len(args.goal)} values")
-    if args.cup_friction is not None and not (
-        np.isfinite(args.cup_friction) and args.cup_friction > 0
-    ):
-        raise ValueError(f"--cup-friction must be positive, got {args.cup_friction}")
-    if args.cup_friction is not None and "Tray" not in env_id:
-        raise ValueError(f"--cup-friction needs a tray task; {env_id} has no cup")
+    check_task_flags(env_id, args.goal, args.cup_friction)
     for flag, value in (("--width", args.width), ("--height", args.height)):
         if not 16 <= value <= 4096:
             raise ValueError(f"{flag} must be in [16, 4096] px, got {value}")

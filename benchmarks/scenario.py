@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 
 import wip_gym
 
@@ -20,6 +21,29 @@ def resolve_env_id(name: str) -> str:
         if candidate in wip_gym.ENV_IDS:
             return candidate
     raise ValueError(f"unknown env {name!r}; valid: {sorted(wip_gym.ENV_IDS)}")
+
+
+def parse_controllers(text: str) -> list[str]:
+    """Comma-separated registry names; ``ValueError`` naming the valid ones."""
+    from benchmarks.registry import controller_names
+
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    unknown = [n for n in names if n not in controller_names()]
+    if unknown or not names:
+        raise ValueError(f"unknown controllers {unknown}; valid: {controller_names()}")
+    if len(set(names)) != len(names):
+        raise ValueError(f"--controllers lists a controller twice: {names}")
+    return names
+
+
+def check_task_flags(env_id: str, goal: list[float] | None, cup_friction: float | None) -> None:
+    """The CLI's checks of ``--goal`` and ``--cup-friction`` (the env checks the rest)."""
+    if goal is not None and len(goal) not in (1, 2):
+        raise ValueError(f"--goal takes X or X Y, got {len(goal)} values")
+    if cup_friction is not None and not (np.isfinite(cup_friction) and cup_friction > 0):
+        raise ValueError(f"--cup-friction must be positive, got {cup_friction}")
+    if cup_friction is not None and "Tray" not in env_id:
+        raise ValueError(f"--cup-friction needs a tray task; {env_id} has no cup")
 
 
 @dataclass(frozen=True)
