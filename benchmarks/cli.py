@@ -2,6 +2,7 @@
 
 wip-bench compare --env PlanarTray-v0 --controllers decoupled --episodes 3 --video
 wip-bench figures --env PlanarTray-v0 --out docs/figures
+wip-bench solvers --json out/solvers.json
 """
 
 from __future__ import annotations
@@ -9,7 +10,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from benchmarks import compare, figures
+from benchmarks import compare, figures, solvers
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -19,6 +20,10 @@ def build_parser() -> argparse.ArgumentParser:
     compare.add_arguments(compare_parser)
     figures_parser = commands.add_parser("figures", help="the paper's Figure 3 as PNGs")
     figures.add_arguments(figures_parser)
+    solvers_parser = commands.add_parser(
+        "solvers", help="DDP solver timings against a plain NumPy iLQR"
+    )
+    solvers.add_arguments(solvers_parser)
     return parser
 
 
@@ -30,6 +35,8 @@ def main(argv: list[str] | None = None) -> int:
             compare.run(args)
         elif args.command == "figures":
             figures.run(args)
+        elif args.command == "solvers":
+            solvers.run(args)
     except ValueError as error:
         parser.error(str(error))  # exits with status 2 and the message
     return 0
