@@ -159,7 +159,6 @@ class FrameOrientationTask:
     kp: float = 150.0
     kv: float = 50.0
     name: str = "ee_orientation"
-    angular_velocity_d: Array = field(default_factory=lambda: np.zeros(3))
 
     def jacobian(self, robot: RobotModel) -> Array:
         return site_in_axle_frame(robot, self.site)[3]
@@ -169,9 +168,7 @@ class FrameOrientationTask:
 
     def reference_acceleration(self, robot: RobotModel) -> Array:
         _, R, _, Jr = site_in_axle_frame(robot, self.site)
-        return -self.kp * rotation_error(R, self.target) - self.kv * (
-            Jr @ robot.nu - self.angular_velocity_d
-        )
+        return -self.kp * rotation_error(R, self.target) - self.kv * (Jr @ robot.nu)
 
     def weights(self) -> Array:
         return np.full(3, self.weight)
