@@ -40,7 +40,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--episodes", type=int, default=1)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--goal", type=float, nargs="+", metavar=("X", "Y"))
-    parser.add_argument("--push", help="NEWTONS@SECONDS[:DURATION] along the heading")
+    parser.add_argument(
+        "--push",
+        help="NEWTONS@SECONDS[:DURATION] along the heading (a backward push: --push=-80@2)",
+    )
     parser.add_argument("--payload", type=float, default=0.0, metavar="KG")
     parser.add_argument(
         "--payload-time",

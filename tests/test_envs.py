@@ -154,9 +154,14 @@ def test_payload_changes_the_mass_when_it_appears() -> None:
     model = env.unwrapped.model
     payload = model.body("payload").id
     assert model.body_mass[payload] == 0.0
+    positions = []
     for _ in range(60):
-        env.step(np.zeros(env.action_space.shape))
+        obs, *_ = env.step(np.zeros(env.action_space.shape))
+        positions.append(obs["qpos"].copy())
     assert model.body_mass[payload] == 2.0
+    # the state carries on through the change (mj_setConst must not touch the env's data)
+    jumps = np.abs(np.diff(np.array(positions), axis=0)).max(axis=1)
+    assert jumps.max() < 1e-2
 
 
 def test_mass_randomization_is_seeded() -> None:

@@ -240,7 +240,8 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         if self._payload_mass > 0 and not self._payload_attached:
             m.body_mass[self._payload_body] = 0.0
             m.body_inertia[self._payload_body] = 0.0
-        mujoco.mj_setConst(m, d)
+        # mj_setConst overwrites the data it is given (qpos reset to qpos0): use scratch data
+        mujoco.mj_setConst(m, mujoco.MjData(m))
 
         qpos0 = reset_qpos(m, self.robot)
         self.robot.update(qpos0, np.zeros(lay.nv), dynamics=False)
@@ -293,7 +294,8 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         if not self._payload_attached and t >= self._payload_time:
             m.body_mass[self._payload_body] = self._payload_mass
             m.body_inertia[self._payload_body] = self._nominal_inertia[self._payload_body]
-            mujoco.mj_setConst(m, d)
+            # mj_setConst overwrites the data it is given (qpos reset to qpos0): use scratch data
+            mujoco.mj_setConst(m, mujoco.MjData(m))
             self._payload_attached = True
         self.do_simulation(action, self.frame_skip)
         self.robot.update(d.qpos[: lay.nq], d.qvel[: lay.nv], dynamics=False)
