@@ -48,10 +48,10 @@ import wip_gym  # noqa: F401  (registers the environments)
 from benchmarks.numpy_ilqr import NumpyILQR
 from controllers.ddp import DDPConfig
 from controllers.mpc import ModelPredictiveController, MPCConfig, mpc_problem
-from controllers.planning import PlanConfig, _solver, plan_to_goal, planning_problem
+from controllers.planning import PlanConfig, plan_to_goal, planning_problem
 from controllers.policy import make_robot
 from controllers.wipm import WIPMParams, params_from_lambda
-from controllers.wipm_problem import refs_for
+from controllers.wipm_problem import ddp_solver_for, refs_for
 
 ENV_ID = "wip_gym/Krang-v0"
 PLAN_TARGET_MS = 50.0
@@ -188,7 +188,7 @@ def bench_problem(
     refs = refs_for(np.tile(goal, (steps + 1, 1)), params)
 
     # ours: the planner's own (cached) solver, first used here, so the first call compiles
-    ours = _solver(wipm, config.ddp)
+    ours = ddp_solver_for(wipm, config.ddp)
     compile_s, plan_s, result = _plan_timings(lambda: ours(z0, U0, params, refs), plan_reps)
     ours_iters = int(result.iterations)
     ours_out: dict[str, Any] = {

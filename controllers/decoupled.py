@@ -106,7 +106,6 @@ class DecoupledController:
         self._recorder.clear()
         self._step = 0
         self._integral = 0.0
-        self._saturated = 0
         lam = robot.wipm_parameters()
         if lam.com_distance < 1e-3:
             raise ValueError(
@@ -223,7 +222,6 @@ class DecoupledController:
         action[list(lay.joint_actuators)] = self._posture.torques(robot)
         clipped = np.clip(action, self.task.torque_low, self.task.torque_high)
         saturated = bool(np.any(clipped != action))
-        self._saturated += saturated
         self._step += 1
         self._recorder.record(
             t=t,

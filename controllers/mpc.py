@@ -18,10 +18,10 @@ from dataclasses import dataclass, field
 import jax
 import numpy as np
 
-from controllers.ddp import DDPConfig, DDPSolver, make_ddp_solver, rollout
+from controllers.ddp import DDPConfig, rollout
 from controllers.planning import Plan
 from controllers.wipm import WIPMParams
-from controllers.wipm_problem import Weights, WIPMProblem, refs_for
+from controllers.wipm_problem import Weights, WIPMProblem, ddp_solver_for, refs_for
 
 
 @dataclass(frozen=True)
@@ -80,12 +80,6 @@ def mpc_problem(planar: bool, config: MPCConfig, a_max: float, theta_max: float)
     return WIPMProblem(planar=planar, dt=c.dt, weights=weights, rate_input=False)
 
 
-@functools.lru_cache(maxsize=16)
-def _solver(problem: WIPMProblem, ddp: DDPConfig) -> DDPSolver:
-    running, terminal = problem.costs()
-    return make_ddp_solver(problem.dynamics(), running, terminal, ddp)
-
-
 @dataclass(frozen=True)
 class MPCStep:
     """One MPC solution: the control to apply now, the predicted trajectory, and whether the
@@ -108,7 +102,7 @@ class ModelPredictiveController:
         self.plan = plan
         self.problem = mpc_problem(plan.planar, self.config, plan.a_max, plan.theta_max)
         ddp = DDPConfig(**{**self.config.ddp.__dict__, "max_iterations": self.config.iterations})
-        self.solver = _solver(self.problem, ddp)
+        self.solver = ddp_solver_for(self.problem, ddp)
         self._rollout = jax.jit(functools.partial(rollout, self.problem.dynamics()))
         self.horizon = self.config.steps
         self.rejected = 0

@@ -17,13 +17,14 @@ from dataclasses import dataclass, field
 import jax
 import numpy as np
 
-from controllers.ddp import DDPConfig, DDPSolver, make_ddp_solver
+from controllers.ddp import DDPConfig
 from controllers.wipm import WIPMParams
 from controllers.wipm_problem import (
     PLANAR_STATE,
     SPATIAL_STATE,
     Weights,
     WIPMProblem,
+    ddp_solver_for,
     refs_for,
 )
 
@@ -170,12 +171,6 @@ def _accelerations(problem: WIPMProblem):  # noqa: ANN202 (a jitted function)
     return jax.jit(jax.vmap(problem.horizontal_acceleration, in_axes=(0, 0, None)))
 
 
-@functools.lru_cache(maxsize=16)
-def _solver(problem: WIPMProblem, ddp: DDPConfig) -> DDPSolver:
-    running, terminal = problem.costs()
-    return make_ddp_solver(problem.dynamics(), running, terminal, ddp)
-
-
 def arrival_time(times: np.ndarray, states: np.ndarray, goal: np.ndarray, planar: bool
                  ) -> float | None:  # fmt: skip
     """First time from which the plan stays within 1 cm of the goal, slower than 1 cm/s and
@@ -230,7 +225,7 @@ def plan_to_goal(
     m = problem.n_control
     z0 = np.concatenate([state, np.zeros(m)])
     refs = refs_for(np.tile(goal, (steps + 1, 1)), params)
-    solver = _solver(problem, config.ddp)
+    solver = ddp_solver_for(problem, config.ddp)
     result = solver(z0, np.zeros((steps, m)), params, refs)
     Z = np.asarray(result.X)
     states, controls = Z[:, :n], Z[:-1, n:]

@@ -22,6 +22,7 @@ terminal cost is ``(s - s_ref)^T Q_f (s - s_ref)``.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -29,6 +30,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from controllers.ddp import DDPConfig, DDPSolver, make_ddp_solver
 from controllers.wipm import WIPMParams, planar_dynamics, spatial_dynamics
 from wip_gym.robot_model import RobotModel
 
@@ -142,6 +144,14 @@ class WIPMProblem:
             return e @ (q_terminal * e)
 
         return running, terminal
+
+
+@functools.lru_cache(maxsize=16)
+def ddp_solver_for(problem: WIPMProblem, ddp: DDPConfig) -> DDPSolver:
+    """One compiled DDP solver per problem (weights, bounds, dt) and solver settings, shared by
+    every plan and MPC that poses the same problem."""
+    running, terminal = problem.costs()
+    return make_ddp_solver(problem.dynamics(), running, terminal, ddp)
 
 
 def refs_for(states: np.ndarray, params: WIPMParams) -> tuple[Array, WIPMParams]:
