@@ -149,11 +149,19 @@ class TaskQP:
             upper.append(hi)
         return np.vstack(rows), np.concatenate(lower), np.concatenate(upper)
 
-    def solve(self, robot: RobotModel, iso: IsolatedDynamics, tasks: Sequence[Task]) -> QPSolution:
+    def assemble(self, robot: RobotModel, iso: IsolatedDynamics, tasks: Sequence[Task]
+                 ) -> tuple[Array, Array, Array, Array, Array]:  # fmt: skip
+        """The QP ``min 0.5 qdd' H qdd + g' qdd  s.t.  lower <= C qdd <= upper`` of this state,
+        as ``(H, g, C, lower, upper)`` (what ``solve`` hands ProxQP; the benchmark's peers
+        solve the same arrays)."""
         T, b = self.task_rows(robot, iso, tasks)
         H = T.T @ T + self.settings.regularization * np.eye(self.n)
         g = -T.T @ b
         C, lower, upper = self.constraints(robot, iso)
+        return H, g, C, lower, upper
+
+    def solve(self, robot: RobotModel, iso: IsolatedDynamics, tasks: Sequence[Task]) -> QPSolution:
+        H, g, C, lower, upper = self.assemble(robot, iso, tasks)
         if self._qp is None:
             self._qp = proxsuite.proxqp.dense.QP(self.n, 0, C.shape[0])
             self._qp.settings.eps_abs = self.settings.eps_abs
