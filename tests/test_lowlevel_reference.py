@@ -1,0 +1,99 @@
+"""Guards for the low level's speed changes (issue 6): the code reproduces the reference data
+recorded by ``tools/record_lowlevel_reference.py`` before any of them.
+
+* Main guard, on recorded inputs: the task QP assembled from a recorded observation and task
+  references is the recorded ``(H, g, C, lower, upper)`` to 1e-9 (relative to each array's
+  largest entry), and ProxQP's solution the recorded one to 1e-6. The MPC is not run (its
+  reset is replaced by a stub), so changes to the high level do not move this guard.
+* Second guard, the closed loop: the first ``CLOSED_LOOP_STEPS`` steps from the recorded seed
+  give the recorded actions and states to 1e-6 (the MPC, sped up elsewhere, is allowed 1e-6).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from types import SimpleNamespace
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import wip_gym  # noqa: F401
+from controllers.hierarchical import HierarchicalConfig, HierarchicalController
+from controllers.isolated_dynamics import isolated_dynamics
+from controllers.task_qp import TaskQP
+
+DATA = Path(__file__).parent / "data"
+CASES = {
+    "planar": ("wip_gym/PlanarTray-v0", 2.0, "level"),
+    "planar_waiter": ("wip_gym/PlanarTray-v0", 2.0, "specific_force"),
+    "krang": ("wip_gym/KrangTray-v0", (2.0, 0.0), "level"),
+}
+CLOSED_LOOP_STEPS = 100
+
+
+def _reference(case: str) -> dict[str, np.ndarray]:
+    with np.load(DATA / f"lowlevel_{case}.npz") as data:
+        return dict(data)
+
+
+def _close(actual: np.ndarray, expected: np.ndarray, tol: float) -> None:
+    scale = max(1.0, float(np.max(np.abs(expected)))) if expected.size else 1.0
+    np.testing.assert_allclose(actual, expected, rtol=0.0, atol=tol * scale)
+
+
+def _low_level_only(case: str) -> tuple[gym.Env, HierarchicalController]:
+    """The controller after reset, its high level stubbed (no plan, no MPC)."""
+    env_id, goal, mode = CASES[case]
+    env = gym.make(env_id, goal=goal)
+    obs, info = env.reset(seed=int(_reference(case)["seed"]))
+    policy = HierarchicalController.for_env(env, HierarchicalConfig(tray_mode=mode))
+    policy.high_level.reset = lambda *args: SimpleNamespace()  # type: ignore[method-assign]
+    policy.reset(obs, info)
+    return env, policy
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_assembled_qps_and_solutions_match_the_recording(case: str) -> None:
+    ref = _reference(case)
+    env, policy = _low_level_only(case)
+    robot = policy.robot
+    for i in range(len(ref["x"])):
+        robot.update(ref["obs_qpos"][i], ref["obs_qvel"][i])
+        theta = policy.theta_task
+        theta.theta_d, theta.thetad_d, theta.thdd_d = ref["theta_ref"][i]
+        if policy.spin_task is not None:
+            spin = policy.spin_task
+            spin.psi_d, spin.psid_d, spin.psidd_d = ref["spin_ref"][i]
+        for task, target in zip(
+            policy.orientation_tasks, ref["orientation_targets"][i], strict=True
+        ):
+            task.target = target
+        iso = isolated_dynamics(robot)
+        H, g, C, lower, upper = policy.qp.assemble(robot, iso, policy.tasks)
+        for name, value in zip(
+            ("H", "g", "C", "lower", "upper"), (H, g, C, lower, upper), strict=True
+        ):
+            _close(value, ref[name][i], 1e-9)
+        # a cold solve of each recorded state (the recording was warm-started)
+        fresh = TaskQP(robot, policy.task.torque_low, policy.task.torque_high, policy.config.qp)
+        _close(fresh.solve(robot, iso, policy.tasks).qdd, ref["x"][i], 1e-6)
+    env.close()
+
+
+@pytest.mark.parametrize("case", ["planar", "krang"])
+def test_closed_loop_matches_the_recording(case: str) -> None:
+    ref = _reference(case)
+    env_id, goal, mode = CASES[case]
+    env = gym.make(env_id, goal=goal)
+    obs, info = env.reset(seed=int(ref["seed"]))
+    policy = HierarchicalController.for_env(env, HierarchicalConfig(tray_mode=mode))
+    policy.reset(obs, info)
+    for n in range(CLOSED_LOOP_STEPS):
+        action = policy(obs)
+        obs, _, terminated, _, _ = env.step(action)
+        assert not terminated
+        _close(action, ref["actions"][n], 1e-6)
+        _close(env.unwrapped.data.qpos, ref["qpos"][n], 1e-6)
+        _close(env.unwrapped.data.qvel, ref["qvel"][n], 1e-6)
+    env.close()
