@@ -3,6 +3,7 @@
 wip-bench compare --env PlanarTray-v0 --controllers decoupled --episodes 3 --video
 wip-bench figures --env PlanarTray-v0 --out docs/figures
 wip-bench solvers --json out/solvers.json
+wip-bench profile --env KrangTray-v0 --controller unified --json out/profile.json
 """
 
 from __future__ import annotations
@@ -10,7 +11,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from benchmarks import compare, figures, solvers
+from benchmarks import compare, figures, profile, solvers
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -24,6 +25,10 @@ def build_parser() -> argparse.ArgumentParser:
         "solvers", help="DDP solver timings against a plain NumPy iLQR"
     )
     solvers.add_arguments(solvers_parser)
+    profile_parser = commands.add_parser(
+        "profile", help="one closed-loop episode's time per control step, part by part"
+    )
+    profile.add_arguments(profile_parser)
     return parser
 
 
@@ -37,6 +42,8 @@ def main(argv: list[str] | None = None) -> int:
             figures.run(args)
         elif args.command == "solvers":
             solvers.run(args)
+        elif args.command == "profile":
+            profile.run(args)
     except ValueError as error:
         parser.error(str(error))  # exits with status 2 and the message
     return 0

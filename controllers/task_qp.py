@@ -104,6 +104,7 @@ class TaskQP:
         self.failures = 0
         self.probe = RobotModel(robot.model)
         self._last_actuators: Array | None = None
+        self.last_run_time_us = float("nan")  # ProxQP's own run time of the last solve
 
     def task_rows(self, robot: RobotModel, iso: IsolatedDynamics, tasks: Sequence[Task]
                   ) -> tuple[Array, Array]:  # fmt: skip
@@ -180,6 +181,7 @@ class TaskQP:
             self._qp.update(H=H, g=g, C=C, l=lower, u=upper)
             self._qp.solve()
         results = self._qp.results
+        self.last_run_time_us = float(results.info.run_time)
         solved = results.info.status == _SOLVED and bool(np.all(np.isfinite(results.x)))
         if solved:
             qdd = np.array(results.x)

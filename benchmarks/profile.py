@@ -1,0 +1,287 @@
+"""``wip-bench profile``: where the time of one closed-loop episode goes, per control step
+(issue 6), against the simulator's own floor measured in the same run.
+
+    wip-bench profile --env KrangTray-v0 --controller unified [--duration 5] [--seed 0]
+                      [--json PATH]
+
+One episode of ``--duration`` s (the env's own task parameters, ``max_episode_steps`` off). The
+timing definitions are the benchmark CLI's (``benchmarks.episode``): the control time is the
+policy's ``__call__`` only; making the env, ``reset``, building the policy and its ``reset``
+(compilation, the offline plan) count in ``setup_s``; the real-time factor is simulated time
+over the time of ``policy(obs)`` plus ``env.step(action)`` summed over the steps.
+
+The parts are timed with ``time.perf_counter`` around methods of the policy's own objects,
+wrapped on the instance for this run only (the controller's code is not changed; a wrapper
+costs well under a microsecond): ``robot.update`` (the robot model), ``qp.assemble`` and
+``qp.solve`` (the task QP; ``qp_solve`` is ``solve`` minus ``assemble``) and
+``high_level.reference`` (the MPC and the reference it hands the low level, amortised: it runs
+every 10 ms). A part the controller lacks is ``null``. The floor, ``mujoco_step``, is a bare
+``mujoco.mj_step(model, data, nstep=frame_skip)`` (one control period) on a scratch copy of the
+env's data taken just before every ``env.step``, with the same control: the same states, in the
+same run, outside the timed loop.
+
+JSON schema (``--json PATH``; times per control step in microseconds unless named otherwise)::
+
+    {
+      "env": str, "controller": str, "seed": int, "model": "nominal",
+      "duration_s": float, "steps": int, "control_dt_s": float, "frame_skip": int,
+      "setup_s": float,                   # env reset + policy construction + policy.reset
+      "control_time_ms": {"mean": float, "median": float, "p99": float},  # policy __call__
+      "per_step_us": {                    # each {"mean": float, "median": float} or null
+        "mujoco_step": ...,               # the floor: bare mj_step for one control period
+        "robot_model": ...,               # RobotModel.update in the policy
+        "qp_assembly": ...,               # TaskQP.assemble (tasks, Jdot nu, H, g, C, l, u)
+        "qp_solve": ...,                  # TaskQP.solve minus assembly (ProxQP + torques)
+        "high_level": ...,                # MPC + references (mean = amortised)
+        "python_overhead": ...,           # control minus the four parts above
+        "control": ...,                   # the policy's __call__
+        "low_level": ...,                 # control minus high_level
+        "env_step": ...,                  # env.step
+        "env_overhead": ...,              # env_step minus mujoco_step
+        "loop": ...                       # control + env_step
+      },
+      "proxqp_run_us": {"mean": float, "median": float} | null,  # ProxQP's own run_time
+      "qp_iterations": {"mean": float, "max": int} | null,
+      "control_over_mujoco_step": float,  # mean control / mean floor
+      "low_level_over_mujoco_step": float,
+      "real_time_factor": float,          # steps * dt / sum(control + env_step)
+      "sim_only_real_time_factor": float, # steps * dt / sum(mujoco_step): the ceiling
+      "fell": bool,
+      "machine": {"cpu": str, "cores": int, "python": str}
+    }
+
+The means of ``robot_model``, ``qp_assembly``, ``qp_solve``, ``high_level`` and
+``python_overhead`` add up to the mean of ``control``; ``low_level`` + ``high_level`` is
+``control``; ``mujoco_step`` + ``env_overhead`` is ``env_step``; ``control`` + ``env_step`` is
+``loop`` (means).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from benchmarks.registry import controller_names, make_policy
+from benchmarks.scenario import Scenario
+
+PARTS = ("robot_model", "qp_assembly", "qp_solve", "high_level")
+ROWS = (
+    "mujoco_step", "robot_model", "qp_assembly", "qp_solve", "high_level", "python_overhead",
+    "control", "low_level", "env_step", "env_overhead", "loop",
+)  # fmt: skip
+
+
+class _Timer:
+    """Accumulates the time spent in wrapped calls during one control step."""
+
+    def __init__(self) -> None:
+        self.elapsed = 0.0
+
+    def wrap(self, function: Callable[..., Any]) -> Callable[..., Any]:
+        def timed(*args: Any, **kwargs: Any) -> Any:
+            start = time.perf_counter()
+            try:
+                return function(*args, **kwargs)
+            finally:
+                self.elapsed += time.perf_counter() - start
+
+        return timed
+
+    def take(self) -> float:
+        value, self.elapsed = self.elapsed, 0.0
+        return value
+
+
+def _instrument(policy: Any) -> dict[str, _Timer]:
+    """Wrap the policy's parts that exist; return their timers."""
+    timers: dict[str, _Timer] = {}
+    robot = getattr(policy, "robot", None)
+    if robot is not None and hasattr(robot, "update"):
+        timers["robot_model"] = _Timer()
+        robot.update = timers["robot_model"].wrap(robot.update)
+    qp = getattr(policy, "qp", None)
+    if qp is not None and hasattr(qp, "assemble") and hasattr(qp, "solve"):
+        timers["qp_assembly"] = _Timer()
+        timers["qp_solve_total"] = _Timer()
+        qp.assemble = timers["qp_assembly"].wrap(qp.assemble)
+        qp.solve = timers["qp_solve_total"].wrap(qp.solve)
+    high_level = getattr(policy, "high_level", None)
+    if high_level is not None and hasattr(high_level, "reference"):
+        timers["high_level"] = _Timer()
+        high_level.reference = timers["high_level"].wrap(high_level.reference)
+    return timers
+
+
+def _stats(values: np.ndarray | None) -> dict[str, float] | None:
+    if values is None:
+        return None
+    return {"mean": float(values.mean() * 1e6), "median": float(np.median(values) * 1e6)}
+
+
+def profile_episode(env_id: str, controller: str, duration: float = 5.0, seed: int = 0
+                    ) -> dict[str, Any]:  # fmt: skip
+    """Run one instrumented episode; return the JSON-ready profile (module docstring)."""
+    if duration <= 0:
+        raise ValueError(f"duration must be positive, got {duration}")
+    scenario = Scenario(env_id, duration=duration)
+    env = scenario.make_env()
+    setup_start = time.perf_counter()
+    observation, info = env.reset(seed=seed)
+    policy = make_policy(controller, env, scenario.model)
+    policy.reset(observation, info)
+    setup_s = time.perf_counter() - setup_start
+
+    base = env.unwrapped
+    model, data = base.model, base.data
+    scratch = mujoco.MjData(model)
+    frame_skip = int(base.frame_skip)
+    dt = float(base.dt)
+    steps = int(round(duration / dt))
+    timers = _instrument(policy)
+    parts = {name: np.zeros(steps) for name in (*PARTS, "qp_solve_total")}
+    control = np.zeros(steps)
+    env_step = np.zeros(steps)
+    floor = np.zeros(steps)
+    qp = getattr(policy, "qp", None)
+    run_times = np.full(steps, np.nan)
+    fell = False
+    n = 0
+    for n in range(steps):
+        tick = time.perf_counter()
+        action = policy(observation)
+        tock = time.perf_counter()
+        for name, timer in timers.items():
+            parts[name][n] = timer.take()
+        if qp is not None:
+            run_times[n] = getattr(qp, "last_run_time_us", np.nan)
+        # the floor, on a copy of the state the env is about to step, outside the timed loop
+        mujoco.mj_copyData(scratch, model, data)
+        scratch.ctrl[:] = action
+        start = time.perf_counter()
+        mujoco.mj_step(model, scratch, nstep=frame_skip)
+        floor[n] = time.perf_counter() - start
+        start = time.perf_counter()
+        observation, _, terminated, truncated, info = env.step(action)
+        env_step[n] = time.perf_counter() - start
+        control[n] = tock - tick
+        fell = fell or bool(info.get("fallen", False))
+        if terminated or truncated:
+            break
+    env.close()
+    k = n + 1
+    control, env_step, floor = control[:k], env_step[:k], floor[:k]
+    parts = {name: values[:k] for name, values in parts.items()}
+    present = {name: name in timers for name in ("robot_model", "qp_assembly", "high_level")}
+    present["qp_solve"] = "qp_solve_total" in timers
+    parts["qp_solve"] = parts["qp_solve_total"] - parts["qp_assembly"]
+    measured = sum(parts[name] for name in PARTS if present[name])
+    high_level = parts["high_level"] if present["high_level"] else np.zeros(k)
+    per_step: dict[str, dict[str, float] | None] = {
+        "mujoco_step": _stats(floor),
+        **{name: _stats(parts[name]) if present[name] else None for name in PARTS},
+        "python_overhead": _stats(control - measured),
+        "control": _stats(control),
+        "low_level": _stats(control - high_level),
+        "env_step": _stats(env_step),
+        "env_overhead": _stats(env_step - floor),
+        "loop": _stats(control + env_step),
+    }
+    diagnostics = getattr(policy, "diagnostics", {})
+    iterations = diagnostics.get("qp_iterations")
+    run_times = run_times[:k]
+    has_run_times = bool(np.all(np.isfinite(run_times)))
+    floor_mean = float(floor.mean())
+    return {
+        "env": scenario.env_id,
+        "controller": controller,
+        "seed": seed,
+        "model": scenario.model,
+        "duration_s": duration,
+        "steps": k,
+        "control_dt_s": dt,
+        "frame_skip": frame_skip,
+        "setup_s": setup_s,
+        "control_time_ms": {
+            "mean": float(control.mean() * 1e3),
+            "median": float(np.median(control) * 1e3),
+            "p99": float(np.percentile(control, 99) * 1e3),
+        },
+        "per_step_us": per_step,
+        "proxqp_run_us": _stats(run_times * 1e-6) if has_run_times else None,
+        "qp_iterations": None
+        if iterations is None
+        else {"mean": float(np.mean(iterations)), "max": int(np.max(iterations))},  # fmt: skip
+        "control_over_mujoco_step": float(control.mean() / floor_mean),
+        "low_level_over_mujoco_step": float((control - high_level).mean() / floor_mean),
+        "real_time_factor": float(k * dt / (control.sum() + env_step.sum())),
+        "sim_only_real_time_factor": float(k * dt / floor.sum()),
+        "fell": fell,
+        "machine": {
+            "cpu": platform.processor() or platform.machine(),
+            "cores": os.cpu_count() or 0,
+            "python": platform.python_version(),
+        },
+    }
+
+
+def format_table(result: dict[str, Any]) -> str:
+    per_step = result["per_step_us"]
+    floor = per_step["mujoco_step"]["mean"]
+    lines = [
+        f"{result['controller']} on {result['env']}: {result['steps']} steps of "
+        f"{result['control_dt_s'] * 1e3:g} ms, seed {result['seed']}, setup "
+        f"{result['setup_s']:.1f} s",
+        "",
+        "| part (per control step) | mean us | median us | x mj_step |",
+        "|---|---|---|---|",
+    ]
+    for name in ROWS:
+        stats = per_step[name]
+        if stats is None:
+            lines.append(f"| {name} | - | - | - |")
+            continue
+        lines.append(f"| {name} | {stats['mean']:.1f} | {stats['median']:.1f} | "
+                     f"{stats['mean'] / floor:.2f} |")  # fmt: skip
+    lines += [
+        "",
+        f"control time (policy __call__): mean {result['control_time_ms']['mean']:.3f} ms, "
+        f"median {result['control_time_ms']['median']:.3f} ms, "
+        f"p99 {result['control_time_ms']['p99']:.3f} ms",
+        f"controller cost: {result['control_over_mujoco_step']:.1f}x the bare mj_step "
+        f"(low level alone {result['low_level_over_mujoco_step']:.1f}x)",
+        f"real-time factor: {result['real_time_factor']:.1f} (simulation alone "
+        f"{result['sim_only_real_time_factor']:.1f})",
+    ]
+    if result["qp_iterations"] is not None:
+        lines.append(f"QP iterations: mean {result['qp_iterations']['mean']:.2f}, "
+                     f"max {result['qp_iterations']['max']}")  # fmt: skip
+    return "\n".join(lines)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--env", required=True, help="env id, e.g. KrangTray-v0")
+    parser.add_argument("--controller", required=True,
+                        help=f"one of {', '.join(controller_names())}")  # fmt: skip
+    parser.add_argument("--duration", type=float, default=5.0, help="episode length (s)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--json", type=Path, default=None, help="write the profile here")
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    if args.controller not in controller_names():
+        raise ValueError(f"unknown controller {args.controller!r}; valid: {controller_names()}")
+    result = profile_episode(args.env, args.controller, args.duration, args.seed)
+    print(format_table(result))
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(result, indent=2) + "\n")
+    return result
