@@ -29,6 +29,9 @@ CASES: dict[str, tuple[str, Any, str]] = {
     "planar": ("wip_gym/PlanarTray-v0", 2.0, "level"),
     "planar_waiter": ("wip_gym/PlanarTray-v0", 2.0, "specific_force"),
     "krang": ("wip_gym/KrangTray-v0", (2.0, 0.0), "level"),
+    # no cup: the closed loop is smooth (a resting cup's contacts turn 1e-10 into 1e-3)
+    "planar_nocup": ("wip_gym/Planar-v0", 2.0, "level"),
+    "krang_nocup": ("wip_gym/Krang-v0", (2.0, 1.0), "level"),
 }
 SEED = 0
 DATA = Path(__file__).resolve().parents[1] / "tests" / "data"
