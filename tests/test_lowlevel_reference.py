@@ -6,7 +6,10 @@ recorded by ``tools/record_lowlevel_reference.py`` before any of them.
   largest entry), and ProxQP's solution the recorded one to 1e-6. The MPC is not run (its
   reset is replaced by a stub), so changes to the high level do not move this guard.
 * Second guard, the closed loop: the first ``CLOSED_LOOP_STEPS`` steps from the recorded seed
-  give the recorded actions and states to 1e-6 (the MPC, sped up elsewhere, is allowed 1e-6).
+  give the recorded actions and states to 1e-6 (the MPC, sped up elsewhere, is allowed 1e-6),
+  on the envs without the cup: a cup resting on the tray turns a 1e-10 change of the torques
+  into 1e-3 m/s of its velocity within ten steps (its contacts switch), so no tolerance would
+  be honest there; the cases with the cup are guarded on recorded inputs.
 """
 
 from __future__ import annotations
@@ -28,6 +31,8 @@ CASES = {
     "planar": ("wip_gym/PlanarTray-v0", 2.0, "level"),
     "planar_waiter": ("wip_gym/PlanarTray-v0", 2.0, "specific_force"),
     "krang": ("wip_gym/KrangTray-v0", (2.0, 0.0), "level"),
+    "planar_nocup": ("wip_gym/Planar-v0", 2.0, "level"),
+    "krang_nocup": ("wip_gym/Krang-v0", (2.0, 1.0), "level"),
 }
 CLOSED_LOOP_STEPS = 100
 
@@ -81,7 +86,7 @@ def test_assembled_qps_and_solutions_match_the_recording(case: str) -> None:
     env.close()
 
 
-@pytest.mark.parametrize("case", ["planar", "krang"])
+@pytest.mark.parametrize("case", ["planar_nocup", "krang_nocup"])
 def test_closed_loop_matches_the_recording(case: str) -> None:
     ref = _reference(case)
     env_id, goal, mode = CASES[case]
