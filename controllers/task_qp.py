@@ -25,6 +25,7 @@ import proxsuite
 from numpy.typing import NDArray
 
 from controllers.isolated_dynamics import IsolatedDynamics
+from controllers.motion_probe import MotionProbe
 from controllers.tasks import Task
 from wip_gym.robot_model import RobotModel
 from wip_gym.wheel_torques import generalized_to_wheel_matrix
@@ -40,7 +41,8 @@ class QPSettings:
     eps_abs: ProxQP's absolute tolerance. Its default (1e-5 on the KKT residual) can stop
         with constraint errors of order 1e-3 N m here; 1e-9 gives answers that are right.
     limit_horizon: ``h`` of the joint-limit acceleration bounds (s).
-    fd_step: time step of the finite difference giving ``Jdot nu`` (s).
+    fd_step: time step of the finite difference giving ``Jdot nu`` for a task without an
+        exact ``jdot_nu`` (s).
     max_iterations: ProxQP's iteration cap (its default, 10000, lets an infeasible QP run for
         a minute before it gives up; a feasible one here takes under 20).
     """
@@ -103,6 +105,7 @@ class TaskQP:
         self._qp: proxsuite.proxqp.dense.QP | None = None
         self.failures = 0
         self.probe = RobotModel(robot.model)
+        self.motion = MotionProbe(robot)
         self._last_actuators: Array | None = None
         self.last_run_time_us = float("nan")  # ProxQP's own run time of the last solve
 
@@ -118,7 +121,20 @@ class TaskQP:
         return T, b
 
     def _jdot_nu(self, robot: RobotModel, tasks: Sequence[Task]) -> Array:
-        """``Jdot nu`` = d/dt of ``J(q) nu`` at fixed ``nu``, by a central difference."""
+        """``Jdot nu`` = d/dt of ``J(q) nu`` at fixed ``nu``: exact from each task's
+        ``jdot_nu`` (``controllers.motion_probe``); by a central difference for a task
+        without one."""
+        self.motion.update(robot)
+        parts = []
+        for task in tasks:
+            exact = getattr(task, "jdot_nu", None)
+            parts.append(exact(self.motion) if exact is not None
+                         else self._jdot_nu_fd(robot, [task]))  # fmt: skip
+        return np.concatenate(parts)
+
+    def _jdot_nu_fd(self, robot: RobotModel, tasks: Sequence[Task]) -> Array:
+        """``Jdot nu`` by a central difference of ``J nu`` between the states
+        ``(q +- fd_step nu, nu)`` on the floor (two kinematic updates of a probe model)."""
         eps = self.settings.fd_step
         q, nu = robot.q, robot.nu
         xy = robot.axle_position[:2]

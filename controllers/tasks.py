@@ -6,9 +6,11 @@ Each task is a small object (mink's style): ``jacobian(robot)`` over the minimal
     xdd* = xdd_d - Kp (x - x_d) - Kv (xd - xd_d)
 
 The QP (``controllers.task_qp``) turns them into rows ``w J E qdd = w (xdd* - Jdot nu - J e)``
-(``nu_dot = E qdd + e`` from the isolated dynamics), with ``Jdot nu`` by a central finite
-difference of ``J nu`` along the motion. Frames: end-effector targets live in the axle frame
-(origin at the axle midpoint, x along the heading, z up; DESIGN 4, ERRATA 5).
+(``nu_dot = E qdd + e`` from the isolated dynamics), with ``Jdot nu`` from each task's
+``jdot_nu(probe)``: exact, from the drift accelerations of ``controllers.motion_probe`` (a task
+without it gets a central finite difference of ``J nu`` along the motion). Frames: end-effector
+targets live in the axle frame (origin at the axle midpoint, x along the heading, z up; DESIGN 4,
+ERRATA 5).
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from controllers.motion_probe import MotionProbe
 from wip_gym.robot_model import RobotModel
 
 Array = NDArray[np.float64]
@@ -93,6 +96,18 @@ class ThetaTask:
     def weights(self) -> Array:
         return np.array([self.weight])
 
+    def jdot_nu(self, probe: MotionProbe) -> Array:
+        """``d/dt (J_theta nu)`` at fixed ``nu``: with ``c`` the CoM in the axle frame and
+        ``D = X^2 + Z^2``, ``(Z c''_x - X c''_z) / D - 2 thetad (X c'_x + Z c'_z) / D``."""
+        c, c_d, c_dd = probe.relative_drift(*probe.com_motion())
+        X, Z = c[0], c[2]
+        D = X * X + Z * Z
+        if D <= 1e-18:
+            return np.zeros(1)
+        thetad = (Z * c_d[0] - X * c_d[2]) / D
+        return np.array([(Z * c_dd[0] - X * c_dd[2]) / D
+                         - 2.0 * thetad * (X * c_d[0] + Z * c_d[2]) / D])  # fmt: skip
+
 
 @dataclass
 class SpinTask:
@@ -122,6 +137,9 @@ class SpinTask:
     def weights(self) -> Array:
         return np.array([self.weight])
 
+    def jdot_nu(self, probe: MotionProbe) -> Array:
+        return np.zeros(1)  # J is constant
+
 
 @dataclass
 class FramePositionTask:
@@ -146,6 +164,11 @@ class FramePositionTask:
 
     def weights(self) -> Array:
         return np.full(3, self.weight)
+
+    def jdot_nu(self, probe: MotionProbe) -> Array:
+        """The site's drift acceleration relative to the axle, in the axle frame."""
+        position, velocity, acceleration, _, _ = probe.site_motion(self.site)
+        return probe.relative_drift(position, velocity, acceleration)[2]
 
 
 @dataclass
@@ -173,6 +196,14 @@ class FrameOrientationTask:
     def weights(self) -> Array:
         return np.full(3, self.weight)
 
+    def jdot_nu(self, probe: MotionProbe) -> Array:
+        """``d/dt (Rh^T Omega - psid e_z) = Rh^T Omega' - omega x Rh^T Omega`` at fixed ``nu``
+        (``Omega`` the site's angular velocity in world, ``omega = psid e_z``)."""
+        _, _, _, omega, omega_drift = probe.site_motion(self.site)
+        Rt = probe.heading.T
+        u = Rt @ omega
+        return Rt @ omega_drift - probe.psid * np.array([-u[1], u[0], 0.0])
+
 
 @dataclass
 class PostureTask:
@@ -198,6 +229,9 @@ class PostureTask:
 
     def weights(self) -> Array:
         return self.joint_weights
+
+    def jdot_nu(self, probe: MotionProbe) -> Array:
+        return np.zeros(len(self.columns))  # J is constant
 
 
 Task = ThetaTask | SpinTask | FramePositionTask | FrameOrientationTask | PostureTask
