@@ -57,19 +57,21 @@ class IsolatedDynamics:
 
 
 def isolated_dynamics(robot: RobotModel) -> IsolatedDynamics:
-    """Eq. ``iso3`` from the robot's current ``A``, ``h`` (see the module docstring)."""
+    """Eq. ``iso3`` from the robot's current ``A``, ``h`` (see the module docstring).
+
+    ``x`` is the first minimal coordinate (``RobotLayout.index_x == 0``), so ``q`` is every
+    later one and the blocks are slices (no index arrays, no copies)."""
     lay = robot.layout
     A, h = robot.A, robot.h
     n = lay.n_min
-    ix = lay.index_x
-    q_indices = np.array([i for i in range(n) if i != ix])
-    a_xx = A[ix, ix]
-    a_xq = A[q_indices, ix]
-    A_qq = A[np.ix_(q_indices, q_indices)]
-    h_x, h_q = h[ix], h[q_indices]
+    if lay.index_x != 0:
+        raise ValueError("isolated_dynamics expects x as the first minimal coordinate")
+    a_xx = A[0, 0]
+    a_xq = A[1:, 0]
+    h_x, h_q = h[0], h[1:]
     r = lay.wheel_radius
     k = lay.index_q1 - 1  # q1's place inside q (x removed)
-    A_star = A_qq - np.outer(a_xq, a_xq) / a_xx
+    A_star = A[1:, 1:] - np.outer(a_xq, a_xq) / a_xx
     alpha = a_xq[k] / (r * a_xx)
     beta = 1.0 / (1.0 + alpha)
     # (I - beta Bm) M = M - beta a_xq M[k] / (R a_xx), Bm = a_xq e_k^T / (R a_xx)
@@ -78,12 +80,23 @@ def isolated_dynamics(robot: RobotModel) -> IsolatedDynamics:
     h_star = h_q - a_xq * h_x / a_xx
     Ph = h_star - scale * a_xq * h_star[k]
     # xdd = (-tau_1 / R - a_xq^T qdd - h_x) / a_xx with tau_1 = calA[k] qdd + Ph[k]
-    E = np.zeros((n, len(q_indices)))
+    E = np.eye(n, n - 1, k=-1)
     e = np.zeros(n)
-    E[ix] = (-calA[k] / r - a_xq) / a_xx
-    e[ix] = (-Ph[k] / r - h_x) / a_xx
-    E[q_indices, np.arange(len(q_indices))] = 1.0
+    E[0] = (-calA[k] / r - a_xq) / a_xx
+    e[0] = (-Ph[k] / r - h_x) / a_xx
+    index_psi = None if lay.index_psi is None else lay.index_psi - 1
     return IsolatedDynamics(
-        calA=calA, Ph=Ph, E=E, e=e, q_indices=q_indices, index_q1=k,
-        index_psi=None if lay.index_psi is None else lay.index_psi - 1,
-    )  # fmt: skip
+        calA=calA, Ph=Ph, E=E, e=e, q_indices=_q_indices(n), index_q1=k, index_psi=index_psi
+    )
+
+
+_Q_INDICES: dict[int, Array] = {}
+
+
+def _q_indices(n: int) -> Array:
+    """``[1, ..., n - 1]``, made once per size, read-only."""
+    if n not in _Q_INDICES:
+        indices = np.arange(1, n)
+        indices.flags.writeable = False
+        _Q_INDICES[n] = indices
+    return _Q_INDICES[n]

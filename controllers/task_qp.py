@@ -13,6 +13,10 @@ Decision variable ``qdd`` (every minimal acceleration but ``xdd``). Cost
 
 One dense ProxQP object per controller, reused and warm-started step to step; its status is
 checked every step, and an unsolved QP falls back to the last feasible torques (counted).
+Before ProxQP, each step tries the minimiser without constraints, ``H qdd = -g`` (one dense
+solve): when it satisfies every constraint it is the QP's exact optimum (the QP is convex and
+its constraints are then inactive), and ProxQP is not called. In closed loop that is most steps
+(no torque or joint limit active); ProxQP, warm-started, takes the others.
 """
 
 from __future__ import annotations
@@ -45,6 +49,7 @@ class QPSettings:
         exact ``jdot_nu`` (s).
     max_iterations: ProxQP's iteration cap (its default, 10000, lets an infeasible QP run for
         a minute before it gives up; a feasible one here takes under 20).
+    unconstrained_first: try the unconstrained minimiser before ProxQP (module docstring).
     """
 
     regularization: float = 1e-6
@@ -52,6 +57,7 @@ class QPSettings:
     limit_horizon: float = 0.05
     fd_step: float = 1e-6
     max_iterations: int = 1000
+    unconstrained_first: bool = True
 
 
 @dataclass(frozen=True)
@@ -102,6 +108,14 @@ class TaskQP:
                 limited.append((k + 1 + j, lay.index_q1 + 1 + j, *m.jnt_range[joint]))
         self._limited = limited
         self.n = lay.n_min - 1
+        # the joint-limit rows, vectorised: qdd column, minimal index, range
+        columns, indices, q_min, q_max = (np.array(v) for v in zip(*limited, strict=True)) if (
+            limited) else (np.zeros(0, dtype=int), np.zeros(0, dtype=int), np.zeros(0),
+                           np.zeros(0))  # fmt: skip
+        self._limit_index = indices.astype(int)
+        self._limit_min, self._limit_max = q_min.astype(float), q_max.astype(float)
+        self._C_limit = np.zeros((len(limited), self.n))
+        self._C_limit[np.arange(len(limited)), columns.astype(int)] = 1.0
         self._qp: proxsuite.proxqp.dense.QP | None = None
         self.failures = 0
         self.probe = RobotModel(robot.model)
@@ -146,25 +160,15 @@ class TaskQP:
         return (sides[0] - sides[1]) / (2 * eps)
 
     def constraints(self, robot: RobotModel, iso: IsolatedDynamics) -> tuple[Array, Array, Array]:
-        C_torque = self.M_act @ iso.calA
+        """``C``, ``lower``, ``upper``: the actuator torque rows, then the joint-limit rows."""
         offset = self.M_act @ iso.Ph
-        rows = [C_torque]
-        lower = [self.torque_low - offset]
-        upper = [self.torque_high - offset]
-        if self._limited:
-            h = self.settings.limit_horizon
-            C_limit = np.zeros((len(self._limited), self.n))
-            lo = np.zeros(len(self._limited))
-            hi = np.zeros(len(self._limited))
-            for r, (column, index, q_min, q_max) in enumerate(self._limited):
-                C_limit[r, column] = 1.0
-                q, qd = robot.q[index], robot.nu[index]
-                lo[r] = 2.0 * (q_min - q - qd * h) / h**2
-                hi[r] = 2.0 * (q_max - q - qd * h) / h**2
-            rows.append(C_limit)
-            lower.append(lo)
-            upper.append(hi)
-        return np.vstack(rows), np.concatenate(lower), np.concatenate(upper)
+        h = self.settings.limit_horizon
+        index = self._limit_index
+        drift = robot.q[index] + robot.nu[index] * h
+        C = np.concatenate((self.M_act @ iso.calA, self._C_limit))
+        lower = np.concatenate((self.torque_low - offset, 2.0 * (self._limit_min - drift) / h**2))
+        upper = np.concatenate((self.torque_high - offset, 2.0 * (self._limit_max - drift) / h**2))
+        return C, lower, upper
 
     def assemble(self, robot: RobotModel, iso: IsolatedDynamics, tasks: Sequence[Task]
                  ) -> tuple[Array, Array, Array, Array, Array]:  # fmt: skip
@@ -179,6 +183,12 @@ class TaskQP:
 
     def solve(self, robot: RobotModel, iso: IsolatedDynamics, tasks: Sequence[Task]) -> QPSolution:
         H, g, C, lower, upper = self.assemble(robot, iso, tasks)
+        if self._qp is not None and self.settings.unconstrained_first:
+            qdd = np.linalg.solve(H, -g)
+            Cx = C @ qdd
+            if (Cx >= lower).all() and (Cx <= upper).all() and np.isfinite(qdd).all():
+                self.last_run_time_us = float("nan")
+                return self._solution(iso, qdd, iterations=0)
         if self._qp is None:
             self._qp = proxsuite.proxqp.dense.QP(self.n, 0, C.shape[0])
             self._qp.settings.eps_abs = self.settings.eps_abs
@@ -198,21 +208,22 @@ class TaskQP:
             self._qp.solve()
         results = self._qp.results
         self.last_run_time_us = float(results.info.run_time)
-        solved = results.info.status == _SOLVED and bool(np.all(np.isfinite(results.x)))
-        if solved:
-            qdd = np.array(results.x)
-            generalized = iso.torques(qdd)
-            actuators = self.M_act @ generalized
-            self._last_actuators = actuators
-        else:
-            self.failures += 1
-            # start the next step cold: a warm start from a failed result does not recover
-            self._qp = None
-            qdd = np.full(self.n, np.nan)
-            generalized = np.full(self.n, np.nan)
-            if self._last_actuators is None:
-                raise RuntimeError("the first task QP was not solved: no feasible torques yet")
-            actuators = self._last_actuators
-        return QPSolution(qdd=qdd, nu_dot=iso.E @ qdd + iso.e if solved else np.full(
-            len(iso.e), np.nan), generalized=generalized, actuators=actuators, solved=solved,
-            iterations=int(results.info.iter))  # fmt: skip
+        iterations = int(results.info.iter)
+        if results.info.status == _SOLVED and bool(np.all(np.isfinite(results.x))):
+            return self._solution(iso, np.array(results.x), iterations)
+        self.failures += 1
+        # start the next step cold: a warm start from a failed result does not recover
+        self._qp = None
+        if self._last_actuators is None:
+            raise RuntimeError("the first task QP was not solved: no feasible torques yet")
+        nan = np.full(self.n, np.nan)
+        return QPSolution(qdd=nan, nu_dot=np.full(len(iso.e), np.nan), generalized=nan.copy(),
+                          actuators=self._last_actuators, solved=False,
+                          iterations=iterations)  # fmt: skip
+
+    def _solution(self, iso: IsolatedDynamics, qdd: Array, iterations: int) -> QPSolution:
+        generalized = iso.torques(qdd)
+        actuators = self.M_act @ generalized
+        self._last_actuators = actuators
+        return QPSolution(qdd=qdd, nu_dot=iso.E @ qdd + iso.e, generalized=generalized,
+                          actuators=actuators, solved=True, iterations=iterations)  # fmt: skip
