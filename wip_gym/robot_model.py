@@ -26,6 +26,7 @@ once per control step, and the properties read the cache.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import mujoco
@@ -251,6 +252,9 @@ class RobotModel:
         self._jacp = np.zeros((3, nv))
         self._jacp_wheel = np.zeros((3, nv))
         self._body_ids = np.array(lay.body_bodies)
+        self._body_qpos = np.array(lay.body_qpos, dtype=int)
+        self._body_dof = np.array(lay.body_dof, dtype=int)
+        self._heading = _read_only(np.eye(3))
         self._q = np.zeros(n)
         self._nu = np.zeros(n)
         first_body = 3 if not lay.planar else 2
@@ -290,7 +294,7 @@ class RobotModel:
                 f"expected qpos of shape ({lay.nq},) and qvel ({lay.nv},), "
                 f"got {qpos.shape}, {qvel.shape}"
             )
-        if not (np.all(np.isfinite(qpos)) and np.all(np.isfinite(qvel))):
+        if not (np.isfinite(qpos).all() and np.isfinite(qvel).all()):
             raise ValueError("qpos/qvel contain NaN or inf")
         d.qpos[: lay.nq] = qpos
         d.qvel[: lay.nv] = qvel
@@ -317,44 +321,45 @@ class RobotModel:
     def _update_minimal_coordinates(self) -> None:
         d, lay = self.data, self.layout
         r = lay.wheel_radius
-        body_q = d.qpos[list(lay.body_qpos)]
-        body_qd = d.qvel[list(lay.body_dof)]
+        qpos, qvel = d.qpos, d.qvel
         wl, wr = lay.wheel_qpos
         dl, dr = lay.wheel_dof
         if lay.planar:
-            x = d.qpos[lay.root_qpos]
-            q1 = d.qpos[lay.root_qpos + 2]
-            xd = d.qvel[lay.root_dof]
-            q1d = d.qvel[lay.root_dof + 2]
+            o, v = lay.root_qpos, lay.root_dof
             self._psi = 0.0
             self._psid = 0.0
-            self._q[:2] = x, q1
-            self._nu[:2] = xd, q1d
+            self._q[:2] = qpos[o], qpos[o + 2]
+            self._nu[:2] = qvel[v], qvel[v + 2]
         else:
-            R = d.xmat[lay.base_body].reshape(3, 3)
-            psi = np.arctan2(-R[0, 1], R[1, 1])
-            c, s = np.cos(psi), np.sin(psi)
-            q1 = np.arctan2(c * R[0, 2] + s * R[1, 2], R[2, 2])
-            omega_world = R @ d.qvel[lay.root_dof + 3 : lay.root_dof + 6]
-            psid = omega_world[2]
-            q1d = -s * omega_world[0] + c * omega_world[1]
-            x = r * 0.5 * (d.qpos[wl] + d.qpos[wr]) + r * q1
-            xd = r * 0.5 * (d.qvel[dl] + d.qvel[dr]) + r * q1d
-            self._psi, self._psid = float(psi), float(psid)
+            R00, R01, R02, R10, R11, R12, R20, R21, R22 = d.xmat[lay.base_body].tolist()
+            psi = math.atan2(-R01, R11)
+            c, s = math.cos(psi), math.sin(psi)
+            q1 = math.atan2(c * R02 + s * R12, R22)
+            v = lay.root_dof
+            w0, w1, w2 = qvel[v + 3 : v + 6].tolist()
+            # angular velocity in world = R (base-frame angular velocity)
+            omega_x = R00 * w0 + R01 * w1 + R02 * w2
+            omega_y = R10 * w0 + R11 * w1 + R12 * w2
+            psid = R20 * w0 + R21 * w1 + R22 * w2
+            q1d = -s * omega_x + c * omega_y
+            x = r * 0.5 * (qpos[wl] + qpos[wr]) + r * q1
+            xd = r * 0.5 * (qvel[dl] + qvel[dr]) + r * q1d
+            self._psi, self._psid = psi, psid
             self._q[:3] = x, psi, q1
             self._nu[:3] = xd, psid, q1d
-        self._q[self._body_cols] = body_q
-        self._nu[self._body_cols] = body_qd
+            self._heading = _read_only(np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]))
+        self._q[self._body_cols] = qpos[self._body_qpos]
+        self._nu[self._body_cols] = qvel[self._body_dof]
 
     def _update_transform(self) -> None:
         lay = self.layout
         if lay.planar:
             return  # J_tf is constant and Jdot_tf is zero for the planar base
         J, Jd = self._J, self._Jdot_nu
-        psi, q1 = self._psi, self._q[2]
-        xd, psid, q1d = self._nu[:3]
-        c, s = np.cos(psi), np.sin(psi)
-        c1, s1 = np.cos(q1), np.sin(q1)
+        psi, q1 = self._psi, float(self._q[2])
+        xd, psid, q1d = self._nu[:3].tolist()
+        c, s = math.cos(psi), math.sin(psi)
+        c1, s1 = math.cos(q1), math.sin(q1)
         o = lay.root_dof
         # free joint: linear velocity of the axle midpoint in world, angular velocity in base frame
         J[o + 0, 0] = c
@@ -468,9 +473,9 @@ class RobotModel:
 
     @property
     def heading_rotation(self) -> Array:
-        """Rotation of the axle frame in world: ``Rz(psi)`` (identity for planar robots)."""
-        c, s = np.cos(self._psi), np.sin(self._psi)
-        return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        """Rotation of the axle frame in world: ``Rz(psi)`` (identity for planar robots).
+        Read-only, made once per update."""
+        return self._heading
 
     @property
     def axle_position(self) -> Array:
@@ -616,3 +621,8 @@ class RobotModel:
         qvel[lay.wheel_dof[0]] = xd / r - half * psid - q1d
         qvel[lay.wheel_dof[1]] = xd / r + half * psid - q1d
         return qpos, qvel
+
+
+def _read_only(array: Array) -> Array:
+    array.flags.writeable = False
+    return array
