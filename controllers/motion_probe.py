@@ -45,7 +45,8 @@ class MotionProbe:
         self._nq, self._nv = lay.nq, lay.nv
         self._base = lay.base_body
         self._wheels = lay.wheel_bodies
-        self._body_mass = float(m.body_mass[list(lay.body_bodies)].sum())
+        # masses are read at every use: an oracle model's payload may change mid-run
+        self._subtree_mass = m.body_subtreemass
         self._gravity = np.array(m.opt.gravity)
         self._jacp = np.zeros((3, m.nv))
         self._jacr = np.zeros((3, m.nv))
@@ -56,19 +57,27 @@ class MotionProbe:
         self.psid = 0.0
         self.heading = np.eye(3)
         self._memo: dict[object, tuple[Array, ...]] = {}
+        # views on MuJoCo's buffers (an attribute read makes a new view: ~1 us each)
+        self._qpos, self._qvel, self._qacc = self.data.qpos, self.data.qvel, self.data.qacc
+        self._xpos, self._site_xpos = self.data.xpos, self.data.site_xpos
+        self._xipos, self._subtree_com = self.data.xipos, self.data.subtree_com
+        self._subtree_linvel, self._cfrc_int = self.data.subtree_linvel, self.data.cfrc_int
+        self._site_body = m.site_bodyid.copy()
+        self._planar = lay.planar
+        self._index_psi = lay.index_psi
 
     def update(self, robot: RobotModel) -> None:
         m, d = self.model, self.data
         qpos, qvel = robot.full_state(robot.q, robot.nu, robot.data.xpos[self._base, :2])
-        d.qpos[: self._nq] = qpos
-        d.qvel[: self._nv] = qvel
+        self._qpos[: self._nq] = qpos
+        self._qvel[: self._nv] = qvel
         mujoco.mj_kinematics(m, d)
         mujoco.mj_comPos(m, d)
         mujoco.mj_comVel(m, d)
-        self.qvel = d.qvel
+        self.qvel = self._qvel
         # qacc = J_tf nu_dot + Jdot_tf nu, at nu_dot = 0 (J_tf depends on psi, q1 only)
         self.qacc0[: self._nv] = robot.Jdot_tf_nu
-        self.psid = 0.0 if robot.layout.planar else float(robot.nu[robot.layout.index_psi])
+        self.psid = 0.0 if self._planar else float(robot.nu[self._index_psi])
         self.heading = robot.heading_rotation
         self._memo.clear()
 
@@ -85,8 +94,8 @@ class MotionProbe:
         key = ("site", site)
         if key not in self._memo:
             m, d = self.model, self.data
-            body = int(m.site_bodyid[site])
-            position = d.site_xpos[site].copy()
+            body = int(self._site_body[site])
+            position = self._site_xpos[site].copy()
             mujoco.mj_jac(m, d, self._jacp, self._jacr, position, body)
             mujoco.mj_jacDot(m, d, self._jacp_dot, self._jacr_dot, position, body)
             qvel, qacc0 = self.qvel, self.qacc0
@@ -103,7 +112,7 @@ class MotionProbe:
         """``(position, velocity, drift acceleration)`` of the axle midpoint in world."""
         key = "origin"
         if key not in self._memo:
-            origin = self.data.xpos[self._base].copy()
+            origin = self._xpos[self._base].copy()
             self._memo[key] = (origin, *self.point_motion(self._base, origin))
         return self._memo[key]  # type: ignore[return-value]
 
@@ -112,16 +121,18 @@ class MotionProbe:
         key = "com"
         if key not in self._memo:
             m, d = self.model, self.data
-            base, (wl, wr), mass = self._base, self._wheels, self._body_mass
-            subtree = m.body_subtreemass[base]
-            position = (subtree * d.subtree_com[base] - m.body_mass[wl] * d.xipos[wl]
-                        - m.body_mass[wr] * d.xipos[wr]) / mass  # fmt: skip
+            base, (wl, wr) = self._base, self._wheels
+            # body = the base's subtree minus the two wheels (leaves): a 3-row weighted sum
+            rows = [base, wl, wr]
+            weights = self._subtree_mass[rows] * np.array([1.0, -1.0, -1.0])
+            mass = weights[0] + weights[1] + weights[2]
+            position = weights @ np.concatenate((self._subtree_com[base][None],
+                                                 self._xipos[[wl, wr]])) / mass  # fmt: skip
             mujoco.mj_subtreeVel(m, d)
-            velocity = (subtree * d.subtree_linvel[base] - m.body_mass[wl] * d.subtree_linvel[wl]
-                        - m.body_mass[wr] * d.subtree_linvel[wr]) / mass  # fmt: skip
-            d.qacc[:] = self.qacc0
+            velocity = weights @ self._subtree_linvel[rows] / mass
+            self._qacc[:] = self.qacc0
             mujoco.mj_rnePostConstraint(m, d)
-            force = d.cfrc_int[base, 3:] - d.cfrc_int[wl, 3:] - d.cfrc_int[wr, 3:]
+            force = self._cfrc_int[base, 3:] - self._cfrc_int[wl, 3:] - self._cfrc_int[wr, 3:]
             self._memo[key] = (position, velocity, force / mass + self._gravity)
         return self._memo[key]  # type: ignore[return-value]
 

@@ -52,20 +52,28 @@ def site_in_axle_frame(robot: RobotModel, site: int) -> tuple[Array, Array, Arra
     jacp = np.zeros((3, m.nv))
     jacr = np.zeros((3, m.nv))
     mujoco.mj_jacSite(m, d, jacp, jacr, site)
-    origin_jac = np.zeros((3, m.nv))
     origin = d.xpos[lay.base_body]
-    mujoco.mj_jac(m, d, origin_jac, None, origin, lay.base_body)
-    Rh = robot.heading_rotation
-    rel = Rh.T @ (d.site_xpos[site] - origin)
+    origin_jac = robot.cache.get("origin_jacobian")
+    if origin_jac is None:
+        origin_jac = np.zeros((3, m.nv))
+        mujoco.mj_jac(m, d, origin_jac, None, origin, lay.base_body)
+        robot.cache["origin_jacobian"] = origin_jac
     J = robot.J_tf
-    Jp = Rh.T @ ((jacp - origin_jac) @ J)
-    Jr = Rh.T @ (jacr @ J)
-    if lay.index_psi is not None:
+    if lay.index_psi is None:  # planar: the axle frame is the world's (Rh = I)
+        rel = d.site_xpos[site] - origin
+        Jp = (jacp - origin_jac) @ J
+        Jr = jacr @ J
+        R = d.site_xmat[site].reshape(3, 3).copy()
+    else:
+        Rt = robot.heading_rotation.T
+        rel = Rt @ (d.site_xpos[site] - origin)
+        Jp = Rt @ ((jacp - origin_jac) @ J)
+        Jr = Rt @ (jacr @ J)
         ipsi = lay.index_psi
         Jp[0, ipsi] += rel[1]
         Jp[1, ipsi] -= rel[0]
         Jr[2, ipsi] -= 1.0
-    R = Rh.T @ d.site_xmat[site].reshape(3, 3)
+        R = Rt @ d.site_xmat[site].reshape(3, 3)
     robot.cache[key] = (rel, R, Jp, Jr)
     return rel, R, Jp, Jr
 

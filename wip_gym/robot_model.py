@@ -251,6 +251,13 @@ class RobotModel:
             self._S[model.jnt_dofadr[model.actuator_trnid[a, 0]], a] = model.actuator_gear[a, 0]
         self._jacp = np.zeros((3, nv))
         self._jacp_wheel = np.zeros((3, nv))
+        self._jac_origin = np.zeros((3, nv))
+        # views on MuJoCo's buffers (an attribute read makes a new view: ~1 us each); masses
+        # are read at every update (an env may change them: payload, randomisation)
+        self._mj_qpos, self._mj_qvel = self.data.qpos, self.data.qvel
+        self._mj_xpos, self._mj_xipos = self.data.xpos, self.data.xipos
+        self._mj_body_mass, self._mj_subtree_mass = model.body_mass, model.body_subtreemass
+        self._mj_qfrc_passive = self.data.qfrc_passive
         self._body_ids = np.array(lay.body_bodies)
         self._body_qpos = np.array(lay.body_qpos, dtype=int)
         self._body_dof = np.array(lay.body_dof, dtype=int)
@@ -296,8 +303,8 @@ class RobotModel:
             )
         if not (np.isfinite(qpos).all() and np.isfinite(qvel).all()):
             raise ValueError("qpos/qvel contain NaN or inf")
-        d.qpos[: lay.nq] = qpos
-        d.qvel[: lay.nv] = qvel
+        self._mj_qpos[: lay.nq] = qpos
+        self._mj_qvel[: lay.nv] = qvel
         self.cache.clear()
         mujoco.mj_kinematics(m, d)
         mujoco.mj_comPos(m, d)
@@ -315,13 +322,13 @@ class RobotModel:
         mujoco.mj_rne(m, d, 0, self._bias)
         J = self._J
         self._A = J.T @ self._M @ J
-        self._h = J.T @ (self._M @ self._Jdot_nu + self._bias - d.qfrc_passive)
+        self._h = J.T @ (self._M @ self._Jdot_nu + self._bias - self._mj_qfrc_passive)
         self._B = J.T @ self._S
 
     def _update_minimal_coordinates(self) -> None:
         d, lay = self.data, self.layout
         r = lay.wheel_radius
-        qpos, qvel = d.qpos, d.qvel
+        qpos, qvel = self._mj_qpos, self._mj_qvel
         wl, wr = lay.wheel_qpos
         dl, dr = lay.wheel_dof
         if lay.planar:
@@ -373,24 +380,27 @@ class RobotModel:
 
     def _update_com(self) -> None:
         m, d, lay = self.model, self.data, self.layout
-        ids = self._body_ids
-        masses = m.body_mass[ids]
+        base = lay.base_body
+        masses = self._mj_body_mass[self._body_ids]
         mass = float(masses.sum())
-        com_world = masses @ d.xipos[ids] / mass
-        origin = d.xpos[lay.base_body]
-        Rh = self.heading_rotation
-        rel = Rh.T @ (com_world - origin)
+        com_world = masses @ self._mj_xipos[self._body_ids] / mass
+        origin = self._mj_xpos[base]
+        planar = lay.planar
+        Rt = None if planar else self._heading.T  # planar: the axle frame is the world's
+        rel = com_world - origin if planar else Rt @ (com_world - origin)
         # CoM Jacobian of the body (wheels excluded) in world coordinates
-        mujoco.mj_jacSubtreeCom(m, d, self._jacp, lay.base_body)
-        Jc = self._jacp * m.body_subtreemass[lay.base_body]
+        mujoco.mj_jacSubtreeCom(m, d, self._jacp, base)
+        Jc = self._jacp * self._mj_subtree_mass[base]
         for w in lay.wheel_bodies:
-            mujoco.mj_jac(m, d, self._jacp_wheel, None, d.xipos[w], w)
-            Jc -= m.body_mass[w] * self._jacp_wheel
+            mujoco.mj_jac(m, d, self._jacp_wheel, None, self._mj_xipos[w], w)
+            Jc -= self._mj_body_mass[w] * self._jacp_wheel
         Jc /= mass
-        # axle-origin velocity: the base origin's linear velocity
-        mujoco.mj_jac(m, d, self._jacp_wheel, None, origin, lay.base_body)
-        J_rel = Rh.T @ ((Jc - self._jacp_wheel) @ self._J)
-        if not lay.planar:
+        # axle-origin velocity: the base origin's linear velocity (kept for the tasks)
+        mujoco.mj_jac(m, d, self._jac_origin, None, origin, base)
+        self.cache["origin_jacobian"] = self._jac_origin
+        J_rel = (Jc - self._jac_origin) @ self._J
+        if not planar:
+            J_rel = Rt @ J_rel
             # the axle frame turns with psi: d/dt (Rh^T p) has the extra term -psid e_z x rel
             J_rel[0, 1] += rel[1]
             J_rel[1, 1] -= rel[0]
@@ -481,7 +491,7 @@ class RobotModel:
     def axle_position(self) -> Array:
         """World position of the axle midpoint ``(X0, Y0, Z0)``."""
         self._require()
-        return self.data.xpos[self.layout.base_body].copy()
+        return self._mj_xpos[self.layout.base_body].copy()
 
     @property
     def body_mass(self) -> float:
