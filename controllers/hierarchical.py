@@ -215,14 +215,13 @@ class HierarchicalController:
         solution = self.qp.solve(robot, iso, self.tasks)
         qp_time = time.perf_counter() - tick
         action = np.clip(solution.actuators, self.task.torque_low, self.task.torque_high)
-        errors = {task.name: task.error(robot) for task in self.tasks[:3]}
         self._recorder.record(
             t=self._step * self.task.control_dt, wipm_state=wipm_state(robot),
             wipm_reference=self.plan.window(self._ref.mpc_index, 1)[0],
             theta_d=self._ref.theta, thetad_d=self._ref.thetad, thdd_ref=self._ref.thdd,
             tau_0=self._ref.tau_0, torque=action, qp_solved=solution.solved,
             qp_iterations=solution.iterations, qp_failures=self.qp.failures,
-            mpc_rejected=self.high_level.mpc.rejected, theta_error=errors["theta"][0],
+            mpc_rejected=self.high_level.mpc.rejected, theta_error=robot.theta - self._ref.theta,
             mpc_time=mpc_time, qp_time=qp_time, compute_time=time.perf_counter() - start,
         )  # fmt: skip
         self._step += 1
