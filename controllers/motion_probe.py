@@ -30,11 +30,16 @@ from wip_gym.robot_model import RobotModel
 Array = NDArray[np.float64]
 
 
+Vec = tuple[float, float, float]
+
+
 class MotionProbe:
     """World velocities and drift accelerations (``nu_dot = 0``) at ``full_state(q, nu)``.
 
     Call :meth:`update` once per control step after ``robot.update``; then
-    :meth:`point_motion`, :meth:`angular_motion` and :meth:`com_motion` read it (memoised).
+    :meth:`site_motion`, :meth:`origin_motion`, :meth:`com_motion` and :meth:`relative_drift`
+    read it (memoised). Three-vectors are tuples of Python floats: at this size scalar
+    arithmetic costs a tenth of a NumPy call.
     """
 
     def __init__(self, robot: RobotModel) -> None:
@@ -45,18 +50,17 @@ class MotionProbe:
         self._nq, self._nv = lay.nq, lay.nv
         self._base = lay.base_body
         self._wheels = lay.wheel_bodies
-        # masses are read at every use: an oracle model's payload may change mid-run
-        self._subtree_mass = m.body_subtreemass
-        self._gravity = np.array(m.opt.gravity)
-        self._jacp = np.zeros((3, m.nv))
-        self._jacr = np.zeros((3, m.nv))
-        self._jacp_dot = np.zeros((3, m.nv))
-        self._jacr_dot = np.zeros((3, m.nv))
+        self._rows = [lay.base_body, *lay.wheel_bodies]
+        self._gravity: Vec = tuple(float(v) for v in m.opt.gravity)  # type: ignore[assignment]
+        # [jacp; jacr] and its time derivative in one buffer each: three products per point
+        self._jac = np.zeros((6, m.nv))
+        self._jac_dot = np.zeros((6, m.nv))
         self.qvel = np.zeros(m.nv)
         self.qacc0 = np.zeros(m.nv)
         self.psid = 0.0
         self.heading = np.eye(3)
-        self._memo: dict[object, tuple[Array, ...]] = {}
+        self._c, self._s = 1.0, 0.0
+        self._memo: dict[object, tuple[Vec, ...]] = {}
         # views on MuJoCo's buffers (an attribute read makes a new view: ~1 us each)
         self._qpos, self._qvel, self._qacc = self.data.qpos, self.data.qvel, self.data.qacc
         self._xpos, self._site_xpos = self.data.xpos, self.data.site_xpos
@@ -65,6 +69,8 @@ class MotionProbe:
         self._site_body = m.site_bodyid.copy()
         self._planar = lay.planar
         self._index_psi = lay.index_psi
+        # masses are read at every use: an oracle model's payload may change mid-run
+        self._subtree_mass = m.body_subtreemass
 
     def update(self, robot: RobotModel) -> None:
         m, d = self.model, self.data
@@ -79,65 +85,71 @@ class MotionProbe:
         self.qacc0[: self._nv] = robot.Jdot_tf_nu
         self.psid = 0.0 if self._planar else float(robot.nu[self._index_psi])
         self.heading = robot.heading_rotation
+        self._c, self._s = float(self.heading[0, 0]), float(self.heading[1, 0])
         self._memo.clear()
 
-    def point_motion(self, body: int, point: Array) -> tuple[Array, Array]:
-        """World velocity and drift acceleration of ``point`` (world) attached to ``body``."""
-        m, d = self.model, self.data
-        mujoco.mj_jac(m, d, self._jacp, None, point, body)
-        mujoco.mj_jacDot(m, d, self._jacp_dot, None, point, body)
-        return self._jacp @ self.qvel, self._jacp @ self.qacc0 + self._jacp_dot @ self.qvel
+    def _point(self, position: Array, body: int) -> tuple[Vec, Vec, Vec, Vec]:
+        """Linear velocity, drift acceleration, angular velocity, angular drift (world) of a
+        point attached to ``body``: ``jac qvel`` and ``jac qacc_0 + jacDot qvel``."""
+        m, d, jac, jac_dot = self.model, self.data, self._jac, self._jac_dot
+        mujoco.mj_jac(m, d, jac[:3], jac[3:], position, body)
+        mujoco.mj_jacDot(m, d, jac_dot[:3], jac_dot[3:], position, body)
+        v = (jac @ self.qvel).tolist()
+        a = (jac @ self.qacc0 + jac_dot @ self.qvel).tolist()
+        return (v[0], v[1], v[2]), (a[0], a[1], a[2]), (v[3], v[4], v[5]), (a[3], a[4], a[5])
 
-    def site_motion(self, site: int) -> tuple[Array, Array, Array, Array, Array]:
+    def site_motion(self, site: int) -> tuple[Vec, Vec, Vec, Vec, Vec]:
         """``(position, velocity, drift acceleration, angular velocity, angular drift)`` of a
         site in world (memoised per update)."""
         key = ("site", site)
         if key not in self._memo:
-            m, d = self.model, self.data
-            body = int(self._site_body[site])
-            position = self._site_xpos[site].copy()
-            mujoco.mj_jac(m, d, self._jacp, self._jacr, position, body)
-            mujoco.mj_jacDot(m, d, self._jacp_dot, self._jacr_dot, position, body)
-            qvel, qacc0 = self.qvel, self.qacc0
-            self._memo[key] = (
-                position,
-                self._jacp @ qvel,
-                self._jacp @ qacc0 + self._jacp_dot @ qvel,
-                self._jacr @ qvel,
-                self._jacr @ qacc0 + self._jacr_dot @ qvel,
-            )
+            position = self._site_xpos[site]
+            v, a, w, w_dot = self._point(position, int(self._site_body[site]))
+            p = position.tolist()
+            self._memo[key] = ((p[0], p[1], p[2]), v, a, w, w_dot)
         return self._memo[key]  # type: ignore[return-value]
 
-    def origin_motion(self) -> tuple[Array, Array, Array]:
+    def origin_motion(self) -> tuple[Vec, Vec, Vec]:
         """``(position, velocity, drift acceleration)`` of the axle midpoint in world."""
         key = "origin"
         if key not in self._memo:
-            origin = self._xpos[self._base].copy()
-            self._memo[key] = (origin, *self.point_motion(self._base, origin))
+            origin = self._xpos[self._base]
+            v, a, _, _ = self._point(origin, self._base)
+            p = origin.tolist()
+            self._memo[key] = ((p[0], p[1], p[2]), v, a)
         return self._memo[key]  # type: ignore[return-value]
 
-    def com_motion(self) -> tuple[Array, Array, Array]:
-        """``(position, velocity, drift acceleration)`` of the body's CoM (wheels excluded)."""
+    def com_motion(self) -> tuple[Vec, Vec, Vec]:
+        """``(position, velocity, drift acceleration)`` of the body's CoM (wheels excluded):
+        the base's subtree minus the two wheels (leaves)."""
         key = "com"
         if key not in self._memo:
             m, d = self.model, self.data
             base, (wl, wr) = self._base, self._wheels
-            # body = the base's subtree minus the two wheels (leaves): a 3-row weighted sum
-            rows = [base, wl, wr]
-            weights = self._subtree_mass[rows] * np.array([1.0, -1.0, -1.0])
-            mass = weights[0] + weights[1] + weights[2]
-            position = weights @ np.concatenate((self._subtree_com[base][None],
-                                                 self._xipos[[wl, wr]])) / mass  # fmt: skip
+            M, m_l, m_r = self._subtree_mass[self._rows].tolist()
+            mass = M - m_l - m_r
+            (c, lw, rw) = (self._subtree_com[base].tolist(), self._xipos[wl].tolist(),
+                           self._xipos[wr].tolist())  # fmt: skip
+            position = tuple((M * c[i] - m_l * lw[i] - m_r * rw[i]) / mass for i in range(3))
             mujoco.mj_subtreeVel(m, d)
-            velocity = weights @ self._subtree_linvel[rows] / mass
+            c, lw, rw = self._subtree_linvel[self._rows].tolist()
+            velocity = tuple((M * c[i] - m_l * lw[i] - m_r * rw[i]) / mass for i in range(3))
             self._qacc[:] = self.qacc0
             mujoco.mj_rnePostConstraint(m, d)
-            force = self._cfrc_int[base, 3:] - self._cfrc_int[wl, 3:] - self._cfrc_int[wr, 3:]
-            self._memo[key] = (position, velocity, force / mass + self._gravity)
+            # the linear part of a subtree's net force is sum m_i (a_i - g)
+            c, lw, rw = self._cfrc_int[self._rows, 3:].tolist()
+            g = self._gravity
+            drift = tuple((c[i] - lw[i] - rw[i]) / mass + g[i] for i in range(3))
+            self._memo[key] = (position, velocity, drift)  # type: ignore[assignment]
         return self._memo[key]  # type: ignore[return-value]
 
-    def relative_drift(self, position: Array, velocity: Array, acceleration: Array
-                       ) -> tuple[Array, Array, Array]:  # fmt: skip
+    def to_axle(self, v: Vec) -> Vec:
+        """``Rh^T v``."""
+        c, s = self._c, self._s
+        return (c * v[0] + s * v[1], -s * v[0] + c * v[1], v[2])
+
+    def relative_drift(self, position: Vec, velocity: Vec, acceleration: Vec
+                       ) -> tuple[Vec, Vec, Vec]:  # fmt: skip
         """A world point's position, velocity and drift acceleration relative to the axle
         midpoint in the axle frame (which turns at ``omega = psid e_z``)::
 
@@ -145,13 +157,14 @@ class MotionProbe:
             rel'  = Rh^T (v - v_o) - omega x rel
             rel'' = Rh^T (a - a_o) - 2 omega x Rh^T (v - v_o) + omega x (omega x rel)
         """
-        origin, v_o, a_o = self.origin_motion()
-        Rt = self.heading.T
-        rel = Rt @ (position - origin)
-        u = Rt @ (velocity - v_o)
+        p_o, v_o, a_o = self.origin_motion()
+        rel = self.to_axle((position[0] - p_o[0], position[1] - p_o[1], position[2] - p_o[2]))
+        u = self.to_axle((velocity[0] - v_o[0], velocity[1] - v_o[1], velocity[2] - v_o[2]))
+        a = self.to_axle(
+            (acceleration[0] - a_o[0], acceleration[1] - a_o[1], acceleration[2] - a_o[2])
+        )
         w = self.psid
-        # omega x v = w (-v_y, v_x, 0)
-        rel_d = u - w * np.array([-rel[1], rel[0], 0.0])
-        rel_dd = Rt @ (acceleration - a_o) - 2.0 * w * np.array([-u[1], u[0], 0.0])
-        rel_dd += w * w * np.array([-rel[0], -rel[1], 0.0])
+        rel_d = (u[0] + w * rel[1], u[1] - w * rel[0], u[2])
+        rel_dd = (a[0] + 2.0 * w * u[1] - w * w * rel[0],
+                  a[1] - 2.0 * w * u[0] - w * w * rel[1], a[2])  # fmt: skip
         return rel, rel_d, rel_dd

@@ -176,7 +176,7 @@ class FramePositionTask:
     def jdot_nu(self, probe: MotionProbe) -> Array:
         """The site's drift acceleration relative to the axle, in the axle frame."""
         position, velocity, acceleration, _, _ = probe.site_motion(self.site)
-        return probe.relative_drift(position, velocity, acceleration)[2]
+        return np.array(probe.relative_drift(position, velocity, acceleration)[2])
 
 
 @dataclass
@@ -208,9 +208,10 @@ class FrameOrientationTask:
         """``d/dt (Rh^T Omega - psid e_z) = Rh^T Omega' - omega x Rh^T Omega`` at fixed ``nu``
         (``Omega`` the site's angular velocity in world, ``omega = psid e_z``)."""
         _, _, _, omega, omega_drift = probe.site_motion(self.site)
-        Rt = probe.heading.T
-        u = Rt @ omega
-        return Rt @ omega_drift - probe.psid * np.array([-u[1], u[0], 0.0])
+        u = probe.to_axle(omega)
+        a = probe.to_axle(omega_drift)
+        w = probe.psid
+        return np.array([a[0] + w * u[1], a[1] - w * u[0], a[2]])
 
 
 @dataclass

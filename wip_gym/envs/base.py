@@ -20,6 +20,7 @@ from wip_gym.robots import robot_spec
 from wip_gym.scene import CUP_HALF_HEIGHT, TRAY_HALF_SIZE, SceneOptions, build_model, reset_qpos
 
 DEFAULT_CAMERA_CONFIG: dict[str, Any] = {}
+CupFrame = tuple[NDArray[np.float64], NDArray[np.float64]]
 
 
 def _goal_array(goal: Any, planar: bool) -> NDArray[np.float64]:
@@ -175,6 +176,8 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
                 and (m.geom_contype[g] or m.geom_conaffinity[g])
             ]
         )
+        self._body_geom_mask = np.zeros(m.ngeom, dtype=bool)
+        self._body_geom_mask[self._body_geoms] = True
         self._ee_site = m.site("ee").id if self._spec.tray_capable else -1
         if tray:
             self._tray_body = m.body("tray").id
@@ -299,8 +302,10 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             self._payload_attached = True
         self.do_simulation(action, self.frame_skip)
         self.robot.update(d.qpos[: lay.nq], d.qvel[: lay.nv], dynamics=False)
+        # the cup's pose in the tray frame, made once for this state
+        cup_frame = self._cup_in_tray_frame() if self._tray else None
         fallen = self._fallen()
-        cup_on_tray = self._cup_on_tray() if self._tray else True
+        cup_on_tray = self._cup_on_tray(cup_frame) if self._tray else True
         newly_lost = self._tray and not cup_on_tray and not self._cup_lost
         self._cup_lost = self._cup_lost or not cup_on_tray
         distance = self._goal_distance()
@@ -315,11 +320,12 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         self._prev_distance = distance
         reward = float(sum(rewards.values()))
         terminated = bool(fallen or (self._tray and self._terminate_on_cup_loss and self._cup_lost))
-        info = self._info(fallen=fallen, cup_on_tray=cup_on_tray)
+        info = self._info(fallen=fallen, cup_on_tray=cup_on_tray, cup_frame=cup_frame,
+                          distance=distance)  # fmt: skip
         info.update(rewards)
         if self.render_mode == "human":
             self.render()
-        return self._get_obs(), reward, terminated, False, info
+        return self._get_obs(cup_frame), reward, terminated, False, info
 
     def _check_action(self, action: Any) -> NDArray[np.float64]:
         a = np.asarray(action, dtype=np.float64)
@@ -365,10 +371,11 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             return False
         pairs = d.contact.geom[: d.ncon]
         with_floor = (pairs == self._floor).any(axis=1)
-        with_body = np.isin(pairs, self._body_geoms).any(axis=1)
-        return bool(np.any(with_floor & with_body))
+        with_body = self._body_geom_mask[pairs].any(axis=1)
+        return bool((with_floor & with_body).any())
 
     def _cup_in_tray_frame(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The cup's position and orientation (quaternion) in the tray frame."""
         d = self.data
         R = d.xmat[self._tray_body].reshape(3, 3)
         position = R.T @ (d.xpos[self._cup_body] - d.xpos[self._tray_body])
@@ -379,9 +386,9 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         mujoco.mju_mulQuat(rel, tray_quat, cup_quat)
         return position, rel
 
-    def _cup_on_tray(self) -> bool:
+    def _cup_on_tray(self, cup_frame: CupFrame | None = None) -> bool:
         """The cup's centre is above the tray's plate (within its outline) and near it."""
-        p, _ = self._cup_in_tray_frame()
+        p, _ = cup_frame or self._cup_in_tray_frame()
         top = 2 * TRAY_HALF_SIZE[2]
         return bool(
             abs(p[0]) <= TRAY_HALF_SIZE[0]
@@ -414,7 +421,9 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         z = self.data.xmat[self._tray_body].reshape(3, 3)[:, 2]
         return float(np.degrees(np.arccos(np.clip(z[2], -1.0, 1.0))))
 
-    def _info(self, *, fallen: bool, cup_on_tray: bool) -> dict[str, Any]:
+    def _info(self, *, fallen: bool, cup_on_tray: bool, cup_frame: CupFrame | None = None,
+              distance: float | None = None) -> dict[str, Any]:  # fmt: skip
+        """The step's info; ``cup_frame`` and ``distance`` when the caller has them."""
         robot = self.robot
         axle = robot.axle_position
         info: dict[str, Any] = {
@@ -423,7 +432,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             "theta": robot.theta,
             "thetad": robot.thetad,
             "axle_position": axle,
-            "goal_distance": self._goal_distance(),
+            "goal_distance": self._goal_distance() if distance is None else distance,
             "fallen": bool(fallen),
         }
         if not self._spec.planar:
@@ -432,14 +441,14 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         if self._ee_site >= 0:
             info["ee_error"] = float(np.linalg.norm(self._ee_in_axle_frame() - self._ee_reference))
         if self._tray:
-            offset, _ = self._cup_in_tray_frame()
+            offset, _ = cup_frame or self._cup_in_tray_frame()
             info["tray_tilt_deg"] = self._tray_tilt_deg()
             info["cup_offset"] = offset
             info["cup_on_tray"] = bool(cup_on_tray)
             info["cup_friction_use"] = self._cup_friction_use()
         return info
 
-    def _get_obs(self) -> dict[str, NDArray[np.float64]]:
+    def _get_obs(self, cup_frame: CupFrame | None = None) -> dict[str, NDArray[np.float64]]:
         d = self.data
         obs = {
             "qpos": d.qpos[: self._nq].astype(np.float64, copy=True),
@@ -447,6 +456,6 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             "goal": self._goal.copy(),
         }
         if self._tray:
-            position, quat = self._cup_in_tray_frame()
+            position, quat = cup_frame or self._cup_in_tray_frame()
             obs["cup_pose"] = np.concatenate([position, quat])
         return obs
