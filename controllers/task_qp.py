@@ -13,10 +13,10 @@ Decision variable ``qdd`` (every minimal acceleration but ``xdd``). Cost
 
 One dense ProxQP object per controller, reused and warm-started step to step; its status is
 checked every step, and an unsolved QP falls back to the last feasible torques (counted).
-Before ProxQP, each step tries the minimiser without constraints, ``H qdd = -g`` (one dense
-solve): when it satisfies every constraint it is the QP's exact optimum (the QP is convex and
-its constraints are then inactive), and ProxQP is not called. In closed loop that is most steps
-(no torque or joint limit active); ProxQP, warm-started, takes the others.
+Before ProxQP, each step tries the minimiser without constraints, ``H qdd = -g`` (one LAPACK
+Cholesky solve, ``dposv``): when it satisfies every constraint it is the QP's exact optimum (the
+QP is convex and its constraints are then inactive), and ProxQP is not called. In closed loop
+that is most steps (no torque or joint limit active); ProxQP, warm-started, takes the others.
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 import proxsuite
 from numpy.typing import NDArray
+from scipy.linalg.lapack import dposv
 
 from controllers.isolated_dynamics import IsolatedDynamics
 from controllers.motion_probe import MotionProbe
@@ -184,11 +185,13 @@ class TaskQP:
     def solve(self, robot: RobotModel, iso: IsolatedDynamics, tasks: Sequence[Task]) -> QPSolution:
         H, g, C, lower, upper = self.assemble(robot, iso, tasks)
         if self._qp is not None and self.settings.unconstrained_first:
-            qdd = np.linalg.solve(H, -g)
-            Cx = C @ qdd
-            if (Cx >= lower).all() and (Cx <= upper).all() and np.isfinite(qdd).all():
-                self.last_run_time_us = float("nan")
-                return self._solution(iso, qdd, iterations=0)
+            # H is symmetric positive definite (regularised): one LAPACK Cholesky solve
+            _, qdd, info = dposv(H, -g)
+            if info == 0:
+                Cx = C @ qdd
+                if (Cx >= lower).all() and (Cx <= upper).all() and np.isfinite(qdd).all():
+                    self.last_run_time_us = float("nan")
+                    return self._solution(iso, qdd, iterations=0)
         if self._qp is None:
             self._qp = proxsuite.proxqp.dense.QP(self.n, 0, C.shape[0])
             self._qp.settings.eps_abs = self.settings.eps_abs
