@@ -122,7 +122,6 @@ class TaskQP:
         self.probe = RobotModel(robot.model)
         self.motion = MotionProbe(robot)
         self._last_actuators: Array | None = None
-        self.last_run_time_us = float("nan")  # ProxQP's own run time of the last solve
 
     def task_rows(self, robot: RobotModel, iso: IsolatedDynamics, tasks: Sequence[Task]
                   ) -> tuple[Array, Array]:  # fmt: skip
@@ -190,7 +189,6 @@ class TaskQP:
             if info == 0:
                 Cx = C @ qdd
                 if (Cx >= lower).all() and (Cx <= upper).all() and np.isfinite(qdd).all():
-                    self.last_run_time_us = float("nan")
                     return self._solution(iso, qdd, iterations=0)
         if self._qp is None:
             self._qp = proxsuite.proxqp.dense.QP(self.n, 0, C.shape[0])
@@ -210,7 +208,6 @@ class TaskQP:
             self._qp.update(H=H, g=g, C=C, l=lower, u=upper)
             self._qp.solve()
         results = self._qp.results
-        self.last_run_time_us = float(results.info.run_time)
         iterations = int(results.info.iter)
         if results.info.status == _SOLVED and bool(np.all(np.isfinite(results.x))):
             return self._solution(iso, np.array(results.x), iterations)
