@@ -601,35 +601,34 @@ class RobotModel:
         r, sep = lay.wheel_radius, lay.wheel_separation
         qpos = np.zeros(lay.nq)
         qvel = np.zeros(lay.nv)
-        x, q1 = q[0], q[lay.index_q1]
         first_body = lay.index_q1 + 1
-        qpos[list(lay.body_qpos)] = q[first_body:]
-        qvel[list(lay.body_dof)] = nu[first_body:]
-        xd, q1d = nu[0], nu[lay.index_q1]
+        qpos[self._body_qpos] = q[first_body:]
+        qvel[self._body_dof] = nu[first_body:]
+        x, q1 = float(q[0]), float(q[lay.index_q1])
+        xd, q1d = float(nu[0]), float(nu[lay.index_q1])
+        (wl, wr), (dl, dr) = lay.wheel_qpos, lay.wheel_dof
         if lay.planar:
-            o = lay.root_qpos
+            o, v = lay.root_qpos, lay.root_dof
             qpos[o : o + 3] = x, r, q1
-            qpos[list(lay.wheel_qpos)] = x / r - q1
-            qvel[lay.root_dof : lay.root_dof + 3] = xd, 0.0, q1d
-            qvel[list(lay.wheel_dof)] = xd / r - q1d
+            qpos[wl] = qpos[wr] = x / r - q1
+            qvel[v : v + 3] = xd, 0.0, q1d
+            qvel[dl] = qvel[dr] = xd / r - q1d
             return qpos, qvel
-        psi, psid = q[1], nu[1]
+        psi, psid = float(q[1]), float(nu[1])
         o = lay.root_qpos
         qpos[o : o + 3] = axle_xy[0], axle_xy[1], r
-        quat_yaw = np.array([np.cos(psi / 2), 0.0, 0.0, np.sin(psi / 2)])
-        quat_pitch = np.array([np.cos(q1 / 2), 0.0, np.sin(q1 / 2), 0.0])
-        quat = np.zeros(4)
-        mujoco.mju_mulQuat(quat, quat_yaw, quat_pitch)
-        qpos[o + 3 : o + 7] = quat
+        # yaw (cos, 0, 0, sin)(psi / 2) times pitch (cos, 0, sin, 0)(q1 / 2), written out
+        cy, sy = math.cos(psi / 2), math.sin(psi / 2)
+        cp, sp = math.cos(q1 / 2), math.sin(q1 / 2)
+        qpos[o + 3 : o + 7] = cy * cp, -(sy * sp), cy * sp, sy * cp
         half = sep / (2.0 * r)
-        qpos[lay.wheel_qpos[0]] = x / r - half * psi - q1
-        qpos[lay.wheel_qpos[1]] = x / r + half * psi - q1
-        c, s = np.cos(psi), np.sin(psi)
+        qpos[wl] = x / r - half * psi - q1
+        qpos[wr] = x / r + half * psi - q1
+        c, s = math.cos(psi), math.sin(psi)
         v = lay.root_dof
-        qvel[v : v + 3] = xd * c, xd * s, 0.0
-        qvel[v + 3 : v + 6] = -psid * np.sin(q1), q1d, psid * np.cos(q1)
-        qvel[lay.wheel_dof[0]] = xd / r - half * psid - q1d
-        qvel[lay.wheel_dof[1]] = xd / r + half * psid - q1d
+        qvel[v : v + 6] = xd * c, xd * s, 0.0, -psid * math.sin(q1), q1d, psid * math.cos(q1)
+        qvel[dl] = xd / r - half * psid - q1d
+        qvel[dr] = xd / r + half * psid - q1d
         return qpos, qvel
 
 
