@@ -6,6 +6,7 @@ class docstrings there hold the tables of spaces, rewards and arguments.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import mujoco
@@ -187,10 +188,15 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             self._cup_geom = m.geom("cup").id
             self._tray_geom = m.geom("tray").id
             self._cup_friction = float(cup_friction)
+            self._contact_force = np.zeros(6)
         if payload_mass > 0:
             self._payload_body = m.body("payload").id
         self._action_low = self.action_space.low.astype(np.float64)
         self._action_high = self.action_space.high.astype(np.float64)
+        # made once: the accepted band (limits +- 1e-6 of the range) and the reward's scale
+        tol = 1e-6 * (self._action_high - self._action_low)
+        self._action_band = (self._action_low - tol, self._action_high + tol)
+        self._action_scale = np.maximum(np.abs(self._action_high), 1e-12)
         self._prev_distance = 0.0
         self._ee_reference = np.zeros(3)
         self._cup_lost = False
@@ -310,7 +316,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         self._cup_lost = self._cup_lost or not cup_on_tray
         distance = self._goal_distance()
         progress_w, ctrl_w, fall_pen, cup_pen = self._weights
-        scaled = action / np.maximum(np.abs(self._action_high), 1e-12)
+        scaled = action / self._action_scale
         rewards = {
             "reward_progress": progress_w * (self._prev_distance - distance),
             "reward_ctrl": -ctrl_w * float(scaled @ scaled) * self.dt,
@@ -334,13 +340,13 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
                 f"action must have shape {self.action_space.shape} (one torque per actuator: "
                 f"{[self.model.actuator(i).name for i in range(self.model.nu)]}), got {a.shape}"
             )
-        if not np.all(np.isfinite(a)):
+        if not np.isfinite(a).all():
             raise ValueError(
                 f"action contains NaN or inf at indices {np.flatnonzero(~np.isfinite(a))}"
             )
-        tol = 1e-6 * (self._action_high - self._action_low)
-        outside = (a < self._action_low - tol) | (a > self._action_high + tol)
-        if np.any(outside):
+        low, high = self._action_band
+        outside = (a < low) | (a > high)
+        if outside.any():
             bad = {
                 self.model.actuator(i).name: (float(a[i]), float(self._action_high[i]))
                 for i in np.flatnonzero(outside)
@@ -400,22 +406,26 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         """Tangential over mu times normal contact force, summed over the tray-cup contacts
         (1 means the cup slides); 0 with no contact."""
         d, m = self.data, self.model
-        normal = 0.0
-        tangential = np.zeros(3)
-        frame = np.zeros(6)
         if d.ncon == 0:
             return 0.0
-        pairs = d.contact.geom[: d.ncon]
+        contact = d.contact
+        pairs = contact.geom[: d.ncon]
         cup_tray = ((pairs == self._cup_geom) | (pairs == self._tray_geom)).all(axis=1)
-        frames = d.contact.frame[: d.ncon]
-        for i in np.flatnonzero(cup_tray):
-            mujoco.mj_contactForce(m, d, int(i), frame)
-            R = frames[i].reshape(3, 3)  # rows: normal, tangent 1, tangent 2
-            normal += frame[0]
-            tangential += frame[1] * R[1] + frame[2] * R[2]
+        frames = contact.frame
+        frame = self._contact_force
+        normal = tx = ty = tz = 0.0
+        for i in np.flatnonzero(cup_tray).tolist():
+            mujoco.mj_contactForce(m, d, i, frame)
+            f_n, f_1, f_2 = frame[:3].tolist()
+            # rows of the contact frame: normal, tangent 1, tangent 2
+            _, _, _, a0, a1, a2, b0, b1, b2 = frames[i].tolist()
+            normal += f_n
+            tx += f_1 * a0 + f_2 * b0
+            ty += f_1 * a1 + f_2 * b1
+            tz += f_1 * a2 + f_2 * b2
         if normal <= 0.0:
             return 0.0
-        return float(np.linalg.norm(tangential) / (self._cup_friction * normal))
+        return math.sqrt(tx * tx + ty * ty + tz * tz) / (self._cup_friction * normal)
 
     def _tray_tilt_deg(self) -> float:
         z = self.data.xmat[self._tray_body].reshape(3, 3)[:, 2]
