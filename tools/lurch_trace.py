@@ -70,7 +70,25 @@ def trace(env_id: str, controller: str, goal: float, friction: float, seconds: f
         "rest_tilt_deg": float(tilt[rest].max()) if end + 1 < len(t) else float("nan"),
         "peak_speed": float(xd.max()),
         "cup_kept": bool(info["cup_on_tray"]),
+        "series": np.array(rows),
     }
+
+
+def print_series(series: np.ndarray, start: float, stop: float, every: float) -> None:
+    """Rows of the time series: the axle's acceleration as the mean over 20 ms of the speed's
+    differences, and the tray tilt that would cancel it, ``atan(a / g)``."""
+    t, x, xd, friction_use, tilt = series.T
+    dt = t[1] - t[0]
+    window = max(1, int(round(0.02 / dt)))
+    a = np.convolve(np.gradient(xd, dt), np.ones(window) / window, mode="same")
+    print("| t s | x m | xd m/s | axle a m/s^2 | atan(a/g) deg | tray tilt deg | friction use |")
+    print("|---|---|---|---|---|---|---|")
+    step = max(1, int(round(every / dt)))
+    for i in range(0, len(t), step):
+        if start <= t[i] <= stop + 1e-9:
+            print(f"| {t[i]:.2f} | {x[i]:.3f} | {xd[i]:.2f} | {a[i]:.2f} | "
+                  f"{np.degrees(np.arctan(a[i] / 9.81)):.1f} | {tilt[i]:.1f} | "
+                  f"{friction_use[i]:.2f} |")  # fmt: skip
 
 
 def main() -> None:
@@ -83,6 +101,9 @@ def main() -> None:
     parser.add_argument("--a-max", type=float, default=None, help="m/s^2 (default 0.5 mu g)")
     parser.add_argument("--q-position", type=float, default=PlanConfig.q_position)
     parser.add_argument("--theta-max", type=float, default=PlanConfig.theta_max)
+    parser.add_argument("--trace", default="", help="controllers whose time series to print")
+    parser.add_argument("--window", default="0:2", help="START:STOP s of the time series")
+    parser.add_argument("--every", type=float, default=0.05, help="s between rows")
     args = parser.parse_args()
     plan = PlanConfig(a_max=args.a_max, q_position=args.q_position, theta_max=args.theta_max)
     header = ("controller", "plan peak a", "roll back cm", "lurch ends s", "lurch: friction (at s)",
@@ -100,6 +121,11 @@ def main() -> None:
               f"{r['lurch_tilt_deg']:.1f} | {r['rest_friction']:.2f} | {r['rest_tilt_deg']:.1f} | "
               f"{r['peak_speed']:.2f} | {'yes' if r['cup_kept'] else 'no'} |",
               flush=True)  # fmt: skip
+        if name in args.trace.split(","):
+            start, stop = (float(v) for v in args.window.split(":"))
+            print(f"\n{name}:")
+            print_series(r["series"], start, stop, args.every)
+            print()
 
 
 if __name__ == "__main__":
