@@ -19,8 +19,8 @@ def test_tilt_toward_the_specific_force() -> None:
     np.testing.assert_allclose(tilt_toward(np.zeros(2), 20.0), np.eye(3))
 
 
-def run(env_id: str, goal, mode: str, seconds: float) -> dict:
-    env = gym.make(env_id, goal=goal)
+def run(env_id: str, goal, mode: str, seconds: float, **env_kwargs) -> dict:
+    env = gym.make(env_id, goal=goal, **env_kwargs)
     obs, info = env.reset(seed=0)
     policy = HierarchicalController.for_env(env, HierarchicalConfig(tray_mode=mode))
     policy.reset(obs, info)
@@ -58,7 +58,44 @@ def test_waiter_comes_less_close_to_slipping(planar_runs: dict) -> None:
     assert planar_runs["specific_force"]["friction"] < planar_runs["level"]["friction"]
 
 
-def test_krang_tray_reaches_the_goal_with_the_cup_level() -> None:
-    info = run("wip_gym/KrangTray-v0", (2.0, 0.0), "level", 9.0)
+def test_unified_keeps_the_cup_when_a_payload_appears_in_the_hand() -> None:
+    # 3 kg in the hand at 2.5 s (mid-drive), unknown to the nominal model: without the
+    # estimate of the hand tasks' unmodelled acceleration the tray tipped 38 deg and the cup
+    # fell at 3.5 s (README); 6 s covers the braking that tipped it and the stop
+    info = run("wip_gym/PlanarTray-v0", 2.0, "level", 6.0, payload_mass=3.0, payload_time=2.5)
+    assert info["cup_on_tray"] and info["tilt"] < 5.0
+
+
+# KrangTray-v0: the goal ahead, and 1.5 m to either side (the plan turns toward the goal
+# while it drives). 7.5 s: every run has arrived and settled by 7 s (goal distance under
+# 1.5 cm, speed under 2 cm/s, measured).
+KRANG_GOALS = [(2.0, 0.0), (2.0, 1.5), (2.0, -1.5)]
+KRANG_SECONDS = 7.5
+
+
+@pytest.fixture(scope="module")
+def krang_run():
+    """One Krang episode per (goal, mode), run on first use and shared by the tests."""
+    runs: dict[tuple, dict] = {}
+
+    def get(goal: tuple[float, float], mode: str) -> dict:
+        if (goal, mode) not in runs:
+            runs[goal, mode] = run("wip_gym/KrangTray-v0", goal, mode, KRANG_SECONDS)
+        return runs[goal, mode]
+
+    return get
+
+
+@pytest.mark.parametrize("goal", KRANG_GOALS)
+def test_krang_level_tray_reaches_the_goal_with_the_cup(krang_run, goal) -> None:
+    info = krang_run(goal, "level")
     assert info["goal_distance"] < 0.05 and abs(info["xd"]) < 0.05
     assert info["cup_on_tray"] and info["tilt"] < 5.0
+
+
+@pytest.mark.parametrize("goal", KRANG_GOALS[1:])
+def test_krang_waiter_reaches_the_goal_and_comes_less_close_to_slipping(krang_run, goal) -> None:
+    waiter = krang_run(goal, "specific_force")
+    assert waiter["goal_distance"] < 0.05 and abs(waiter["xd"]) < 0.05
+    assert waiter["cup_on_tray"]
+    assert waiter["friction"] < krang_run(goal, "level")["friction"]

@@ -1,0 +1,125 @@
+"""Disturbance rejection for a low-level task: an estimate of its unmodelled acceleration.
+
+The task QP computes torques by inverse dynamics of the *nominal* model (eq. ``iso3``), so an
+unmodelled load at the hand (a payload, DESIGN 7) shows up as a task-space acceleration the
+QP did not ask for: the hand's inertia is larger than the model's, and gravity pulls on a
+mass the model does not have. The PD law of the paper,
+
+    xdd* = xdd_d - Kp (x - x_d) - Kv (xd - xd_d)
+
+then holds the task with a stiffness divided by the inertia mismatch, and a destabilising
+load (a mass above the wrist) can overcome it. Integral action on the position error alone
+cannot restore the lost stiffness.
+
+:class:`DisturbanceRejectingTask` wraps a task and subtracts an estimate ``d_hat`` of that
+unmodelled acceleration from its reference, time-delay estimation in the task's space
+(Youcef-Toumi and Ito, "A time delay controller for systems with unknown dynamics", ASME
+J. Dyn. Sys. Meas. Control 112(1), 1990), low-pass filtered:
+
+    d_meas(k) = (J nu)(k) - (J nu)(k-1)) / dt - xdd*(k-1)        measured minus commanded
+    d_hat(k)  = d_hat(k-1) + alpha (d_meas(k) - d_hat(k-1)),      alpha = dt w / (1 + dt w)
+    xdd*(k)   = PD(k) - clip(d_hat(k), -bound, bound)
+
+The update is integral action on the acceleration residual with a clamp as anti-windup: a
+constant disturbance is cancelled exactly (the PD then reaches zero error), and an inertia
+mismatch ``M_true > M_nominal`` is made up for below the bandwidth ``w``. The residual also
+holds what the QP could not give the task (its trade-off with the other tasks and the
+torque limits): the estimate then raises the task's priority within the bound.
+
+The wrapper composes with any task of ``controllers.tasks`` (``jacobian``, ``error``,
+``weights``, ``reference_acceleration``, ``name``). The estimate is advanced once per robot
+state (memoised in ``robot.cache``, which every ``RobotModel.update`` clears), so it is called
+once per control step however often the QP asks.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wip_gym.robot_model import RobotModel
+
+Array = NDArray[np.float64]
+
+
+class AccelerationTask(Protocol):
+    """The interface of a task of ``controllers.tasks``."""
+
+    name: str
+
+    def jacobian(self, robot: RobotModel) -> Array: ...
+
+    def error(self, robot: RobotModel) -> Array: ...
+
+    def reference_acceleration(self, robot: RobotModel) -> Array: ...
+
+    def weights(self) -> Array: ...
+
+
+@dataclass(frozen=True)
+class ObserverSettings:
+    """Settings of one task's disturbance estimate.
+
+    Attributes:
+        dt: time between two control steps (s): the estimate's finite difference.
+        bandwidth: ``w`` (rad/s) of the first-order filter on the measured residual.
+        bound: clamp on each component of ``d_hat`` (the task's acceleration units).
+    """
+
+    dt: float
+    bandwidth: float
+    bound: float
+
+    def __post_init__(self) -> None:
+        if not (self.dt > 0 and self.bandwidth > 0 and self.bound > 0):
+            raise ValueError(f"dt, bandwidth and bound must be positive, got {self}")
+
+    @property
+    def alpha(self) -> float:
+        """Gain of the discrete first-order filter (backward Euler)."""
+        return self.dt * self.bandwidth / (1.0 + self.dt * self.bandwidth)
+
+
+class DisturbanceRejectingTask:
+    """A task whose reference acceleration is corrected by the estimate of its unmodelled
+    acceleration (see the module docstring)."""
+
+    def __init__(self, task: AccelerationTask, settings: ObserverSettings) -> None:
+        self.task = task
+        self.settings = settings
+        self.name = task.name
+        self.estimate = np.zeros(len(task.weights()))
+        self._previous: tuple[Array, Array] | None = None  # (task velocity, commanded xdd*)
+        self._key = ("disturbance_rejecting_task", id(self))
+
+    def restart(self) -> None:
+        """Forget the last step (after a reset, or a jump in the state); keep the estimate."""
+        self._previous = None
+
+    def jacobian(self, robot: RobotModel) -> Array:
+        return self.task.jacobian(robot)
+
+    def error(self, robot: RobotModel) -> Array:
+        return self.task.error(robot)
+
+    def weights(self) -> Array:
+        return self.task.weights()
+
+    def reference_acceleration(self, robot: RobotModel) -> Array:
+        cached = robot.cache.get(self._key)
+        if cached is not None:
+            return cached  # type: ignore[return-value]
+        velocity = self.task.jacobian(robot) @ robot.nu
+        s = self.settings
+        if self._previous is not None:
+            previous_velocity, previous_command = self._previous
+            measured = (velocity - previous_velocity) / s.dt - previous_command
+            self.estimate += s.alpha * (measured - self.estimate)
+            np.clip(self.estimate, -s.bound, s.bound, out=self.estimate)
+        command = self.task.reference_acceleration(robot) - self.estimate
+        self._previous = (velocity, command)
+        robot.cache[self._key] = command
+        return command
