@@ -40,6 +40,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from controllers.motion_probe import MotionProbe
 from wip_gym.robot_model import RobotModel
 
 Array = NDArray[np.float64]
@@ -57,6 +58,8 @@ class AccelerationTask(Protocol):
     def reference_acceleration(self, robot: RobotModel) -> Array: ...
 
     def weights(self) -> Array: ...
+
+    def jdot_nu(self, probe: MotionProbe) -> Array: ...
 
 
 @dataclass(frozen=True)
@@ -107,6 +110,10 @@ class DisturbanceRejectingTask:
 
     def weights(self) -> Array:
         return self.task.weights()
+
+    def jdot_nu(self, probe: MotionProbe) -> Array:
+        """The wrapped task's exact ``Jdot nu`` (``controllers.motion_probe``)."""
+        return self.task.jdot_nu(probe)
 
     def reference_acceleration(self, robot: RobotModel) -> Array:
         cached = robot.cache.get(self._key)

@@ -41,7 +41,9 @@ def record(case: str, steps: int, every: int) -> dict[str, np.ndarray]:
     env_id, goal, mode = CASES[case]
     env = gym.make(env_id, goal=goal)
     obs, info = env.reset(seed=SEED)
-    policy = HierarchicalController.for_env(env, HierarchicalConfig(tray_mode=mode))
+    policy = HierarchicalController.for_env(
+        env, HierarchicalConfig(tray_mode=mode, hand_observer_bandwidth=None)
+    )
     policy.reset(obs, info)
     samples: dict[str, list[np.ndarray]] = {
         k: []
