@@ -13,8 +13,7 @@ solver (crocoddyl's ``SolverDDP``, C++) and the per-node Python model it calls b
 
 Solver settings: crocoddyl's ``SolverDDP`` with its own globalisation (regularisation of
 ``Q_uu`` and ``V_xx``, line search over ``2^0 ... 2^-9``), started at our ``mu_init``. Its
-stopping test is ``sum_k ||Q_u||^2 < th_stop``; for the optimum checks it is set tight (see
-:data:`CONVERGED_TH_STOP`) and the iteration cap high.
+stopping test is ``sum_k ||Q_u||^2 < th_stop`` (the caller's; crocoddyl's default is 1e-9).
 """
 
 from __future__ import annotations
@@ -35,7 +34,6 @@ from controllers.wipm import WIPMParams
 from controllers.wipm_problem import WIPMProblem
 
 __all__ = [
-    "CONVERGED_TH_STOP",
     "CrocoddylResult",
     "CrocoddylWIPM",
     "WIPMActionModel",
@@ -43,7 +41,6 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
-CONVERGED_TH_STOP = 1e-14  # sum_k ||Q_u||^2 at a converged solve (crocoddyl's default: 1e-9)
 
 
 @dataclass(frozen=True)
@@ -59,7 +56,6 @@ class _Kernels:
     step_diff: Callable[..., Any]
     terminal: Callable[..., Any]
     terminal_diff: Callable[..., Any]
-    unravel: Callable[..., Any]
 
 
 @functools.lru_cache(maxsize=16)
@@ -105,7 +101,6 @@ def _kernels(problem: WIPMProblem, shapes: tuple[tuple[int, ...], ...]) -> _Kern
         step_diff=jax.jit(step_diff),
         terminal=jax.jit(terminal_cost),
         terminal_diff=jax.jit(terminal_diff),
-        unravel=unravel,
     )
 
 
@@ -115,7 +110,8 @@ def _flat_params(params: WIPMParams) -> FloatArray:
 
 class WIPMActionModel(crocoddyl.ActionModelAbstract):
     """One running node: ``x_next = dynamics(x, u)``, ``cost = running(x, u, (s_ref, params))``
-    (``controllers.wipm_problem``), with ``p = [s_ref, params]`` set by :meth:`set_reference`."""
+    (``controllers.wipm_problem``), with ``p = [s_ref, params]`` (set by :class:`CrocoddylWIPM`
+    before each solve)."""
 
     def __init__(self, kernels: _Kernels, p: FloatArray) -> None:
         crocoddyl.ActionModelAbstract.__init__(self, crocoddyl.StateVector(kernels.nx), kernels.nu)
@@ -124,9 +120,6 @@ class WIPMActionModel(crocoddyl.ActionModelAbstract):
         nx, nu = kernels.nx, kernels.nu
         sizes = (nx * nx, nx * nu, nx, nu, nx * nx, nx * nu, nu * nu)
         self._splits = np.cumsum(sizes)[:-1]
-
-    def set_reference(self, s_ref: FloatArray) -> None:
-        self.p[: len(s_ref)] = s_ref
 
     def calc(self, data: Any, x: FloatArray, u: FloatArray | None = None) -> None:
         if u is None:  # crocoddyl's convention for a node without control: no motion, no cost
@@ -160,9 +153,6 @@ class WIPMTerminalModel(crocoddyl.ActionModelAbstract):
         crocoddyl.ActionModelAbstract.__init__(self, crocoddyl.StateVector(kernels.nx), 0)
         self.kernels = kernels
         self.p = np.array(p, dtype=np.float64)
-
-    def set_reference(self, s_ref: FloatArray) -> None:
-        self.p[: len(s_ref)] = s_ref
 
     def calc(self, data: Any, x: FloatArray, u: FloatArray | None = None) -> None:
         data.xnext = x

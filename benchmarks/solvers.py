@@ -141,7 +141,10 @@ def summarise(ddp: dict[str, Any], qp: dict[str, Any]) -> dict[str, Any]:
         },
         "qp": {
             env: {
-                name: {k: entry[k] for k in ("max_error", "agree", "failures", "first_failure")}
+                name: {
+                    k: entry[k]
+                    for k in ("max_error", "agree", "failures", "first_failure", "stalled")
+                }
                 for name, entry in qp[env]["solvers"].items()
             }
             for env in ENVS
@@ -218,8 +221,9 @@ def format_table(results: dict[str, Any]) -> str:
         )
     lines += [
         "",
-        "| env | solver | median (us) | p99 (us) | max error | agrees (1e-6) | failures |",
-        "|" + "---|" * 7,
+        "| env | solver | median (us) | p99 (us) | max error | agrees (1e-6) | failures | "
+        "stalled |",
+        "|" + "---|" * 8,
     ]
     for env in ENVS:
         entry = results["qp"][env]
@@ -227,7 +231,7 @@ def format_table(results: dict[str, Any]) -> str:
             lines.append(
                 f"| {env} | {name} | {_f(r['solve_us']['median'], '.1f')} | "
                 f"{_f(r['solve_us']['p99'], '.1f')} | {_f(r['max_error'], '.1e')} | "
-                f"{'yes' if r['agree'] else 'NO'} | {r['failures']} |"
+                f"{'yes' if r['agree'] else 'NO'} | {r['failures']} | {r['stalled']} |"
             )
     lines.append("")
     for env in ENVS:
@@ -238,6 +242,10 @@ def format_table(results: dict[str, Any]) -> str:
             f"constraints, {entry['qps_with_active_constraints']} with active constraints), "
             f"{entry['passes']} passes"
         )
+    lines.append(
+        "stalled: solves that ended at the solver's precision limit (SLSQP exit mode 8), "
+        "their solutions checked like any other; the reference: quadprog's, KKT-checked"
+    )
     lines.append("")
     lines.append(
         f"Ratios ({RATIO_DEFINITION}): "

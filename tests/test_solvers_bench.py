@@ -13,7 +13,13 @@ import pytest
 
 from benchmarks.cli import main
 from benchmarks.crocoddyl_wipm import CrocoddylWIPM
-from benchmarks.ddp_bench import GOALS, goal_state, initial_state, krang_params
+from benchmarks.ddp_bench import (
+    CROCODDYL_TH_STOP_CONVERGED,
+    GOALS,
+    goal_state,
+    initial_state,
+    krang_params,
+)
 from benchmarks.numpy_ilqr import NumpyILQR
 from benchmarks.qp_peers import all_solvers, reference_solution, solution_error
 from benchmarks.qp_recording import RecordedQP
@@ -118,7 +124,7 @@ def test_crocoddyl_mpc_step_matches_numpy_ilqr_cost() -> None:
         x0, U0, params, refs_for(states, params)
     )
     peer = CrocoddylWIPM(wipm, params, horizon, ddp.mu_init).solve(
-        x0, U0, params, states, 500, 1e-9
+        x0, U0, params, states, 500, CROCODDYL_TH_STOP_CONVERGED
     )
     assert numpy_result.converged and peer.converged
     assert abs(peer.cost - numpy_result.cost) <= 1e-6 * abs(numpy_result.cost)
