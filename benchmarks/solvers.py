@@ -92,6 +92,42 @@ def _ratio(peer: float | None, ours: float | None) -> float | None:
     return peer / ours
 
 
+def _target(figure: float | None, limit: float, below: bool = True) -> dict[str, Any]:
+    met = None if figure is None else (figure <= limit if below else figure >= limit)
+    return {"figure": figure, "limit": limit, "met": met}
+
+
+def targets(summary: dict[str, Any]) -> dict[str, Any]:
+    """Issue 6's solver targets (item 4; benchmarks, not tests) against this run's medians: the
+    offline plan under 10 ms and 1.5 ms per iteration, the MPC step under 0.3 ms, crocoddyl
+    at least 10x slower per solve, the Krang task QP under 40 us and within 2x of the fastest
+    peer that agrees."""
+    plan, iters, mpc = summary["ddp_plan_ms"], summary["ddp_iter_ms"], summary["mpc_step_ms"]
+    ratios = summary["ratios"]
+    out: dict[str, Any] = {}
+    for p in PROBLEMS:
+        out[f"plan_under_10ms_{p}"] = _target(plan[p]["ours"]["median"], 10.0)
+        out[f"iteration_under_1.5ms_{p}"] = _target(iters[p]["ours"]["median"], 1.5)
+        out[f"mpc_step_under_0.3ms_{p}"] = _target(mpc[p]["ours"]["median"], 0.3)
+        for kind in ("plan", "mpc"):
+            key = f"crocoddyl_{kind}_{p}"
+            out[f"{key}_at_least_10x"] = _target(ratios[key], 10.0, below=False)
+    krang = summary["qp_solve_us"]["krang"]
+    agreeing = summary["optimum_checks"]["qp"]["krang"]
+    peers = [
+        entry["median"]
+        for name, entry in krang.items()
+        if name != QP_OURS and agreeing[name]["agree"] and entry["median"] is not None
+    ]
+    ours = krang[QP_OURS]["median"]
+    out["qp_krang_under_40us"] = _target(ours, 40.0)
+    fastest = min(peers) if peers else None
+    out["qp_krang_within_2x_fastest_peer"] = _target(
+        None if ours is None or fastest is None else ours / fastest, 2.0
+    )
+    return out
+
+
 def summarise(ddp: dict[str, Any], qp: dict[str, Any]) -> dict[str, Any]:
     """The top-level schema (module docstring) from the two halves' details."""
     out: dict[str, Any] = {}
@@ -150,6 +186,7 @@ def summarise(ddp: dict[str, Any], qp: dict[str, Any]) -> dict[str, Any]:
             for env in ENVS
         },
     }
+    out["targets"] = targets(out)
     return out
 
 
@@ -245,6 +282,15 @@ def format_table(results: dict[str, Any]) -> str:
     lines.append(
         "stalled: solves that ended at the solver's precision limit (SLSQP exit mode 8), "
         "their solutions checked like any other; the reference: quadprog's, KKT-checked"
+    )
+    lines.append("")
+    lines.append(
+        "Targets (issue 6 item 4): "
+        + "; ".join(
+            f"{key} {_f(t['figure'], '.3g')}: "
+            + {True: "met", False: "NOT met", None: "n/a"}[t["met"]]
+            for key, t in results["targets"].items()
+        )
     )
     lines.append("")
     lines.append(

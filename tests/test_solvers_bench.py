@@ -69,6 +69,8 @@ def test_quick_run_schema_and_agreement(tmp_path: Path, capsys: pytest.CaptureFi
     for key in REQUIRED_RATIOS:
         value = results["ratios"][key]
         assert isinstance(value, float) and math.isfinite(value) and value > 0, key
+    for key in ("qp_krang_under_40us", "qp_krang_within_2x_fastest_peer", "plan_under_10ms_3d"):
+        assert set(results["targets"][key]) == {"figure", "limit", "met"}, key
     # the optimum checks: every DDP solver converged to the same cost
     for p in PROBLEMS:
         for what in ("plan", "mpc_step"):
