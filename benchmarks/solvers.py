@@ -18,7 +18,8 @@ JSON (``--json PATH``), beyond the details of each half (``ddp``, ``qp``):
 * ``ratios``: a peer's median time over ours (above 1: ours is faster): ``crocoddyl_plan_*``,
   ``crocoddyl_mpc_*``, ``numpy_plan_*``, ``numpy_mpc_*`` for ``planar``/``3d`` and
   ``qp_SOLVER_krang``, ``qp_SOLVER_planar`` for each QP peer;
-* ``optimum_checks``: the DDP cost agreement (plan and MPC step) and each QP solver's agreement.
+* ``optimum_checks``: the DDP cost agreement (plan and MPC step) and each QP solver's agreement;
+* ``targets``: issue 6's solver targets, each ``{figure, limit, met}`` (:func:`targets`).
 
     wip-bench solvers [--quick] [--json PATH] [--mpc-steps K]
 
