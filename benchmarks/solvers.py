@@ -1,383 +1,303 @@
-"""``wip-bench solvers``: solver timings of the JAX DDP against a plain NumPy iLQR (issue 4).
+"""``wip-bench solvers``: our solvers against the peers a user would pick instead, on the same
+problems, in one process, on this machine (issue 6 item 1).
 
-Measured in one run, in one process, on this machine, for two problems:
+* DDP on the WIPM (:mod:`benchmarks.ddp_bench`): ours vs crocoddyl (the WIPM as a Python action
+  model) vs a NumPy iLQR, the N = 2000 offline plan and the N = 100 warm-started MPC step, on
+  the planar and the 3-D model; the optimum checked first on converged solves.
+* The whole-body task QP (:mod:`benchmarks.qp_bench`): our ProxQP path vs OSQP, DAQP,
+  quadprog and SLSQP on the QPs of a real ``unified`` closed loop on ``PlanarTray-v0`` and
+  ``KrangTray-v0``; every solution checked against a KKT-checked reference first.
 
-* planar: the planar 4-state WIPM with Krang's ``lambda(q)`` at its initial pose (``Krang-v0``,
-  ``reset(seed=0)``, no reset noise), from ``[theta0, 0, 0, 0]`` to ``x = 2 m``;
-* 3d: the 3-D 8-state WIPM with the same parameters, from ``[0, 0, theta0, 0, 0, 0, 0, 0]`` to
-  ``(X0, Y0) = (2, 1)``.
+JSON (``--json PATH``), beyond the details of each half (``ddp``, ``qp``):
 
-For each problem and each solver (``ours``: ``controllers.ddp`` through
-``controllers.planning`` / ``controllers.mpc``; ``numpy_ilqr``: :mod:`benchmarks.numpy_ilqr`):
+* ``ddp_plan_ms``, ``ddp_iter_ms``, ``mpc_step_ms``: ``{planar|3d: {ours|crocoddyl|numpy_ilqr:
+  {median, p99}}}`` (milliseconds);
+* ``compile_s``: ``{planar|3d: {solver: {plan, mpc}}}``, the first call minus the median, kept
+  out of every timing;
+* ``qp_solve_us``: ``{planar|krang: {proxqp|osqp|daqp|quadprog|slsqp: {median, p99}}}``;
+* ``ratios``: a peer's median time over ours (above 1: ours is faster): ``crocoddyl_plan_*``,
+  ``crocoddyl_mpc_*``, ``numpy_plan_*``, ``numpy_mpc_*`` for ``planar``/``3d`` and
+  ``qp_SOLVER_krang``, ``qp_SOLVER_planar`` for each QP peer;
+* ``optimum_checks``: the DDP cost agreement (plan and MPC step) and each QP solver's agreement;
+* ``targets``: issue 6's solver targets, each ``{figure, limit, met}`` (:func:`targets`).
 
-* ``compile_s``: first call minus a steady-state call of the offline plan solve (JAX tracing
-  and XLA compilation; for the NumPy peer, the compilation of its jitted derivative helpers);
-* ``plan_ms``: the offline plan solve (``N = 2000``, the planner's DDP settings: iLQR, up to
-  100 iterations, tolerance 1e-9), median over repetitions, with ``plan_iterations``,
-  ``plan_cost`` and ``plan_converged``;
-* ``iter_ms``: ``plan_ms / plan_iterations`` (the initial backward pass included);
-* ``mpc_step_ms``: ``median`` and ``p99`` of the MPC step (``N = 100``, warm start from the
-  previous solution shifted, the default budget of 2 iterations) over consecutive steps along
-  the plan from the plan's states. Ours is the whole ``ModelPredictiveController.step`` (the
-  references, the solve, the acceptance test and the shift); the peer does the same work.
-  ``mpc_compile_s`` is its first step minus the median.
+    wip-bench solvers [--quick] [--json PATH] [--mpc-steps K]
 
-``ratios`` are ``ours / numpy_ilqr`` (below 1: ours is faster). ``cost_rel_diff`` compares the
-two converged offline plans' costs (they should agree to 1e-6 relative).
-
-    wip-bench solvers [--quick] [--json PATH]
+``--quick`` is a smoke test for CI (a 3 s plan, few steps, a 0.05 s closed loop), not figures.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import platform
-import statistics
-import time
-from collections.abc import Callable
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import gymnasium as gym
-import jax
-import numpy as np
+if TYPE_CHECKING:
+    from benchmarks.ddp_bench import DDPBenchConfig
+    from benchmarks.qp_bench import QPBenchConfig
 
-import wip_gym  # noqa: F401  (registers the environments)
-from benchmarks.numpy_ilqr import NumpyILQR
-from controllers.ddp import DDPConfig
-from controllers.mpc import ModelPredictiveController, MPCConfig, mpc_problem
-from controllers.planning import PlanConfig, plan_to_goal, planning_problem
-from controllers.policy import make_robot
-from controllers.wipm import WIPMParams, params_from_lambda
-from controllers.wipm_problem import ddp_solver_for, refs_for
-
-ENV_ID = "wip_gym/Krang-v0"
-PLAN_TARGET_MS = 50.0
-MPC_TARGET_MS = 1.0
-COST_TOLERANCE = 1e-6
+# The peers (the ``bench`` extra) are imported when the command runs, not with the CLI, so
+# ``wip-bench compare`` works without them.
 PROBLEMS = ("planar", "3d")
-GOALS = {"planar": (2.0, 0.0), "3d": (2.0, 1.0)}
+SOLVERS = ("ours", "crocoddyl", "numpy_ilqr")
+ENVS = ("planar", "krang")
+PEER_DISTRIBUTIONS = ("crocoddyl", "proxsuite", "osqp", "daqp", "quadprog", "scipy")
+QP_OURS = "proxqp"
+
+
+def configs(quick: bool) -> tuple[DDPBenchConfig, QPBenchConfig]:
+    """The full run's sizes, or ``--quick``'s (a 3 s plan, 10 MPC steps, a 0.05 s loop)."""
+    from benchmarks.ddp_bench import DDPBenchConfig  # noqa: PLC0415
+    from benchmarks.qp_bench import QPBenchConfig  # noqa: PLC0415
+
+    if not quick:
+        return DDPBenchConfig(), QPBenchConfig()
+    return (
+        DDPBenchConfig(plan_horizon_s=3.0, plan_reps_ours=1, plan_reps_peers=1, mpc_steps=10),
+        QPBenchConfig(seconds=0.05, passes=1),
+    )
+
+
+RATIO_DEFINITION = "peer median time / ours (above 1: ours is faster)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The ``solvers`` subcommand's flags."""
     parser.add_argument(
-        "--quick", action="store_true", help="fewer repetitions (a smoke test, not figures)"
+        "--quick", action="store_true", help="a smoke test for CI (short problems, few steps)"
     )
     parser.add_argument("--json", type=Path, default=None, help="write the results as JSON")
     parser.add_argument(
-        "--mpc-steps", type=int, default=None, help="MPC steps timed (default 200, quick 20)"
+        "--mpc-steps", type=int, default=None, help="MPC steps timed (default 200, quick 10)"
     )
 
 
-def krang_params() -> tuple[WIPMParams, float]:
-    """Krang's ``lambda(q)`` at its initial pose as WIPM parameters, and its pitch ``theta0``."""
-    env = gym.make(ENV_ID, reset_noise_scale=0.0)
-    try:
-        obs, _ = env.reset(seed=0)
-        robot = make_robot(env, "nominal")
-        robot.update(obs["qpos"], obs["qvel"])
-        return params_from_lambda(robot.wipm_parameters()), float(robot.theta)
-    finally:
-        env.close()
+def _versions() -> dict[str, str]:
+    out = {"python": platform.python_version()}
+    for name in ("numpy", "jax", *PEER_DISTRIBUTIONS):
+        try:
+            out[name] = version(name)
+        except PackageNotFoundError:
+            out[name] = "not installed"
+    return out
 
 
-def _initial_state(problem: str, theta0: float) -> np.ndarray:
-    if problem == "planar":
-        return np.array([theta0, 0.0, 0.0, 0.0])
-    return np.array([0.0, 0.0, theta0, 0.0, 0.0, 0.0, 0.0, 0.0])
+def _ratio(peer: float | None, ours: float | None) -> float | None:
+    if peer is None or ours is None or ours <= 0:
+        return None
+    return peer / ours
 
 
-def _goal_state(problem: str, state: np.ndarray, goal_xy: np.ndarray) -> np.ndarray:
-    """The planner's goal state (``plan_to_goal``'s: at rest, upright; 3-D heading free, so
-    facing the goal's bearing from the start)."""
-    if problem == "planar":
-        return np.array([0.0, 0.0, goal_xy[0], 0.0])
-    delta = goal_xy - state[6:8]
-    heading = state[1] + np.angle(np.exp(1j * (np.arctan2(delta[1], delta[0]) - state[1])))
-    return np.array([0.0, heading, 0.0, 0.0, 0.0, 0.0, *goal_xy])
+def _target(figure: float | None, limit: float, below: bool = True) -> dict[str, Any]:
+    met = None if figure is None else (figure <= limit if below else figure >= limit)
+    return {"figure": figure, "limit": limit, "met": met}
 
 
-def _timed(fn: Callable[[], Any]) -> tuple[float, Any]:
-    """Wall time (s) of ``fn()`` and its result (JAX results are waited for)."""
-    start = time.perf_counter()
-    out = fn()
-    jax.block_until_ready(out)
-    return time.perf_counter() - start, out
-
-
-def _p99(values: list[float]) -> float:
-    return float(np.percentile(np.asarray(values), 99))
-
-
-def _plan_timings(solve: Callable[[], Any], repetitions: int) -> tuple[float, float, Any]:
-    """``compile_s`` (first call minus the median), median plan seconds, last result."""
-    first, result = _timed(solve)
-    times = []
-    for _ in range(repetitions):
-        seconds, result = _timed(solve)
-        times.append(seconds)
-    median = statistics.median(times)
-    return max(first - median, 0.0), median, result
-
-
-def _mpc_timings(
-    step: Callable[[int], Any], warmup: Callable[[], None], steps: int
-) -> tuple[float, list[float]]:
-    """``mpc_compile_s`` (the throwaway first step minus the median) and the step times (s)."""
-    first, _ = _timed(warmup)
-    times = [_timed(lambda i=i: step(i))[0] for i in range(steps)]
-    return max(first - statistics.median(times), 0.0), times
-
-
-class _NumpyMPC:
-    """The NumPy peer's MPC step: the same references, warm start and shift as
-    ``ModelPredictiveController.step`` (acceptance test included), its solver the peer's."""
-
-    def __init__(self, plan: Any, solver: NumpyILQR, horizon: int) -> None:
-        self.plan = plan
-        self.solver = solver
-        self.horizon = horizon
-        self._controls: np.ndarray | None = None
-
-    def step(self, index: int, state: np.ndarray, params: WIPMParams) -> np.ndarray:
-        refs = refs_for(self.plan.window(index, self.horizon + 1), params)
-        warm = (
-            self._controls
-            if self._controls is not None
-            else self.plan.control_window(index, self.horizon)
-        )
-        result = self.solver(state, warm, params, refs)
-        U = result.U
-        accepted = bool(
-            np.all(np.isfinite(U))
-            and np.isfinite(result.cost)
-            and result.cost <= result.initial_cost * (1 + 1e-12) + 1e-12
-        )
-        if not accepted:
-            U = warm
-        self._controls = np.vstack([U[1:], self.plan.control_window(index + self.horizon, 1)])
-        return U[0].copy()
-
-
-def bench_problem(
-    problem: str,
-    params: WIPMParams,
-    theta0: float,
-    *,
-    plan_reps: int,
-    numpy_reps: int,
-    mpc_steps: int,
-    plan_horizon_s: float = 20.0,
-) -> dict[str, Any]:
-    """Both solvers on one problem (see the module docstring for the keys)."""
-    planar = problem == "planar"
-    config = PlanConfig(horizon_s=plan_horizon_s)
-    state = _initial_state(problem, theta0)
-    goal_xy = np.asarray(GOALS[problem])
-    a_max = config.acceleration_bound(None, float(params.gravity))
-    wipm = planning_problem(planar, config, a_max, heading_given=False)
-
-    steps = config.steps
-    m = wipm.n_control
-    goal = _goal_state(problem, state, goal_xy)
-    z0 = np.concatenate([state, np.zeros(m)])
-    U0 = np.zeros((steps, m))
-    refs = refs_for(np.tile(goal, (steps + 1, 1)), params)
-
-    # ours: the planner's own (cached) solver, first used here, so the first call compiles
-    ours = ddp_solver_for(wipm, config.ddp)
-    compile_s, plan_s, result = _plan_timings(lambda: ours(z0, U0, params, refs), plan_reps)
-    ours_iters = int(result.iterations)
-    ours_out: dict[str, Any] = {
-        "compile_s": compile_s,
-        "plan_ms": 1e3 * plan_s,
-        "plan_iterations": ours_iters,
-        "iter_ms": 1e3 * plan_s / max(ours_iters, 1),
-        "plan_cost": float(result.cost),
-        "plan_converged": bool(result.converged),
-    }
-
-    running, terminal = wipm.costs()
-    peer = NumpyILQR(wipm.dynamics(), running, terminal, config.ddp)
-    compile_np, plan_np, result_np = _plan_timings(lambda: peer(z0, U0, params, refs), numpy_reps)
-    numpy_out: dict[str, Any] = {
-        "compile_s": compile_np,
-        "plan_ms": 1e3 * plan_np,
-        "plan_iterations": result_np.iterations,
-        "iter_ms": 1e3 * plan_np / max(result_np.iterations, 1),
-        "plan_cost": result_np.cost,
-        "plan_converged": result_np.converged,
-    }
-
-    # the plan itself (the same cached solver: no compilation), to run the MPC along
-    plan = plan_to_goal(state, params, goal_xy, planar=planar, config=config)
-    if not np.allclose(plan.goal_state, goal) or abs(
-        plan.cost - ours_out["plan_cost"]
-    ) > 1e-9 * abs(plan.cost):
-        raise RuntimeError("the benchmark's plan problem differs from plan_to_goal's")
-
-    # MPC along the plan, from the plan's states, warm-started step to step
-    mpc_config = MPCConfig()
-    horizon = mpc_config.steps
-    warm_index = steps // 2  # the throwaway compile step, away from the timed window
-
-    def fresh() -> ModelPredictiveController:
-        return ModelPredictiveController(plan, mpc_config)
-
-    throwaway = fresh()
-    timed = fresh()
-    mpc_compile, mpc_times = _mpc_timings(
-        lambda i: timed.step(i, plan.states[i], params).control,
-        lambda: throwaway.step(warm_index, plan.states[warm_index], params).control,
-        mpc_steps,
+def targets(summary: dict[str, Any]) -> dict[str, Any]:
+    """Issue 6's solver targets (item 4; benchmarks, not tests) against this run's medians: the
+    offline plan under 10 ms and 1.5 ms per iteration, the MPC step under 0.3 ms, crocoddyl
+    at least 10x slower per solve, the Krang task QP under 40 us and within 2x of the fastest
+    peer that agrees."""
+    plan, iters, mpc = summary["ddp_plan_ms"], summary["ddp_iter_ms"], summary["mpc_step_ms"]
+    ratios = summary["ratios"]
+    out: dict[str, Any] = {}
+    for p in PROBLEMS:
+        out[f"plan_under_10ms_{p}"] = _target(plan[p]["ours"]["median"], 10.0)
+        out[f"iteration_under_1.5ms_{p}"] = _target(iters[p]["ours"]["median"], 1.5)
+        out[f"mpc_step_under_0.3ms_{p}"] = _target(mpc[p]["ours"]["median"], 0.3)
+        for kind in ("plan", "mpc"):
+            key = f"crocoddyl_{kind}_{p}"
+            out[f"{key}_at_least_10x"] = _target(ratios[key], 10.0, below=False)
+    krang = summary["qp_solve_us"]["krang"]
+    agreeing = summary["optimum_checks"]["qp"]["krang"]
+    peers = [
+        entry["median"]
+        for name, entry in krang.items()
+        if name != QP_OURS and agreeing[name]["agree"] and entry["median"] is not None
+    ]
+    ours = krang[QP_OURS]["median"]
+    out["qp_krang_under_40us"] = _target(ours, 40.0)
+    fastest = min(peers) if peers else None
+    out["qp_krang_within_2x_fastest_peer"] = _target(
+        None if ours is None or fastest is None else ours / fastest, 2.0
     )
-    ours_out["mpc_compile_s"] = mpc_compile
-    ours_out["mpc_step_ms"] = {
-        "median": 1e3 * statistics.median(mpc_times),
-        "p99": 1e3 * _p99(mpc_times),
-        "steps": mpc_steps,
+    return out
+
+
+def summarise(ddp: dict[str, Any], qp: dict[str, Any]) -> dict[str, Any]:
+    """The top-level schema (module docstring) from the two halves' details."""
+    out: dict[str, Any] = {}
+    for key, field in (("ddp_plan_ms", "plan_ms"), ("ddp_iter_ms", "iter_ms"),
+                       ("mpc_step_ms", "mpc_step_ms")):  # fmt: skip
+        out[key] = {
+            p: {s: {q: ddp[p]["solvers"][s][field][q] for q in ("median", "p99")} for s in SOLVERS}
+            for p in PROBLEMS
+        }
+    out["compile_s"] = {
+        p: {
+            s: {
+                "plan": ddp[p]["solvers"][s]["compile_s"],
+                "mpc": ddp[p]["solvers"][s]["mpc_compile_s"],
+            }
+            for s in SOLVERS
+        }
+        for p in PROBLEMS
     }
-
-    mpc_wipm = mpc_problem(planar, mpc_config, plan.a_max, plan.theta_max)
-    mpc_running, mpc_terminal = mpc_wipm.costs()
-    mpc_ddp = DDPConfig(**{**mpc_config.ddp.__dict__, "max_iterations": mpc_config.iterations})
-    mpc_peer = NumpyILQR(mpc_wipm.dynamics(), mpc_running, mpc_terminal, mpc_ddp)
-    throwaway_np = _NumpyMPC(plan, mpc_peer, horizon)
-    timed_np = _NumpyMPC(plan, mpc_peer, horizon)
-    mpc_compile_np, mpc_times_np = _mpc_timings(
-        lambda i: timed_np.step(i, plan.states[i], params),
-        lambda: throwaway_np.step(warm_index, plan.states[warm_index], params),
-        mpc_steps,
-    )
-    numpy_out["mpc_compile_s"] = mpc_compile_np
-    numpy_out["mpc_step_ms"] = {
-        "median": 1e3 * statistics.median(mpc_times_np),
-        "p99": 1e3 * _p99(mpc_times_np),
-        "steps": mpc_steps,
+    out["qp_solve_us"] = {
+        env: {name: dict(entry["solve_us"]) for name, entry in qp[env]["solvers"].items()}
+        for env in ENVS
     }
-
-    rel = abs(ours_out["plan_cost"] - numpy_out["plan_cost"]) / max(
-        abs(ours_out["plan_cost"]), 1e-300
-    )
-    return {
-        "ours": ours_out,
-        "numpy_ilqr": numpy_out,
-        "plan_steps": steps,
-        "mpc_horizon": horizon,
-        "mpc_iterations": mpc_config.iterations,
-        "cost_rel_diff": rel,
-        "costs_agree": bool(rel <= COST_TOLERANCE),
+    ratios: dict[str, float | None] = {}
+    for p in PROBLEMS:
+        for peer, label in (("crocoddyl", "crocoddyl"), ("numpy_ilqr", "numpy")):
+            ratios[f"{label}_plan_{p}"] = _ratio(
+                out["ddp_plan_ms"][p][peer]["median"], out["ddp_plan_ms"][p]["ours"]["median"]
+            )
+            ratios[f"{label}_mpc_{p}"] = _ratio(
+                out["mpc_step_ms"][p][peer]["median"], out["mpc_step_ms"][p]["ours"]["median"]
+            )
+    for env in ENVS:
+        times = out["qp_solve_us"][env]
+        for name in times:
+            if name != QP_OURS:
+                ratios[f"qp_{name}_{env}"] = _ratio(times[name]["median"], times[QP_OURS]["median"])
+    out["ratios"] = ratios
+    out["ratio_definition"] = RATIO_DEFINITION
+    out["optimum_checks"] = {
+        "ddp": {
+            p: {
+                what: {k: check[k] for k in ("max_rel_diff", "tolerance", "agree", "costs")}
+                for what, check in ddp[p]["optimum_check"].items()
+            }
+            for p in PROBLEMS
+        },
+        "qp": {
+            env: {
+                name: {
+                    k: entry[k]
+                    for k in ("max_error", "agree", "failures", "first_failure", "stalled")
+                }
+                for name, entry in qp[env]["solvers"].items()
+            }
+            for env in ENVS
+        },
     }
-
-
-def _ratio(ours: float, peer: float) -> float | None:
-    return ours / peer if peer > 0 else None
-
-
-def _ratios(entry: dict[str, Any]) -> dict[str, float | None]:
-    ours, peer = entry["ours"], entry["numpy_ilqr"]
-    return {
-        "compile": _ratio(ours["compile_s"], peer["compile_s"]),
-        "plan": _ratio(ours["plan_ms"], peer["plan_ms"]),
-        "iter": _ratio(ours["iter_ms"], peer["iter_ms"]),
-        "mpc_step_median": _ratio(ours["mpc_step_ms"]["median"], peer["mpc_step_ms"]["median"]),
-        "mpc_step_p99": _ratio(ours["mpc_step_ms"]["p99"], peer["mpc_step_ms"]["p99"]),
-    }
-
-
-def _fmt(value: float | None, spec: str) -> str:
-    return "n/a" if value is None else format(value, spec)
+    out["targets"] = targets(out)
+    return out
 
 
 def run_benchmark(quick: bool = False, mpc_steps: int | None = None) -> dict[str, Any]:
     """All measurements as one JSON-ready dictionary."""
-    if mpc_steps is None:
-        mpc_steps = 20 if quick else 200
-    if mpc_steps < 1:
-        raise ValueError(f"--mpc-steps must be >= 1, got {mpc_steps}")
-    plan_reps, numpy_reps = (2, 1) if quick else (10, 3)
-    plan_horizon_s = 10.0 if quick else 20.0  # quick: N = 1000
-    params, theta0 = krang_params()
-    out: dict[str, Any] = {
+    try:
+        from benchmarks import ddp_bench, qp_bench  # noqa: PLC0415
+    except ImportError as error:
+        raise ValueError(
+            f"wip-bench solvers needs the peers: pip install -c constraints.txt -e '.[bench]' "
+            f"({error})"
+        ) from error
+    ddp_config, qp_config = configs(quick)
+    if mpc_steps is not None:
+        if mpc_steps < 1:
+            raise ValueError(f"--mpc-steps must be >= 1, got {mpc_steps}")
+        ddp_config = dataclasses.replace(ddp_config, mpc_steps=mpc_steps)
+    machine = {
+        "platform": platform.platform(),
+        "processor": platform.processor() or platform.machine(),
+        "cpus": os.cpu_count(),
+        "load_average_1min_at_start": os.getloadavg()[0],
+    }
+    ddp = ddp_bench.run(ddp_config)
+    qp = qp_bench.run(qp_config)
+    machine["load_average_1min_at_end"] = os.getloadavg()[0]
+    return {
         "command": "wip-bench solvers" + (" --quick" if quick else ""),
         "quick": quick,
-        "machine": {
-            "platform": platform.platform(),
-            "processor": platform.processor() or platform.machine(),
-            "cpus": os.cpu_count(),
-            "python": platform.python_version(),
-            "jax": jax.__version__,
-            "numpy": np.__version__,
-            "load_average_1min_at_start": os.getloadavg()[0],
-        },
-        "theta0": theta0,
-        "plan_horizon_s": plan_horizon_s,
-        "repetitions": {"plan_ours": plan_reps, "plan_numpy": numpy_reps, "mpc": mpc_steps},
+        "machine": machine,
+        "versions": _versions(),
+        **summarise(ddp, qp),
+        "ddp": ddp,
+        "qp": qp,
     }
-    for problem in PROBLEMS:
-        out[problem] = bench_problem(
-            problem,
-            params,
-            theta0,
-            plan_reps=plan_reps,
-            numpy_reps=numpy_reps,
-            mpc_steps=mpc_steps,
-            plan_horizon_s=plan_horizon_s,
-        )
-    out["ratios"] = {"definition": "ours / numpy_ilqr"} | {p: _ratios(out[p]) for p in PROBLEMS}
-    out["targets"] = {
-        "plan_under_50ms": {p: out[p]["ours"]["plan_ms"] < PLAN_TARGET_MS for p in PROBLEMS},
-        "mpc_median_under_1ms": {
-            p: out[p]["ours"]["mpc_step_ms"]["median"] < MPC_TARGET_MS for p in PROBLEMS
-        },
-    }
-    return out
+
+
+def _f(value: float | None, spec: str) -> str:
+    return "n/a" if value is None else format(value, spec)
 
 
 def format_table(results: dict[str, Any]) -> str:
-    """A plain-text table of the results (Markdown-compatible)."""
-    header = (
-        "| problem | solver | compile (s) | plan (ms) | iters | per iter (ms) | "
-        "MPC median (ms) | MPC p99 (ms) |"
-    )
-    lines = [f"$ {results['command']}", "", header, "|" + "---|" * 8]
-    for problem in PROBLEMS:
-        entry = results[problem]
-        for name in ("ours", "numpy_ilqr"):
-            r = entry[name]
+    """Plain-text tables of the results (Markdown-compatible)."""
+    ddp, ratios = results["ddp"], results["ratios"]
+    lines = [
+        f"$ {results['command']}",
+        "",
+        "| problem | solver | plan (ms) | iters | per iter (ms) | MPC median (ms) | "
+        "MPC p99 (ms) | compile plan/MPC (s) | plan cost |",
+        "|" + "---|" * 9,
+    ]
+    for p in PROBLEMS:
+        for s in SOLVERS:
+            r = ddp[p]["solvers"][s]
             lines.append(
-                f"| {problem} | {name} | {r['compile_s']:.2f} | {r['plan_ms']:.1f} | "
-                f"{r['plan_iterations']} | {r['iter_ms']:.2f} | "
-                f"{r['mpc_step_ms']['median']:.3f} | {r['mpc_step_ms']['p99']:.3f} |"
+                f"| {p} | {s} | {r['plan_ms']['median']:.1f} | {r['plan_iterations']} | "
+                f"{r['iter_ms']['median']:.2f} | {r['mpc_step_ms']['median']:.3f} | "
+                f"{r['mpc_step_ms']['p99']:.3f} | {r['compile_s']:.1f}/{r['mpc_compile_s']:.1f} "
+                f"| {r['plan_cost']:.10g} |"
             )
-        q = results["ratios"][problem]
-        lines.append(
-            f"| {problem} | ratio ours/numpy | {_fmt(q['compile'], '.2f')} | "
-            f"{_fmt(q['plan'], '.3f')} | | {_fmt(q['iter'], '.3f')} | "
-            f"{_fmt(q['mpc_step_median'], '.3f')} | {_fmt(q['mpc_step_p99'], '.3f')} |"
-        )
     lines.append("")
-    for problem in PROBLEMS:
-        entry = results[problem]
+    for p in PROBLEMS:
+        checks = ddp[p]["optimum_check"]
         lines.append(
-            f"{problem}: plan cost ours {entry['ours']['plan_cost']:.10g}, numpy "
-            f"{entry['numpy_ilqr']['plan_cost']:.10g} (relative difference "
-            f"{entry['cost_rel_diff']:.1e}: {'agree' if entry['costs_agree'] else 'DISAGREE'} "
-            f"to {COST_TOLERANCE:g}); N = {entry['plan_steps']}, MPC N = {entry['mpc_horizon']}, "
-            f"{entry['mpc_iterations']} iterations, {entry['ours']['mpc_step_ms']['steps']} steps"
+            f"{p}: N = {ddp[p]['plan_steps']}, MPC N = {ddp[p]['mpc_horizon']} at "
+            f"{ddp[p]['mpc_iterations']} iterations; converged costs agree (max relative "
+            f"difference: plan {checks['plan']['max_rel_diff']:.1e}, MPC step "
+            f"{checks['mpc_step']['max_rel_diff']:.1e}; tolerance {checks['plan']['tolerance']:g})"
         )
-    met = []
-    labels = {
-        "plan_under_50ms": "offline plan < 50 ms",
-        "mpc_median_under_1ms": "MPC step median < 1 ms",
-    }
-    for key, label in labels.items():
-        for problem, ok in results["targets"][key].items():
-            met.append(f"{label} ({problem}): {'met' if ok else 'NOT met'}")
-    lines.append("Targets: " + "; ".join(met))
+    lines += [
+        "",
+        "| env | solver | median (us) | p99 (us) | max error | agrees (1e-6) | failures | "
+        "stalled |",
+        "|" + "---|" * 8,
+    ]
+    for env in ENVS:
+        entry = results["qp"][env]
+        for name, r in entry["solvers"].items():
+            lines.append(
+                f"| {env} | {name} | {_f(r['solve_us']['median'], '.1f')} | "
+                f"{_f(r['solve_us']['p99'], '.1f')} | {_f(r['max_error'], '.1e')} | "
+                f"{'yes' if r['agree'] else 'NO'} | {r['failures']} | {r['stalled']} |"
+            )
+    lines.append("")
+    for env in ENVS:
+        entry = results["qp"][env]
+        lines.append(
+            f"{env}: {entry['qps']} QPs from {entry['seconds']} s of `unified` on "
+            f"{entry['env']} ({entry['variables']} variables, {entry['constraints']} "
+            f"constraints, {entry['qps_with_active_constraints']} with active constraints), "
+            f"{entry['passes']} passes"
+        )
+    lines.append(
+        "stalled: solves that ended at the solver's precision limit (SLSQP exit mode 8), "
+        "their solutions checked like any other; the reference: quadprog's, KKT-checked"
+    )
+    lines.append("")
+    lines.append(
+        "Targets (issue 6 item 4): "
+        + "; ".join(
+            f"{key} {_f(t['figure'], '.3g')}: "
+            + {True: "met", False: "NOT met", None: "n/a"}[t["met"]]
+            for key, t in results["targets"].items()
+        )
+    )
+    lines.append("")
+    lines.append(
+        f"Ratios ({RATIO_DEFINITION}): "
+        + ", ".join(f"{key} {_f(value, '.2f')}" for key, value in ratios.items())
+    )
     return "\n".join(lines)
 
 
