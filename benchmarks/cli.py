@@ -22,7 +22,7 @@ def build_parser() -> argparse.ArgumentParser:
     figures_parser = commands.add_parser("figures", help="the paper's Figure 3 as PNGs")
     figures.add_arguments(figures_parser)
     solvers_parser = commands.add_parser(
-        "solvers", help="DDP solver timings against a plain NumPy iLQR"
+        "solvers", help="DDP and task-QP solvers, ours against crocoddyl, NumPy iLQR and QP peers"
     )
     solvers.add_arguments(solvers_parser)
     profile_parser = commands.add_parser(
