@@ -112,13 +112,13 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.scipy.linalg import cho_solve
 
-jax.config.update("jax_enable_x64", True)
+from controllers import jax_setup  # noqa: F401  (float64, XLA's loop option, compile cache)
 
 __all__ = [
     "DDPConfig",
     "DDPResult",
+    "RunningDerivatives",
     "DDPSolver",
     "ddp_solve",
     "make_ddp_solver",
@@ -131,6 +131,8 @@ PyTree = Any
 Dynamics = Callable[[Array, Array, PyTree], Array]
 RunningCost = Callable[[Array, Array, PyTree], Array]
 TerminalCost = Callable[[Array, PyTree], Array]
+# (x, u, ref) -> (l_x, l_u, l_xx, l_ux, l_uu) of the running cost at one step
+RunningDerivatives = Callable[[Array, Array, PyTree], tuple[Array, Array, Array, Array, Array]]
 
 
 def _default_alphas() -> tuple[float, ...]:
@@ -252,6 +254,67 @@ def trajectory_cost(
     return jnp.sum(stage) + terminal(X[-1], _last(refs))
 
 
+# Small matrix products as broadcast products and sums: XLA:CPU keeps a ``dot`` as a library
+# call, which also keeps a loop containing it out of the one-kernel compilation (jax_setup); the
+# element-wise form fuses. The sums run over the same index in the same order as a dot would
+# up to the rounding of the summation order.
+def _mv(a: Array, v: Array) -> Array:
+    """``a @ v`` for a matrix ``a`` and a vector ``v``."""
+    return jnp.sum(a * v[None, :], axis=1)
+
+
+def _tmv(a: Array, v: Array) -> Array:
+    """``a.T @ v``."""
+    return jnp.sum(a * v[:, None], axis=0)
+
+
+def _mm(a: Array, b: Array) -> Array:
+    """``a @ b`` for two matrices."""
+    return jnp.sum(a[:, :, None] * b[None, :, :], axis=1)
+
+
+def _tmm(a: Array, b: Array) -> Array:
+    """``a.T @ b``."""
+    return jnp.sum(a[:, :, None] * b[:, None, :], axis=0)
+
+
+def _contract(v: Array, t: Array) -> Array:
+    """``sum_i v_i t[i]`` (the value gradient contracted with a dynamics Hessian's output
+    index, the DDP terms of (2))."""
+    return jnp.sum(v[:, None, None] * t, axis=0)
+
+
+def _cholesky_solve(A: Array, B: Array) -> tuple[Array, Array]:
+    """``A^-1 B`` for a small symmetric ``A`` (m x m) through its Cholesky factor ``A = L L^T``,
+    written out entry by entry (``m`` is the control dimension: 1 or 2 here), and whether ``A``
+    is positive definite (every pivot positive and finite).
+
+    The same arithmetic as LAPACK's ``potrf``/``potrs`` for such sizes, but plain element-wise
+    operations: a LAPACK custom call inside the backward ``lax.scan`` keeps XLA from compiling
+    the scan into one kernel (jax_setup), which made every step ~20x slower.
+    """
+    m = A.shape[0]
+    L: list[list[Array]] = [[jnp.zeros((), A.dtype)] * m for _ in range(m)]
+    ok = jnp.array(True)
+    for j in range(m):
+        pivot = A[j, j] - sum((L[j][k] * L[j][k] for k in range(j)), jnp.zeros((), A.dtype))
+        ok = ok & (pivot > 0.0)
+        L[j][j] = jnp.sqrt(pivot)
+        for i in range(j + 1, m):
+            off = A[i, j] - sum((L[i][k] * L[j][k] for k in range(j)), jnp.zeros((), A.dtype))
+            L[i][j] = off / L[j][j]
+    y: list[Array] = []  # forward substitution L y = B, row by row
+    for i in range(m):
+        acc = B[i] - sum((L[i][k] * y[k] for k in range(i)), jnp.zeros_like(B[i]))
+        y.append(acc / L[i][i])
+    x: list[Array] = [jnp.zeros_like(B[0])] * m  # back substitution L^T x = y
+    for i in reversed(range(m)):
+        acc = y[i] - sum((L[k][i] * x[k] for k in range(i + 1, m)), jnp.zeros_like(B[i]))
+        x[i] = acc / L[i][i]
+    solution = jnp.stack(x)
+    return solution, ok & jnp.all(jnp.isfinite(solution))
+
+
 class _Derivatives(NamedTuple):
     lx: Array  # (N, n)
     lu: Array  # (N, m)
@@ -305,11 +368,13 @@ class DDPSolver:
         running: RunningCost,
         terminal: TerminalCost,
         config: DDPConfig,
+        running_derivatives: RunningDerivatives | None = None,
     ) -> None:
         self.dynamics = dynamics
         self.running = running
         self.terminal = terminal
         self.config = config
+        self.running_derivatives = running_derivatives
         self.trace_count = 0
         self.jitted: Callable[[Array, Array, PyTree, PyTree], DDPResult] = jax.jit(self._solve)
 
@@ -368,15 +433,18 @@ class DDPSolver:
 
         def stage(x: Array, u: Array, r: PyTree) -> tuple[Array, ...]:
             fx, fu = jax.jacfwd(dyn, argnums=(0, 1))(x, u, params)
-            lx, lu = jax.grad(run, argnums=(0, 1))(x, u, r)
-            (lxx, _), (lux, luu) = jax.hessian(run, argnums=(0, 1))(x, u, r)
+            if self.running_derivatives is not None:
+                lx, lu, lxx, lux, luu = self.running_derivatives(x, u, r)
+            else:
+                lx, lu = jax.grad(run, argnums=(0, 1))(x, u, r)
+                (lxx, _), (lux, luu) = jax.hessian(run, argnums=(0, 1))(x, u, r)
             out: tuple[Array, ...] = (lx, lu, lxx, lux, luu, fx, fu)
             if self.config.second_order:
                 (fxx, _), (fux, fuu) = jax.hessian(dyn, argnums=(0, 1))(x, u, params)
                 out = (*out, fxx, fux, fuu)
             return out
 
-        parts = jax.vmap(stage)(X[:-1], U, _head(refs))
+        parts = jax.lax.map(lambda a: stage(*a), (X[:-1], U, _head(refs)))
         xN, refN = X[-1], _last(refs)
         vx = jax.grad(self.terminal)(xN, refN)
         vxx = jax.hessian(self.terminal)(xN, refN)
@@ -392,33 +460,33 @@ class DDPSolver:
         def step(carry: tuple[Array, ...], z: tuple[Array, ...]) -> tuple[tuple, tuple]:
             vx, vxx, lam, dv1, dv2, ok, gmax = carry
             lx, lu, lxx, lux, luu, fx, fu = z[:7]
-            qx = lx + fx.T @ vx
-            qu = lu + fu.T @ vx
-            qxx = lxx + fx.T @ vxx @ fx
-            qux = lux + fu.T @ vxx @ fx
-            quu = luu + fu.T @ vxx @ fu
+            qx = lx + _tmv(fx, vx)
+            qu = lu + _tmv(fu, vx)
+            vxx_fx = _mm(vxx, fx)
+            qxx = lxx + _tmm(fx, vxx_fx)
+            qux = lux + _tmm(fu, vxx_fx)
+            quu = luu + _tmm(fu, _mm(vxx, fu))
             if second:
                 fxx, fux, fuu = z[7:]
-                qxx = qxx + jnp.einsum("i,ijk->jk", vx, fxx)
-                qux = qux + jnp.einsum("i,ijk->jk", vx, fux)
-                quu = quu + jnp.einsum("i,ijk->jk", vx, fuu)
+                qxx = qxx + _contract(vx, fxx)
+                qux = qux + _contract(vx, fux)
+                quu = quu + _contract(vx, fuu)
             qxx = 0.5 * (qxx + qxx.T)
             quu = 0.5 * (quu + quu.T)
-            chol = jnp.linalg.cholesky(quu + mu * eye)
-            step_ok = jnp.all(jnp.isfinite(chol))
-            sol = cho_solve((chol, True), jnp.concatenate([qu[:, None], qux], axis=1))
+            sol, step_ok = _cholesky_solve(quu + mu * eye, jnp.concatenate([qu[:, None], qux], 1))
             k, K = -sol[:, 0], -sol[:, 1:]
-            vx_new = qx + K.T @ quu @ k + K.T @ qu + qux.T @ k
-            vxx_new = qxx + K.T @ quu @ K + K.T @ qux + qux.T @ K
+            quu_k = _mv(quu, k)
+            vx_new = qx + _tmv(K, quu_k) + _tmv(K, qu) + _tmv(qux, k)
+            vxx_new = qxx + _tmm(K, _mm(quu, K)) + _tmm(K, qux) + _tmm(qux, K)
             vxx_new = 0.5 * (vxx_new + vxx_new.T)
-            grad_u = lu + fu.T @ lam
-            lam_new = lx + fx.T @ lam
+            grad_u = lu + _tmv(fu, lam)
+            lam_new = lx + _tmv(fx, lam)
             carry = (
                 vx_new,
                 vxx_new,
                 lam_new,
-                dv1 + k @ qu,
-                dv2 + 0.5 * k @ quu @ k,
+                dv1 + jnp.sum(k * qu),
+                dv2 + 0.5 * jnp.sum(k * quu_k),
                 ok & step_ok,
                 jnp.maximum(gmax, jnp.max(jnp.abs(grad_u))),
             )
@@ -507,7 +575,7 @@ class DDPSolver:
         def forward(X: Array, U: Array, bp: _Backward, alpha: Array) -> tuple[Array, Array]:
             def step(x: Array, z: tuple[Array, ...]) -> tuple[Array, tuple[Array, Array]]:
                 x_ref, u_ref, K, k = z
-                u = u_ref + alpha * k + K @ (x - x_ref)
+                u = u_ref + alpha * k + _mv(K, x - x_ref)
                 x_next = dyn(x, u, params)
                 return x_next, (x_next, u)
 
@@ -622,13 +690,18 @@ def make_ddp_solver(
     running: RunningCost,
     terminal: TerminalCost,
     config: DDPConfig | None = None,
+    running_derivatives: RunningDerivatives | None = None,
 ) -> DDPSolver:
     """Build a solver; call it as ``solver(x0, U_init, params, refs) -> DDPResult``.
+
+    ``running_derivatives(x, u, ref) -> (l_x, l_u, l_xx, l_ux, l_uu)``, if given, replaces the
+    autodiff gradient and Hessian of ``running`` (it must be exact: a cheaper closed form).
 
     One compilation per distinct input shape (horizon) and pytree structure; reuse the same
     solver object in an MPC loop so that every call after the first runs compiled code.
     """
-    return DDPSolver(dynamics, running, terminal, config if config is not None else DDPConfig())
+    config = config if config is not None else DDPConfig()
+    return DDPSolver(dynamics, running, terminal, config, running_derivatives)
 
 
 @functools.lru_cache(maxsize=32)
