@@ -164,6 +164,12 @@ class DDPConfig:
             Default ``2^0 ... 2^-10``. Authors: halve from 1 until the cost decreases, or accept
             the step anyway once alpha < 1e-4.
         line_search_c: Minimum ratio of actual to expected reduction (7). Default 1e-4.
+        final_backward: True (default): the last iteration ends with its backward pass, so the
+            returned gains belong to the returned ``(X, U)`` and (9) is tested there. False: an
+            iteration that exhausts the budget skips it (a third of the work of a 2-iteration
+            MPC solve, which uses only ``X``, ``U`` and the cost: those are unchanged); ``K``,
+            ``k`` and ``grad_norm`` are then the previous pass's and ``converged`` is False
+            unless (9) held earlier.
     """
 
     max_iterations: int = 50
@@ -177,6 +183,7 @@ class DDPConfig:
     mu_max: float = 1e10
     alphas: tuple[float, ...] = _default_alphas()
     line_search_c: float = 1e-4
+    final_backward: bool = True
 
     def __post_init__(self) -> None:
         if self.max_iterations < 0:
@@ -610,23 +617,41 @@ class DDPSolver:
             mu_history=jnp.full((length,), mu),
         )
 
-        def line_search(s: _LoopState) -> tuple[Array, Array, Array, Array, Array, Array]:
-            """(6)-(7); returns X, U, cost, mu, dmu for the next backward pass and `stuck`."""
+        def acceptable(s: _LoopState, cost: Array, alpha: Array) -> Array:
+            """Test (7) of a candidate's cost for step size ``alpha``."""
+            actual = s.cost - cost
+            expected = -(alpha * s.bp.dv1 + alpha**2 * s.bp.dv2)
+            return jnp.isfinite(cost) & (actual > 0) & (actual >= cfg.line_search_c * expected)
+
+        def search_all(s: _LoopState) -> tuple[Array, Array, Array, Array]:
+            """Every alpha in parallel; the largest acceptable one (X, U, cost, accepted)."""
             Xs, Us = jax.vmap(lambda a: forward(s.X, s.U, s.bp, a))(alphas)
             costs = jax.vmap(cost_of)(Xs, Us)
-            actual = s.cost - costs
-            expected = -(alphas * s.bp.dv1 + alphas**2 * s.bp.dv2)
-            good = jnp.isfinite(costs) & (actual > 0) & (actual >= cfg.line_search_c * expected)
-            accepted = jnp.any(good)
+            good = acceptable(s, costs, alphas)
             best = jnp.argmax(good)
+            return Xs[best], Us[best], costs[best], jnp.any(good)
+
+        def line_search(s: _LoopState) -> tuple[Array, Array, Array, Array, Array, Array]:
+            """(6)-(7); returns X, U, cost, mu, dmu for the next backward pass and `stuck`.
+
+            The largest alpha is tried alone first: it is usually accepted, and then it is the
+            answer of the parallel search too (the largest acceptable alpha), at 1/len(alphas)
+            of the cost. Otherwise all of them are tried in parallel."""
+            X1, U1 = forward(s.X, s.U, s.bp, alphas[0])
+            cost1 = cost_of(X1, U1)
+            X_new, U_new, cost_new, accepted = jax.lax.cond(
+                acceptable(s, cost1, alphas[0]),
+                lambda: (X1, U1, cost1, jnp.array(True)),
+                lambda: search_all(s),
+            )
             mu_dn, dmu_dn = self._decrease(s.mu, s.dmu)
             mu_up, dmu_up = self._increase(s.mu, s.dmu)
             # A failed line search that cannot raise mu any further ends the solve.
             stuck = ~accepted & ((mu_up > cfg.mu_max) | (mu_up <= s.mu))
             return (
-                jnp.where(accepted, Xs[best], s.X),
-                jnp.where(accepted, Us[best], s.U),
-                jnp.where(accepted, costs[best], s.cost),
+                jnp.where(accepted, X_new, s.X),
+                jnp.where(accepted, U_new, s.U),
+                jnp.where(accepted, cost_new, s.cost),
                 jnp.where(accepted, mu_dn, jnp.where(stuck, s.mu, mu_up)),
                 jnp.where(accepted, dmu_dn, jnp.where(stuck, s.dmu, dmu_up)),
                 stuck,
@@ -651,9 +676,10 @@ class DDPSolver:
             def keep() -> tuple[_Backward, Array, Array]:
                 return s.bp._replace(ok=jnp.array(False)), mu_new, dmu_new
 
-            bp_new, mu_new, dmu_new = jax.lax.cond(stuck, keep, redo)
-            conv = self._converged(bp_new, cost_new)
             it = s.iteration + s.started.astype(s.iteration.dtype)
+            last = (it >= cfg.max_iterations) & s.started & (not cfg.final_backward)
+            bp_new, mu_new, dmu_new = jax.lax.cond(stuck | last, keep, redo)
+            conv = self._converged(bp_new, cost_new)
             tail = jnp.arange(length) >= it
             return _LoopState(
                 X=X_new,

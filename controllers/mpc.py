@@ -38,7 +38,8 @@ class MPCConfig:
         r_control: weights on [thdd, tau_0] (authors 0.01, 0.01).
         q_terminal: terminal weights on positions and theta (authors 1e5) and speeds (1e4).
         q_terminal_speed: see above.
-        ddp: solver settings except the iteration budget (iLQR, no tolerance stop).
+        ddp: solver settings except the iteration budget (iLQR, no tolerance stop, no backward
+            pass after the last line search: the MPC uses the controls, not the gains).
     """
 
     horizon_s: float = 1.0
@@ -53,7 +54,9 @@ class MPCConfig:
     q_terminal: float = 1e5
     q_terminal_speed: float = 1e4
     ddp: DDPConfig = field(
-        default_factory=lambda: DDPConfig(max_iterations=2, tolerance=0.0, second_order=False)
+        default_factory=lambda: DDPConfig(
+            max_iterations=2, tolerance=0.0, second_order=False, final_backward=False
+        )
     )
 
     @property
