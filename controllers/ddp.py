@@ -17,7 +17,7 @@ Algorithm (Jacobson & Mayne 1970 DDP; regularisation and line search after Tassa
 Todorov 2012, "Synthesis and stabilization of complex behaviors through online trajectory
 optimization", section II). All derivatives come from autodiff (``jax.jacfwd`` of the
 dynamics, ``jax.grad``/``jax.hessian`` of the costs, ``jax.hessian`` of the dynamics for the
-second-order terms), vmapped over the trajectory.
+second-order terms), evaluated step by step inside the backward scan.
 
 Backward pass (a reverse ``lax.scan``), with ``V'`` the value expansion at step ``k + 1``,
 ``V_x(N) = terminal_x``, ``V_xx(N) = terminal_xx``:
@@ -322,21 +322,6 @@ def _cholesky_solve(A: Array, B: Array) -> tuple[Array, Array]:
     return solution, ok & jnp.all(jnp.isfinite(solution))
 
 
-class _Derivatives(NamedTuple):
-    lx: Array  # (N, n)
-    lu: Array  # (N, m)
-    lxx: Array  # (N, n, n)
-    lux: Array  # (N, m, n)
-    luu: Array  # (N, m, m)
-    fx: Array  # (N, n, n)
-    fu: Array  # (N, n, m)
-    fxx: Array | None  # (N, n, n, n), output index first
-    fux: Array | None  # (N, n, m, n)
-    fuu: Array | None  # (N, n, m, m)
-    vx: Array  # (n,) terminal gradient
-    vxx: Array  # (n, n) terminal Hessian
-
-
 class _Backward(NamedTuple):
     K: Array
     k: Array
@@ -435,38 +420,32 @@ class DDPSolver:
         if getattr(final, "shape", None) != ():
             raise ValueError("terminal(x, ref) must return a scalar")
 
-    def _derivatives(self, X: Array, U: Array, params: PyTree, refs: PyTree) -> _Derivatives:
+    def _stage_derivatives(self, x: Array, u: Array, r: PyTree, params: PyTree) -> tuple:
+        """``(l_x, l_u, l_xx, l_ux, l_uu, f_x, f_u[, f_xx, f_ux, f_uu])`` at one step."""
         dyn, run = self.dynamics, self.running
-
-        def stage(x: Array, u: Array, r: PyTree) -> tuple[Array, ...]:
-            fx, fu = jax.jacfwd(dyn, argnums=(0, 1))(x, u, params)
-            if self.running_derivatives is not None:
-                lx, lu, lxx, lux, luu = self.running_derivatives(x, u, r)
-            else:
-                lx, lu = jax.grad(run, argnums=(0, 1))(x, u, r)
-                (lxx, _), (lux, luu) = jax.hessian(run, argnums=(0, 1))(x, u, r)
-            out: tuple[Array, ...] = (lx, lu, lxx, lux, luu, fx, fu)
-            if self.config.second_order:
-                (fxx, _), (fux, fuu) = jax.hessian(dyn, argnums=(0, 1))(x, u, params)
-                out = (*out, fxx, fux, fuu)
-            return out
-
-        parts = jax.lax.map(lambda a: stage(*a), (X[:-1], U, _head(refs)))
-        xN, refN = X[-1], _last(refs)
-        vx = jax.grad(self.terminal)(xN, refN)
-        vxx = jax.hessian(self.terminal)(xN, refN)
+        fx, fu = jax.jacfwd(dyn, argnums=(0, 1))(x, u, params)
+        if self.running_derivatives is not None:
+            lx, lu, lxx, lux, luu = self.running_derivatives(x, u, r)
+        else:
+            lx, lu = jax.grad(run, argnums=(0, 1))(x, u, r)
+            (lxx, _), (lux, luu) = jax.hessian(run, argnums=(0, 1))(x, u, r)
+        out: tuple[Array, ...] = (lx, lu, lxx, lux, luu, fx, fu)
         if self.config.second_order:
-            return _Derivatives(*parts, vx=vx, vxx=vxx)
-        return _Derivatives(*parts, fxx=None, fux=None, fuu=None, vx=vx, vxx=vxx)
+            (fxx, _), (fux, fuu) = jax.hessian(dyn, argnums=(0, 1))(x, u, params)
+            out = (*out, fxx, fux, fuu)
+        return out
 
-    def _backward(self, d: _Derivatives, mu: Array) -> _Backward:
-        m = d.lu.shape[1]
-        eye = jnp.eye(m, dtype=d.luu.dtype)
+    def _backward(self, X: Array, U: Array, params: PyTree, refs: PyTree, mu: Array) -> _Backward:
+        """Backward pass (2)-(5) along ``(X, U)``, the derivatives of each step computed inside
+        the scan (one compiled loop, no (N, n, n) arrays of derivatives in memory)."""
+        m = U.shape[1]
+        eye = jnp.eye(m, dtype=U.dtype)
         second = self.config.second_order
 
         def step(carry: tuple[Array, ...], z: tuple[Array, ...]) -> tuple[tuple, tuple]:
             vx, vxx, lam, dv1, dv2, ok, gmax = carry
-            lx, lu, lxx, lux, luu, fx, fu = z[:7]
+            derivatives = self._stage_derivatives(*z, params)
+            lx, lu, lxx, lux, luu, fx, fu = derivatives[:7]
             qx = lx + _tmv(fx, vx)
             qu = lu + _tmv(fu, vx)
             vxx_fx = _mm(vxx, fx)
@@ -474,7 +453,7 @@ class DDPSolver:
             qux = lux + _tmm(fu, vxx_fx)
             quu = luu + _tmm(fu, _mm(vxx, fu))
             if second:
-                fxx, fux, fuu = z[7:]
+                fxx, fux, fuu = derivatives[7:]
                 qxx = qxx + _contract(vx, fxx)
                 qux = qux + _contract(vx, fux)
                 quu = quu + _contract(vx, fuu)
@@ -499,11 +478,12 @@ class DDPSolver:
             )
             return carry, (K, k)
 
-        zs: tuple[Array, ...] = (d.lx, d.lu, d.lxx, d.lux, d.luu, d.fx, d.fu)
-        if second:
-            zs = (*zs, d.fxx, d.fux, d.fuu)
-        zero = jnp.zeros((), d.vx.dtype)
-        init = (d.vx, d.vxx, d.vx, zero, zero, jnp.array(True), zero)
+        xN, refN = X[-1], _last(refs)
+        vx = jax.grad(self.terminal)(xN, refN)
+        vxx = jax.hessian(self.terminal)(xN, refN)
+        zero = jnp.zeros((), vx.dtype)
+        init = (vx, vxx, vx, zero, zero, jnp.array(True), zero)
+        zs = (X[:-1], U, _head(refs))
         (_, _, _, dv1, dv2, ok, gmax), (K, k) = jax.lax.scan(step, init, zs, reverse=True)
         ok = ok & jnp.isfinite(dv1) & jnp.isfinite(dv2)
         return _Backward(K=K, k=k, dv1=dv1, dv2=dv2, grad_norm=gmax, ok=ok)
@@ -520,19 +500,18 @@ class DDPSolver:
         return jnp.where(mu < self.config.mu_min, 0.0, mu), dmu
 
     def _backward_regularised(
-        self, d: _Derivatives, mu: Array, dmu: Array
+        self, X: Array, U: Array, params: PyTree, refs: PyTree, mu: Array, dmu: Array
     ) -> tuple[_Backward, Array, Array]:
         """Backward pass, increasing mu until Q_uu + mu I is PD everywhere (8).
 
         One ``_backward`` in the loop body (so it is compiled once). Returns the last pass (its
         ``ok`` is False if mu hit ``mu_max`` or could not grow) and the mu it used.
         """
-        n, m = d.lx.shape[1], d.lu.shape[1]
-        horizon = d.lx.shape[0]
-        zero = jnp.zeros((), d.lx.dtype)
+        n, (horizon, m) = X.shape[1], U.shape
+        zero = jnp.zeros((), X.dtype)
         placeholder = _Backward(
-            K=jnp.zeros((horizon, m, n), d.lx.dtype),
-            k=jnp.zeros((horizon, m), d.lx.dtype),
+            K=jnp.zeros((horizon, m, n), X.dtype),
+            k=jnp.zeros((horizon, m), X.dtype),
             dv1=zero,
             dv2=zero,
             grad_norm=zero,
@@ -545,7 +524,7 @@ class DDPSolver:
 
         def body(s: tuple) -> tuple:
             _, mu_, dmu_, _ = s
-            bp_ = self._backward(d, mu_)
+            bp_ = self._backward(X, U, params, refs, mu_)
             mu2, dmu2 = self._increase(mu_, dmu_)
             give_up = ~bp_.ok & ((mu2 > self.config.mu_max) | (mu2 <= mu_))
             advance = ~bp_.ok & ~give_up
@@ -670,8 +649,7 @@ class DDPSolver:
             )
 
             def redo() -> tuple[_Backward, Array, Array]:
-                d = self._derivatives(X_new, U_new, params, refs)
-                return self._backward_regularised(d, mu_new, dmu_new)
+                return self._backward_regularised(X_new, U_new, params, refs, mu_new, dmu_new)
 
             def keep() -> tuple[_Backward, Array, Array]:
                 return s.bp._replace(ok=jnp.array(False)), mu_new, dmu_new
