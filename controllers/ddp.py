@@ -257,7 +257,8 @@ def trajectory_cost(
     running: RunningCost, terminal: TerminalCost, X: Array, U: Array, refs: PyTree
 ) -> Array:
     """Total cost (1): ``sum_k running(X[k], U[k], refs[k]) + terminal(X[N], refs[N])``."""
-    stage = jax.vmap(running)(X[:-1], U, _head(refs))
+    # lax.map: one compiled loop over the steps (jax_setup) rather than an op per array kernel
+    stage = jax.lax.map(lambda z: running(*z), (X[:-1], U, _head(refs)))
     return jnp.sum(stage) + terminal(X[-1], _last(refs))
 
 
