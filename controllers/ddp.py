@@ -402,7 +402,7 @@ class DDPSolver:
             arr = np.asarray(leaf)
             if np.issubdtype(arr.dtype, np.floating) and not np.all(np.isfinite(arr)):
                 raise ValueError("refs contains non-finite values")
-        return self.jitted(jnp.asarray(x0_np), jnp.asarray(U_np), params, refs)
+        return self.jitted(x0_np, U_np, params, refs)
 
     # ---------------------------------------------------------------- traced internals
     def _check_signatures(self, x0: Array, U: Array, params: PyTree, refs: PyTree) -> None:

@@ -134,10 +134,10 @@ class WIPMProblem:
         """``running(z, w, ref)`` and ``terminal(z, ref)`` with ``ref = (s_ref, params)``: the
         reference state and the WIPM parameters the acceleration penalty needs."""
         wts, n, dt = self.weights, self.n_state, self.dt
-        q = jnp.asarray(wts.q)
-        r = jnp.asarray(wts.r)
-        r_rate = jnp.asarray(wts.r_rate)
-        q_terminal = jnp.asarray(wts.q_terminal)
+        q = np.asarray(wts.q, dtype=float)
+        r = np.asarray(wts.r, dtype=float)
+        r_rate = np.asarray(wts.r_rate, dtype=float)
+        q_terminal = np.asarray(wts.q_terminal, dtype=float)
 
         def running(z: Array, w: Array, ref: tuple[Array, WIPMParams]) -> Array:
             s_ref, params = ref
@@ -167,10 +167,10 @@ class WIPMProblem:
             x_diag, u_diag = np.concatenate([q, r]), r_rate  # z = [s, u], input w
         else:
             x_diag, u_diag = q, r
-        lxx = jnp.asarray(np.diag(2.0 * dt * x_diag))
-        luu = jnp.asarray(np.diag(2.0 * dt * u_diag))
+        lxx = np.diag(2.0 * dt * x_diag)
+        luu = np.diag(2.0 * dt * u_diag)
         nx, nu = x_diag.size, u_diag.size
-        zero_penalty = (jnp.zeros(n + m), jnp.zeros((n + m, n + m)))
+        zero_penalty = (np.zeros(n + m), np.zeros((n + m, n + m)))
 
         def penalty_derivatives(su: Array, params: WIPMParams) -> tuple[Array, Array]:
             def value(v: Array) -> Array:
