@@ -20,9 +20,11 @@ that compiles JAX code (``controllers.ddp``, ``controllers.wipm``).
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
 
 import jax
+from jax._src import xla_bridge  # backends_are_initialized: no public equivalent
 
 __all__ = ["CACHE_ENV", "SMALL_LOOP_ENV", "cache_dir", "configure"]
 
@@ -53,6 +55,14 @@ def _add_xla_flag() -> None:
     flag = _small_loop_flag()
     if flag is None or "xla_backend_extra_options" in flags:
         return  # the user's own backend options win
+    if xla_bridge.backends_are_initialized():
+        warnings.warn(
+            "JAX's backend was initialised before controllers was imported, so the DDP runs "
+            f"without {SMALL_LOOP_OPTION} (correct, ~10x slower); import controllers first or "
+            f"set XLA_FLAGS={flag}",
+            stacklevel=3,
+        )
+        return
     os.environ["XLA_FLAGS"] = f"{flags} {flag}".strip()
 
 
