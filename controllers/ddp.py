@@ -17,7 +17,7 @@ Algorithm (Jacobson & Mayne 1970 DDP; regularisation and line search after Tassa
 Todorov 2012, "Synthesis and stabilization of complex behaviors through online trajectory
 optimization", section II). All derivatives come from autodiff (``jax.jacfwd`` of the
 dynamics, ``jax.grad``/``jax.hessian`` of the costs, ``jax.hessian`` of the dynamics for the
-second-order terms), vmapped over the trajectory.
+second-order terms), evaluated step by step inside the backward scan.
 
 Backward pass (a reverse ``lax.scan``), with ``V'`` the value expansion at step ``k + 1``,
 ``V_x(N) = terminal_x``, ``V_xx(N) = terminal_xx``:
@@ -100,6 +100,15 @@ the one-shot form; it caches solvers by ``(dynamics, running, terminal, config)`
 
 Float64 is switched on at import (``jax_enable_x64``): DDP's convergence tests and the
 Riccati recursion need it.
+
+Speed (issue 6; ``controllers.jax_setup``). Every loop (the rollouts, the backward scan with the
+derivatives of each step computed inside it, the stage costs, the line search) is written so
+that XLA:CPU compiles it into one kernel: the small products as broadcast sums (``_mv``,
+``_mm``, ...) and ``Q_uu``'s Cholesky factor entry by entry (``_cholesky_solve``), since a
+``dot`` or a LAPACK call inside a loop makes XLA dispatch every operation of every step
+separately. The line search tries ``alpha = 1`` alone first and the parallel search only if it
+fails (the same accepted step). Results equal those of the plain ``@``/``cho_solve`` version to
+round-off (tests/test_ddp_speed.py).
 """
 
 from __future__ import annotations
@@ -112,13 +121,13 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.scipy.linalg import cho_solve
 
-jax.config.update("jax_enable_x64", True)
+from controllers import jax_setup  # noqa: F401  (float64, XLA's loop option, compile cache)
 
 __all__ = [
     "DDPConfig",
     "DDPResult",
+    "RunningDerivatives",
     "DDPSolver",
     "ddp_solve",
     "make_ddp_solver",
@@ -131,6 +140,8 @@ PyTree = Any
 Dynamics = Callable[[Array, Array, PyTree], Array]
 RunningCost = Callable[[Array, Array, PyTree], Array]
 TerminalCost = Callable[[Array, PyTree], Array]
+# (x, u, ref) -> (l_x, l_u, l_xx, l_ux, l_uu) of the running cost at one step
+RunningDerivatives = Callable[[Array, Array, PyTree], tuple[Array, Array, Array, Array, Array]]
 
 
 def _default_alphas() -> tuple[float, ...]:
@@ -162,6 +173,12 @@ class DDPConfig:
             Default ``2^0 ... 2^-10``. Authors: halve from 1 until the cost decreases, or accept
             the step anyway once alpha < 1e-4.
         line_search_c: Minimum ratio of actual to expected reduction (7). Default 1e-4.
+        final_backward: True (default): the last iteration ends with its backward pass, so the
+            returned gains belong to the returned ``(X, U)`` and (9) is tested there. False: an
+            iteration that exhausts the budget skips it (a third of the work of a 2-iteration
+            MPC solve, which uses only ``X``, ``U`` and the cost: those are unchanged); ``K``,
+            ``k`` and ``grad_norm`` are then the previous pass's and ``converged`` is False
+            unless (9) held earlier.
     """
 
     max_iterations: int = 50
@@ -175,6 +192,7 @@ class DDPConfig:
     mu_max: float = 1e10
     alphas: tuple[float, ...] = _default_alphas()
     line_search_c: float = 1e-4
+    final_backward: bool = True
 
     def __post_init__(self) -> None:
         if self.max_iterations < 0:
@@ -248,23 +266,70 @@ def trajectory_cost(
     running: RunningCost, terminal: TerminalCost, X: Array, U: Array, refs: PyTree
 ) -> Array:
     """Total cost (1): ``sum_k running(X[k], U[k], refs[k]) + terminal(X[N], refs[N])``."""
-    stage = jax.vmap(running)(X[:-1], U, _head(refs))
+    # lax.map: one compiled loop over the steps (jax_setup) rather than an op per array kernel
+    stage = jax.lax.map(lambda z: running(*z), (X[:-1], U, _head(refs)))
     return jnp.sum(stage) + terminal(X[-1], _last(refs))
 
 
-class _Derivatives(NamedTuple):
-    lx: Array  # (N, n)
-    lu: Array  # (N, m)
-    lxx: Array  # (N, n, n)
-    lux: Array  # (N, m, n)
-    luu: Array  # (N, m, m)
-    fx: Array  # (N, n, n)
-    fu: Array  # (N, n, m)
-    fxx: Array | None  # (N, n, n, n), output index first
-    fux: Array | None  # (N, n, m, n)
-    fuu: Array | None  # (N, n, m, m)
-    vx: Array  # (n,) terminal gradient
-    vxx: Array  # (n, n) terminal Hessian
+# Small matrix products as broadcast products and sums: XLA:CPU keeps a ``dot`` as a library
+# call, which also keeps a loop containing it out of the one-kernel compilation (jax_setup); the
+# element-wise form fuses. The sums run over the same index in the same order as a dot would
+# up to the rounding of the summation order.
+def _mv(a: Array, v: Array) -> Array:
+    """``a @ v`` for a matrix ``a`` and a vector ``v``."""
+    return jnp.sum(a * v[None, :], axis=1)
+
+
+def _tmv(a: Array, v: Array) -> Array:
+    """``a.T @ v``."""
+    return jnp.sum(a * v[:, None], axis=0)
+
+
+def _mm(a: Array, b: Array) -> Array:
+    """``a @ b`` for two matrices."""
+    return jnp.sum(a[:, :, None] * b[None, :, :], axis=1)
+
+
+def _tmm(a: Array, b: Array) -> Array:
+    """``a.T @ b``."""
+    return jnp.sum(a[:, :, None] * b[:, None, :], axis=0)
+
+
+def _contract(v: Array, t: Array) -> Array:
+    """``sum_i v_i t[i]`` (the value gradient contracted with a dynamics Hessian's output
+    index, the DDP terms of (2))."""
+    return jnp.sum(v[:, None, None] * t, axis=0)
+
+
+def _cholesky_solve(A: Array, B: Array) -> tuple[Array, Array]:
+    """``A^-1 B`` for a small symmetric ``A`` (m x m) through its Cholesky factor ``A = L L^T``,
+    written out entry by entry (``m`` is the control dimension: 1 or 2 here), and whether ``A``
+    is positive definite (every pivot positive and finite).
+
+    The same arithmetic as LAPACK's ``potrf``/``potrs`` for such sizes, but plain element-wise
+    operations: a LAPACK custom call inside the backward ``lax.scan`` keeps XLA from compiling
+    the scan into one kernel (jax_setup), which made every step ~20x slower.
+    """
+    m = A.shape[0]
+    L: list[list[Array]] = [[jnp.zeros((), A.dtype)] * m for _ in range(m)]
+    ok = jnp.array(True)
+    for j in range(m):
+        pivot = A[j, j] - sum((L[j][k] * L[j][k] for k in range(j)), jnp.zeros((), A.dtype))
+        ok = ok & (pivot > 0.0)
+        L[j][j] = jnp.sqrt(pivot)
+        for i in range(j + 1, m):
+            off = A[i, j] - sum((L[i][k] * L[j][k] for k in range(j)), jnp.zeros((), A.dtype))
+            L[i][j] = off / L[j][j]
+    y: list[Array] = []  # forward substitution L y = B, row by row
+    for i in range(m):
+        acc = B[i] - sum((L[i][k] * y[k] for k in range(i)), jnp.zeros_like(B[i]))
+        y.append(acc / L[i][i])
+    x: list[Array] = [jnp.zeros_like(B[0])] * m  # back substitution L^T x = y
+    for i in reversed(range(m)):
+        acc = y[i] - sum((L[k][i] * x[k] for k in range(i + 1, m)), jnp.zeros_like(B[i]))
+        x[i] = acc / L[i][i]
+    solution = jnp.stack(x)
+    return solution, ok & jnp.all(jnp.isfinite(solution))
 
 
 class _Backward(NamedTuple):
@@ -305,11 +370,13 @@ class DDPSolver:
         running: RunningCost,
         terminal: TerminalCost,
         config: DDPConfig,
+        running_derivatives: RunningDerivatives | None = None,
     ) -> None:
         self.dynamics = dynamics
         self.running = running
         self.terminal = terminal
         self.config = config
+        self.running_derivatives = running_derivatives
         self.trace_count = 0
         self.jitted: Callable[[Array, Array, PyTree, PyTree], DDPResult] = jax.jit(self._solve)
 
@@ -344,7 +411,7 @@ class DDPSolver:
             arr = np.asarray(leaf)
             if np.issubdtype(arr.dtype, np.floating) and not np.all(np.isfinite(arr)):
                 raise ValueError("refs contains non-finite values")
-        return self.jitted(jnp.asarray(x0_np), jnp.asarray(U_np), params, refs)
+        return self.jitted(x0_np, U_np, params, refs)
 
     # ---------------------------------------------------------------- traced internals
     def _check_signatures(self, x0: Array, U: Array, params: PyTree, refs: PyTree) -> None:
@@ -363,72 +430,70 @@ class DDPSolver:
         if getattr(final, "shape", None) != ():
             raise ValueError("terminal(x, ref) must return a scalar")
 
-    def _derivatives(self, X: Array, U: Array, params: PyTree, refs: PyTree) -> _Derivatives:
+    def _stage_derivatives(self, x: Array, u: Array, r: PyTree, params: PyTree) -> tuple:
+        """``(l_x, l_u, l_xx, l_ux, l_uu, f_x, f_u[, f_xx, f_ux, f_uu])`` at one step."""
         dyn, run = self.dynamics, self.running
-
-        def stage(x: Array, u: Array, r: PyTree) -> tuple[Array, ...]:
-            fx, fu = jax.jacfwd(dyn, argnums=(0, 1))(x, u, params)
+        fx, fu = jax.jacfwd(dyn, argnums=(0, 1))(x, u, params)
+        if self.running_derivatives is not None:
+            lx, lu, lxx, lux, luu = self.running_derivatives(x, u, r)
+        else:
             lx, lu = jax.grad(run, argnums=(0, 1))(x, u, r)
             (lxx, _), (lux, luu) = jax.hessian(run, argnums=(0, 1))(x, u, r)
-            out: tuple[Array, ...] = (lx, lu, lxx, lux, luu, fx, fu)
-            if self.config.second_order:
-                (fxx, _), (fux, fuu) = jax.hessian(dyn, argnums=(0, 1))(x, u, params)
-                out = (*out, fxx, fux, fuu)
-            return out
-
-        parts = jax.vmap(stage)(X[:-1], U, _head(refs))
-        xN, refN = X[-1], _last(refs)
-        vx = jax.grad(self.terminal)(xN, refN)
-        vxx = jax.hessian(self.terminal)(xN, refN)
+        out: tuple[Array, ...] = (lx, lu, lxx, lux, luu, fx, fu)
         if self.config.second_order:
-            return _Derivatives(*parts, vx=vx, vxx=vxx)
-        return _Derivatives(*parts, fxx=None, fux=None, fuu=None, vx=vx, vxx=vxx)
+            (fxx, _), (fux, fuu) = jax.hessian(dyn, argnums=(0, 1))(x, u, params)
+            out = (*out, fxx, fux, fuu)
+        return out
 
-    def _backward(self, d: _Derivatives, mu: Array) -> _Backward:
-        m = d.lu.shape[1]
-        eye = jnp.eye(m, dtype=d.luu.dtype)
+    def _backward(self, X: Array, U: Array, params: PyTree, refs: PyTree, mu: Array) -> _Backward:
+        """Backward pass (2)-(5) along ``(X, U)``, the derivatives of each step computed inside
+        the scan (one compiled loop, no (N, n, n) arrays of derivatives in memory)."""
+        m = U.shape[1]
+        eye = jnp.eye(m, dtype=U.dtype)
         second = self.config.second_order
 
         def step(carry: tuple[Array, ...], z: tuple[Array, ...]) -> tuple[tuple, tuple]:
             vx, vxx, lam, dv1, dv2, ok, gmax = carry
-            lx, lu, lxx, lux, luu, fx, fu = z[:7]
-            qx = lx + fx.T @ vx
-            qu = lu + fu.T @ vx
-            qxx = lxx + fx.T @ vxx @ fx
-            qux = lux + fu.T @ vxx @ fx
-            quu = luu + fu.T @ vxx @ fu
+            derivatives = self._stage_derivatives(*z, params)
+            lx, lu, lxx, lux, luu, fx, fu = derivatives[:7]
+            qx = lx + _tmv(fx, vx)
+            qu = lu + _tmv(fu, vx)
+            vxx_fx = _mm(vxx, fx)
+            qxx = lxx + _tmm(fx, vxx_fx)
+            qux = lux + _tmm(fu, vxx_fx)
+            quu = luu + _tmm(fu, _mm(vxx, fu))
             if second:
-                fxx, fux, fuu = z[7:]
-                qxx = qxx + jnp.einsum("i,ijk->jk", vx, fxx)
-                qux = qux + jnp.einsum("i,ijk->jk", vx, fux)
-                quu = quu + jnp.einsum("i,ijk->jk", vx, fuu)
+                fxx, fux, fuu = derivatives[7:]
+                qxx = qxx + _contract(vx, fxx)
+                qux = qux + _contract(vx, fux)
+                quu = quu + _contract(vx, fuu)
             qxx = 0.5 * (qxx + qxx.T)
             quu = 0.5 * (quu + quu.T)
-            chol = jnp.linalg.cholesky(quu + mu * eye)
-            step_ok = jnp.all(jnp.isfinite(chol))
-            sol = cho_solve((chol, True), jnp.concatenate([qu[:, None], qux], axis=1))
+            sol, step_ok = _cholesky_solve(quu + mu * eye, jnp.concatenate([qu[:, None], qux], 1))
             k, K = -sol[:, 0], -sol[:, 1:]
-            vx_new = qx + K.T @ quu @ k + K.T @ qu + qux.T @ k
-            vxx_new = qxx + K.T @ quu @ K + K.T @ qux + qux.T @ K
+            quu_k = _mv(quu, k)
+            vx_new = qx + _tmv(K, quu_k) + _tmv(K, qu) + _tmv(qux, k)
+            vxx_new = qxx + _tmm(K, _mm(quu, K)) + _tmm(K, qux) + _tmm(qux, K)
             vxx_new = 0.5 * (vxx_new + vxx_new.T)
-            grad_u = lu + fu.T @ lam
-            lam_new = lx + fx.T @ lam
+            grad_u = lu + _tmv(fu, lam)
+            lam_new = lx + _tmv(fx, lam)
             carry = (
                 vx_new,
                 vxx_new,
                 lam_new,
-                dv1 + k @ qu,
-                dv2 + 0.5 * k @ quu @ k,
+                dv1 + jnp.sum(k * qu),
+                dv2 + 0.5 * jnp.sum(k * quu_k),
                 ok & step_ok,
                 jnp.maximum(gmax, jnp.max(jnp.abs(grad_u))),
             )
             return carry, (K, k)
 
-        zs: tuple[Array, ...] = (d.lx, d.lu, d.lxx, d.lux, d.luu, d.fx, d.fu)
-        if second:
-            zs = (*zs, d.fxx, d.fux, d.fuu)
-        zero = jnp.zeros((), d.vx.dtype)
-        init = (d.vx, d.vxx, d.vx, zero, zero, jnp.array(True), zero)
+        xN, refN = X[-1], _last(refs)
+        vx = jax.grad(self.terminal)(xN, refN)
+        vxx = jax.hessian(self.terminal)(xN, refN)
+        zero = jnp.zeros((), vx.dtype)
+        init = (vx, vxx, vx, zero, zero, jnp.array(True), zero)
+        zs = (X[:-1], U, _head(refs))
         (_, _, _, dv1, dv2, ok, gmax), (K, k) = jax.lax.scan(step, init, zs, reverse=True)
         ok = ok & jnp.isfinite(dv1) & jnp.isfinite(dv2)
         return _Backward(K=K, k=k, dv1=dv1, dv2=dv2, grad_norm=gmax, ok=ok)
@@ -445,19 +510,18 @@ class DDPSolver:
         return jnp.where(mu < self.config.mu_min, 0.0, mu), dmu
 
     def _backward_regularised(
-        self, d: _Derivatives, mu: Array, dmu: Array
+        self, X: Array, U: Array, params: PyTree, refs: PyTree, mu: Array, dmu: Array
     ) -> tuple[_Backward, Array, Array]:
         """Backward pass, increasing mu until Q_uu + mu I is PD everywhere (8).
 
         One ``_backward`` in the loop body (so it is compiled once). Returns the last pass (its
         ``ok`` is False if mu hit ``mu_max`` or could not grow) and the mu it used.
         """
-        n, m = d.lx.shape[1], d.lu.shape[1]
-        horizon = d.lx.shape[0]
-        zero = jnp.zeros((), d.lx.dtype)
+        n, (horizon, m) = X.shape[1], U.shape
+        zero = jnp.zeros((), X.dtype)
         placeholder = _Backward(
-            K=jnp.zeros((horizon, m, n), d.lx.dtype),
-            k=jnp.zeros((horizon, m), d.lx.dtype),
+            K=jnp.zeros((horizon, m, n), X.dtype),
+            k=jnp.zeros((horizon, m), X.dtype),
             dv1=zero,
             dv2=zero,
             grad_norm=zero,
@@ -470,7 +534,7 @@ class DDPSolver:
 
         def body(s: tuple) -> tuple:
             _, mu_, dmu_, _ = s
-            bp_ = self._backward(d, mu_)
+            bp_ = self._backward(X, U, params, refs, mu_)
             mu2, dmu2 = self._increase(mu_, dmu_)
             give_up = ~bp_.ok & ((mu2 > self.config.mu_max) | (mu2 <= mu_))
             advance = ~bp_.ok & ~give_up
@@ -507,7 +571,7 @@ class DDPSolver:
         def forward(X: Array, U: Array, bp: _Backward, alpha: Array) -> tuple[Array, Array]:
             def step(x: Array, z: tuple[Array, ...]) -> tuple[Array, tuple[Array, Array]]:
                 x_ref, u_ref, K, k = z
-                u = u_ref + alpha * k + K @ (x - x_ref)
+                u = u_ref + alpha * k + _mv(K, x - x_ref)
                 x_next = dyn(x, u, params)
                 return x_next, (x_next, u)
 
@@ -542,23 +606,41 @@ class DDPSolver:
             mu_history=jnp.full((length,), mu),
         )
 
-        def line_search(s: _LoopState) -> tuple[Array, Array, Array, Array, Array, Array]:
-            """(6)-(7); returns X, U, cost, mu, dmu for the next backward pass and `stuck`."""
+        def acceptable(s: _LoopState, cost: Array, alpha: Array) -> Array:
+            """Test (7) of a candidate's cost for step size ``alpha``."""
+            actual = s.cost - cost
+            expected = -(alpha * s.bp.dv1 + alpha**2 * s.bp.dv2)
+            return jnp.isfinite(cost) & (actual > 0) & (actual >= cfg.line_search_c * expected)
+
+        def search_all(s: _LoopState) -> tuple[Array, Array, Array, Array]:
+            """Every alpha in parallel; the largest acceptable one (X, U, cost, accepted)."""
             Xs, Us = jax.vmap(lambda a: forward(s.X, s.U, s.bp, a))(alphas)
             costs = jax.vmap(cost_of)(Xs, Us)
-            actual = s.cost - costs
-            expected = -(alphas * s.bp.dv1 + alphas**2 * s.bp.dv2)
-            good = jnp.isfinite(costs) & (actual > 0) & (actual >= cfg.line_search_c * expected)
-            accepted = jnp.any(good)
+            good = acceptable(s, costs, alphas)
             best = jnp.argmax(good)
+            return Xs[best], Us[best], costs[best], jnp.any(good)
+
+        def line_search(s: _LoopState) -> tuple[Array, Array, Array, Array, Array, Array]:
+            """(6)-(7); returns X, U, cost, mu, dmu for the next backward pass and `stuck`.
+
+            The largest alpha is tried alone first: it is usually accepted, and then it is the
+            answer of the parallel search too (the largest acceptable alpha), at 1/len(alphas)
+            of the cost. Otherwise all of them are tried in parallel."""
+            X1, U1 = forward(s.X, s.U, s.bp, alphas[0])
+            cost1 = cost_of(X1, U1)
+            X_new, U_new, cost_new, accepted = jax.lax.cond(
+                acceptable(s, cost1, alphas[0]),
+                lambda: (X1, U1, cost1, jnp.array(True)),
+                lambda: search_all(s),
+            )
             mu_dn, dmu_dn = self._decrease(s.mu, s.dmu)
             mu_up, dmu_up = self._increase(s.mu, s.dmu)
             # A failed line search that cannot raise mu any further ends the solve.
             stuck = ~accepted & ((mu_up > cfg.mu_max) | (mu_up <= s.mu))
             return (
-                jnp.where(accepted, Xs[best], s.X),
-                jnp.where(accepted, Us[best], s.U),
-                jnp.where(accepted, costs[best], s.cost),
+                jnp.where(accepted, X_new, s.X),
+                jnp.where(accepted, U_new, s.U),
+                jnp.where(accepted, cost_new, s.cost),
                 jnp.where(accepted, mu_dn, jnp.where(stuck, s.mu, mu_up)),
                 jnp.where(accepted, dmu_dn, jnp.where(stuck, s.dmu, dmu_up)),
                 stuck,
@@ -577,15 +659,15 @@ class DDPSolver:
             )
 
             def redo() -> tuple[_Backward, Array, Array]:
-                d = self._derivatives(X_new, U_new, params, refs)
-                return self._backward_regularised(d, mu_new, dmu_new)
+                return self._backward_regularised(X_new, U_new, params, refs, mu_new, dmu_new)
 
             def keep() -> tuple[_Backward, Array, Array]:
                 return s.bp._replace(ok=jnp.array(False)), mu_new, dmu_new
 
-            bp_new, mu_new, dmu_new = jax.lax.cond(stuck, keep, redo)
-            conv = self._converged(bp_new, cost_new)
             it = s.iteration + s.started.astype(s.iteration.dtype)
+            last = (it >= cfg.max_iterations) & s.started & (not cfg.final_backward)
+            bp_new, mu_new, dmu_new = jax.lax.cond(stuck | last, keep, redo)
+            conv = self._converged(bp_new, cost_new)
             tail = jnp.arange(length) >= it
             return _LoopState(
                 X=X_new,
@@ -622,13 +704,18 @@ def make_ddp_solver(
     running: RunningCost,
     terminal: TerminalCost,
     config: DDPConfig | None = None,
+    running_derivatives: RunningDerivatives | None = None,
 ) -> DDPSolver:
     """Build a solver; call it as ``solver(x0, U_init, params, refs) -> DDPResult``.
+
+    ``running_derivatives(x, u, ref) -> (l_x, l_u, l_xx, l_ux, l_uu)``, if given, replaces the
+    autodiff gradient and Hessian of ``running`` (it must be exact: a cheaper closed form).
 
     One compilation per distinct input shape (horizon) and pytree structure; reuse the same
     solver object in an MPC loop so that every call after the first runs compiled code.
     """
-    return DDPSolver(dynamics, running, terminal, config if config is not None else DDPConfig())
+    config = config if config is not None else DDPConfig()
+    return DDPSolver(dynamics, running, terminal, config, running_derivatives)
 
 
 @functools.lru_cache(maxsize=32)

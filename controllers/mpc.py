@@ -16,12 +16,13 @@ import functools
 from dataclasses import dataclass, field
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 from controllers.ddp import DDPConfig, rollout
 from controllers.planning import Plan
 from controllers.wipm import WIPMParams
-from controllers.wipm_problem import Weights, WIPMProblem, ddp_solver_for, refs_for
+from controllers.wipm_problem import Weights, WIPMProblem, ddp_solver_for
 
 
 @dataclass(frozen=True)
@@ -37,7 +38,8 @@ class MPCConfig:
         r_control: weights on [thdd, tau_0] (authors 0.01, 0.01).
         q_terminal: terminal weights on positions and theta (authors 1e5) and speeds (1e4).
         q_terminal_speed: see above.
-        ddp: solver settings except the iteration budget (iLQR, no tolerance stop).
+        ddp: solver settings except the iteration budget (iLQR, no tolerance stop, no backward
+            pass after the last line search: the MPC uses the controls, not the gains).
     """
 
     horizon_s: float = 1.0
@@ -52,7 +54,9 @@ class MPCConfig:
     q_terminal: float = 1e5
     q_terminal_speed: float = 1e4
     ddp: DDPConfig = field(
-        default_factory=lambda: DDPConfig(max_iterations=2, tolerance=0.0, second_order=False)
+        default_factory=lambda: DDPConfig(
+            max_iterations=2, tolerance=0.0, second_order=False, final_backward=False
+        )
     )
 
     @property
@@ -92,8 +96,72 @@ class MPCStep:
     accepted: bool
 
 
+class _CompiledStep:
+    """One jitted MPC step for a problem, solver settings and horizon (shared by every
+    :class:`ModelPredictiveController` of that problem, so a new plan or a new controller does
+    not retrace). Everything of a step happens inside it: the plan's window by index (the padded
+    plan arrays are inputs), ``lambda(q)`` broadcast along the horizon, the warm start, the DDP,
+    the acceptance test with its fallback rollout and the shifted warm start of the next step,
+    which stays on the device. ``trace_count`` counts its traces (one per horizon and plan
+    length is the design)."""
+
+    def __init__(self, problem: WIPMProblem, ddp: DDPConfig, horizon: int) -> None:
+        self.solver = ddp_solver_for(problem, ddp)
+        self.dynamics = problem.dynamics()
+        self.horizon = horizon
+        self.trace_count = 0
+        self.jitted = jax.jit(self._step)
+
+    def _step(
+        self,
+        index: jax.Array,
+        first: jax.Array,
+        state: jax.Array,
+        params: WIPMParams,
+        warm: jax.Array,
+        plan_states: jax.Array,
+        plan_controls: jax.Array,
+    ) -> tuple[jax.Array, jax.Array]:
+        """``(packed, next_warm)``: ``packed`` holds ``X`` (N+1, n), ``U`` (N, m), the cost, the
+        warm start's cost and the acceptance flag, flattened in that order."""
+        self.trace_count += 1
+        H = self.horizon
+        window = jax.lax.dynamic_slice_in_dim(plan_states, index, H + 1)
+        plan_warm = jax.lax.dynamic_slice_in_dim(plan_controls, index, H)
+        warm = jnp.where(first, plan_warm, warm)
+        per_step = jax.tree.map(lambda leaf: jnp.broadcast_to(leaf, (H + 1, *jnp.shape(leaf))),
+                                params)  # fmt: skip
+        result = self.solver.jitted(state, warm, params, (window, per_step))
+        X, U, cost = result.X, result.U, result.cost
+        initial = result.cost_history[0]
+        accepted = (jnp.all(jnp.isfinite(X)) & jnp.all(jnp.isfinite(U)) & jnp.isfinite(cost)
+                    & (cost <= initial * (1 + 1e-12) + 1e-12))  # fmt: skip
+        X, U, cost = jax.lax.cond(
+            accepted,
+            lambda: (X, U, cost),
+            lambda: (rollout(self.dynamics, state, warm, params), warm, initial),
+        )
+        # warm start of the next step: shifted by one, the plan's control past the end
+        tail = jax.lax.dynamic_slice_in_dim(plan_controls, index + H, 1)
+        next_warm = jnp.concatenate([U[1:], tail], axis=0)
+        packed = jnp.concatenate([X.ravel(), U.ravel(), jnp.stack([cost, initial]),
+                                  accepted.astype(X.dtype)[None]])  # fmt: skip
+        return packed, next_warm
+
+
+@functools.lru_cache(maxsize=16)
+def compiled_step(problem: WIPMProblem, ddp: DDPConfig, horizon: int) -> _CompiledStep:
+    """The shared compiled MPC step of a problem, solver settings and horizon."""
+    return _CompiledStep(problem, ddp, horizon)
+
+
 class ModelPredictiveController:
-    """Receding-horizon DDP tracking a :class:`Plan` (see the module docstring)."""
+    """Receding-horizon DDP tracking a :class:`Plan` (see the module docstring).
+
+    The plan (padded past its end: the goal state, zero controls) is put on the device once;
+    each :meth:`step` is one call of the shared compiled step (:func:`compiled_step`) and one
+    transfer of its packed result.
+    """
 
     def __init__(self, plan: Plan, config: MPCConfig | None = None) -> None:
         self.config = config or MPCConfig()
@@ -102,37 +170,40 @@ class ModelPredictiveController:
         self.plan = plan
         self.problem = mpc_problem(plan.planar, self.config, plan.a_max, plan.theta_max)
         ddp = DDPConfig(**{**self.config.ddp.__dict__, "max_iterations": self.config.iterations})
-        self.solver = ddp_solver_for(self.problem, ddp)
-        self._rollout = jax.jit(functools.partial(rollout, self.problem.dynamics()))
         self.horizon = self.config.steps
+        self.compiled = compiled_step(self.problem, ddp, self.horizon)
+        self.solver = self.compiled.solver
         self.rejected = 0
         self.solves = 0
-        self._controls: np.ndarray | None = None  # first step: the plan's controls
+        H = self.horizon
+        states = np.vstack([plan.states, np.tile(plan.goal_state, (H + 1, 1))])
+        controls = np.vstack([plan.controls, np.zeros((H + 1, plan.controls.shape[1]))])
+        self._plan_states = jax.device_put(states)
+        self._plan_controls = jax.device_put(controls)
+        self._warm = jax.device_put(np.zeros((H, plan.controls.shape[1])))
+        self._first = True  # the first step warm-starts from the plan's controls
+        n, m = states.shape[1], controls.shape[1]
+        self._sizes = ((H + 1) * n, H * m)
+        self._shapes = ((H + 1, n), (H, m))
+        self._last_index = len(plan.states)  # dynamic_slice clamps: past it, all goal
 
     def step(self, index: int, state: np.ndarray, params: WIPMParams) -> MPCStep:
         """Solve at plan time index ``index`` from WIPM ``state`` with parameters ``params``."""
-        state = np.asarray(state, dtype=float)
-        if not np.all(np.isfinite(state)):
+        state = np.asarray(state, dtype=np.float64)
+        if not np.isfinite(state).all():
             raise ValueError(f"MPC state is not finite: {state}")
-        refs = refs_for(self.plan.window(index, self.horizon + 1), params)
-        warm = (
-            self._controls
-            if self._controls is not None
-            else self.plan.control_window(index, self.horizon)
+        index = min(max(int(index), 0), self._last_index)
+        packed, self._warm = self.compiled.jitted(
+            index, self._first, state, params, self._warm, self._plan_states, self._plan_controls
         )
-        result = self.solver(state, warm, params, refs)
+        self._first = False
         self.solves += 1
-        X, U = np.asarray(result.X), np.asarray(result.U)
-        cost = float(result.cost)
-        initial = float(result.cost_history[0])
-        accepted = bool(np.all(np.isfinite(X)) and np.all(np.isfinite(U)) and np.isfinite(cost)
-                        and cost <= initial * (1 + 1e-12) + 1e-12)  # fmt: skip
+        out = np.asarray(packed)
+        nx, nu = self._sizes
+        X = out[:nx].reshape(self._shapes[0])
+        U = out[nx : nx + nu].reshape(self._shapes[1])
+        accepted = bool(out[-1])
         if not accepted:
             self.rejected += 1
-            U = warm
-            X = np.asarray(self._rollout(state, U, params))
-            cost = initial
-        # warm start of the next step: shifted by one, the plan's control past the end
-        self._controls = np.vstack([U[1:], self.plan.control_window(index + self.horizon, 1)])
-        return MPCStep(control=U[0].copy(), predicted_states=X, predicted_controls=U, cost=cost,
-                       accepted=accepted)  # fmt: skip
+        return MPCStep(control=U[0].copy(), predicted_states=X, predicted_controls=U,
+                       cost=float(out[-3]), accepted=accepted)  # fmt: skip

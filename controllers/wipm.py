@@ -79,7 +79,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-jax.config.update("jax_enable_x64", True)
+from controllers import jax_setup  # noqa: F401  (float64, XLA's loop option, compile cache)
 
 if TYPE_CHECKING:
     from wip_gym.robot_model import WIPMParameters

@@ -1,0 +1,138 @@
+"""Correctness guards of the DDP's speed work (issue 6): the offline plan and the MPC give the
+results recorded before it (tests/data/ddp_reference.npz, see tests/ddp_reference.py), the
+closed-form running-cost derivatives equal autodiff's, the MPC step is compiled once, and the
+persistent compilation cache works from an empty directory."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import jax
+import numpy as np
+import pytest
+
+from controllers.mpc import ModelPredictiveController, MPCConfig, mpc_problem
+from controllers.planning import PlanConfig, plan_to_goal, planning_problem
+from tests import ddp_reference
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def reference() -> dict[str, np.ndarray]:
+    return dict(np.load(ddp_reference.PATH))
+
+
+@pytest.fixture(scope="module")
+def computed(reference: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    params = ddp_reference.params_from_arrays(reference)
+    return ddp_reference.compute(params, float(reference["theta0"]))
+
+
+@pytest.mark.parametrize("problem", ["planar", "3d"])
+def test_plan_and_mpc_equal_the_recorded_reference(
+    problem: str, reference: dict[str, np.ndarray], computed: dict[str, np.ndarray]
+) -> None:
+    # The summation order of the small matrix products changed (dot -> element-wise sums), so
+    # results agree to round-off, not bit for bit: 1e-9 relative to each array's scale.
+    keys = [k for k in computed if k.startswith(f"{problem}_")]
+    assert len(keys) == 8
+    for key in keys:
+        expected = reference[key].astype(float)
+        scale = max(float(np.max(np.abs(expected))), 1.0)
+        np.testing.assert_allclose(
+            np.asarray(computed[key], dtype=float), expected, rtol=0.0, atol=1e-9 * scale,
+            err_msg=key,
+        )  # fmt: skip
+
+
+def _random_points(problem, rng: np.random.Generator, count: int) -> list[tuple]:
+    """Points (z, w) around the penalties' thresholds: some inside, some outside."""
+    n, m = problem.n_state, problem.n_control
+    nz = n + m if problem.rate_input else n
+    nw = m
+    points = []
+    for i in range(count):
+        z = rng.normal(scale=0.3, size=nz)
+        w = rng.normal(scale=3.0 if i % 2 else 0.3, size=nw)
+        if problem.rate_input:
+            z[n:] *= 10.0 if i % 3 == 0 else 1.0  # large thdd: acceleration penalty active
+        else:
+            w *= 10.0 if i % 3 == 0 else 1.0
+        points.append((z, w))
+    return points
+
+
+@pytest.mark.parametrize("planar", [True, False])
+@pytest.mark.parametrize("kind", ["plan", "mpc"])
+def test_running_derivatives_equal_autodiff(
+    planar: bool, kind: str, reference: dict[str, np.ndarray]
+) -> None:
+    params = ddp_reference.params_from_arrays(reference)
+    if kind == "plan":
+        problem = planning_problem(planar, PlanConfig(), a_max=1.0, heading_given=False)
+    else:
+        problem = mpc_problem(planar, MPCConfig(), a_max=1.0, theta_max=0.25)
+    running, _ = problem.costs()
+    derivatives = jax.jit(problem.running_derivatives())
+    grad = jax.jit(jax.grad(running, argnums=(0, 1)))
+    hessian = jax.jit(jax.hessian(running, argnums=(0, 1)))
+    rng = np.random.default_rng(3)
+    active = 0
+    for z, w in _random_points(problem, rng, 24):
+        s_ref = rng.normal(scale=0.5, size=problem.n_state)
+        ref = (s_ref, params)
+        s, u = (z[: problem.n_state], z[problem.n_state :]) if problem.rate_input else (z, w)
+        active += bool(problem.penalty(s, u, params)[1])
+        lx, lu, lxx, lux, luu = derivatives(z, w, ref)
+        gx, gu = grad(z, w, ref)
+        (hxx, _), (hux, huu) = hessian(z, w, ref)
+        for got, want in ((lx, gx), (lu, gu), (lxx, hxx), (lux, hux), (luu, huu)):
+            scale = max(float(np.max(np.abs(want))), 1.0)
+            np.testing.assert_allclose(got, want, rtol=0.0, atol=1e-12 * scale)
+    assert 4 <= active <= 20  # both branches were exercised
+
+
+def test_mpc_step_is_traced_once(reference: dict[str, np.ndarray]) -> None:
+    params = ddp_reference.params_from_arrays(reference)
+    state = ddp_reference.initial_state("planar", float(reference["theta0"]))
+    plan = plan_to_goal(state, params, np.array([2.0, 0.0]), planar=True)
+    mpc = ModelPredictiveController(plan)
+    rng = np.random.default_rng(0)
+    for index in range(0, 2400, 60):  # past the plan's end too
+        mpc.step(index, plan.states[min(index, 2000)] + 0.01 * rng.normal(size=4), params)
+    again = ModelPredictiveController(plan)  # a new controller on the same problem and horizon
+    again.step(5, plan.states[5], params)
+    assert mpc.compiled is again.compiled
+    assert mpc.compiled.trace_count == 1
+    assert mpc.solves == 40 and mpc.rejected == 0
+
+
+_CACHE_SCRIPT = """
+import numpy as np, jax.numpy as jnp
+from controllers.ddp import make_ddp_solver, DDPConfig
+def dynamics(x, u, p):
+    return x + 0.1 * jnp.array([x[1], u[0] - p * jnp.sin(x[0])])
+def running(x, u, r):
+    return jnp.sum((x - r) ** 2) + 0.1 * jnp.sum(u * u)
+def terminal(x, r):
+    return 10.0 * jnp.sum((x - r) ** 2)
+solver = make_ddp_solver(dynamics, running, terminal, DDPConfig(max_iterations=20))
+out = solver(np.array([0.5, 0.0]), np.zeros((30, 1)), 9.81, np.zeros((31, 2)))
+print(repr(float(out.cost)))
+"""
+
+
+def test_compilation_cache_starts_from_an_empty_directory(tmp_path: Path) -> None:
+    cache = tmp_path / "jax-cache"
+    env = os.environ | {"WIP_GYM_JAX_CACHE": str(cache)}
+    costs = []
+    for _ in range(2):  # the first process fills the cache, the second reads it
+        done = subprocess.run([sys.executable, "-c", _CACHE_SCRIPT], cwd=REPO, env=env,
+                              capture_output=True, text=True, check=True, timeout=300)  # fmt: skip
+        costs.append(float(done.stdout.strip().splitlines()[-1]))
+        assert cache.is_dir() and any(cache.iterdir())
+    assert np.isfinite(costs[0]) and costs[0] == costs[1]
