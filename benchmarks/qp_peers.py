@@ -6,6 +6,9 @@ per control step, ``min 0.5 x'Hx + g'x  s.t.  lower <= C x <= upper``:
 * ``proxqp`` (ours): ``controllers.task_qp``'s path exactly: one dense ProxQP object, no
   preconditioner, ``eps_abs`` and the iteration cap of ``QPSettings``, ``eps_rel = 0``, warm
   started from the previous result after the first solve; each step ``update`` + ``solve``;
+  the ratios are against this path;
+* ``proxqp_shortcut`` (ours, what the controller runs): the unconstrained minimiser by one
+  Cholesky solve when it is feasible (then exact), ProxQP as above otherwise;
 * ``osqp``: OSQP with tight tolerances (:data:`OSQP_EPS`), solution polishing, warm started
   (its default) step to step; the full dense pattern kept so ``update(Px, Ax)`` applies;
 * ``daqp``: DAQP (dual active set), from scratch each step (its Python ``solve``);
@@ -34,6 +37,7 @@ import proxsuite
 import quadprog
 import scipy.sparse as sp
 from numpy.typing import NDArray
+from scipy.linalg.lapack import dposv
 from scipy.optimize import minimize
 
 from benchmarks.qp_recording import RecordedQP
@@ -103,6 +107,28 @@ class ProxQPOurs(QPSolver):
             self._qp = None  # as the controller: the next QP starts cold
             raise RuntimeError(f"ProxQP status {info.status}")
         return np.array(self._qp.results.x)
+
+
+class ControllerPath(ProxQPOurs):
+    """What the controller runs each step (``QPSettings.unconstrained_first``): the
+    unconstrained minimiser ``H x = -g`` by one LAPACK Cholesky solve, kept when it satisfies
+    every constraint (then it is the convex QP's exact optimum), otherwise ProxQP as
+    :class:`ProxQPOurs`, warm started."""
+
+    name = "proxqp_shortcut"
+
+    def __init__(self, settings: QPSettings | None = None) -> None:
+        super().__init__(settings)
+        self.settings = {**self.settings, "unconstrained_first": True}
+
+    def solve(self, qp: RecordedQP) -> FloatArray:
+        if self._qp is not None:
+            _, x, info = dposv(qp.H, -qp.g)
+            if info == 0 and np.isfinite(x).all():
+                Cx = qp.C @ x
+                if (Cx >= qp.lower).all() and (Cx <= qp.upper).all():
+                    return x
+        return super().solve(qp)
 
 
 class OSQPSolver(QPSolver):
@@ -235,7 +261,8 @@ class SLSQPSolver(QPSolver):
 
 def all_solvers() -> list[QPSolver]:
     """Ours first, then the peers."""
-    return [ProxQPOurs(), OSQPSolver(), DAQPSolver(), QuadprogSolver(), SLSQPSolver()]
+    return [ProxQPOurs(), ControllerPath(), OSQPSolver(), DAQPSolver(), QuadprogSolver(),
+            SLSQPSolver()]  # fmt: skip
 
 
 def reference_solution(qp: RecordedQP) -> tuple[FloatArray, dict[str, float]]:

@@ -30,10 +30,10 @@ from controllers.wipm_problem import ddp_solver_for, refs_for
 PROBLEMS = ("planar", "3d")
 DDP_SOLVERS = ("ours", "crocoddyl", "numpy_ilqr")
 QP_ENVS = ("planar", "krang")
-QP_SOLVERS = ("proxqp", "osqp", "daqp", "quadprog", "slsqp")
+QP_SOLVERS = ("proxqp", "proxqp_shortcut", "osqp", "daqp", "quadprog", "slsqp")
 REQUIRED_RATIOS = {
     f"{kind}_{p}" for kind in ("crocoddyl_plan", "crocoddyl_mpc", "numpy_plan") for p in PROBLEMS
-} | {f"qp_{s}_{env}" for s in QP_SOLVERS[1:] for env in QP_ENVS}
+} | {f"qp_{s}_{env}" for s in QP_SOLVERS[2:] for env in QP_ENVS}
 
 
 def stats_ok(entry: dict[str, float]) -> bool:
@@ -69,7 +69,11 @@ def test_quick_run_schema_and_agreement(tmp_path: Path, capsys: pytest.CaptureFi
     for key in REQUIRED_RATIOS:
         value = results["ratios"][key]
         assert isinstance(value, float) and math.isfinite(value) and value > 0, key
-    for key in ("qp_krang_under_40us", "qp_krang_within_2x_fastest_peer", "plan_under_10ms_3d"):
+    assert set(results["ratios_controller_path"]) == {
+        f"qp_{s}_{env}" for s in QP_SOLVERS[2:] for env in QP_ENVS
+    }
+    for key in ("qp_krang_under_40us", "qp_krang_within_2x_fastest_peer", "plan_under_10ms_3d",
+                "qp_krang_under_40us_controller_path"):  # fmt: skip
         assert set(results["targets"][key]) == {"figure", "limit", "met"}, key
     # the optimum checks: every DDP solver converged to the same cost
     for p in PROBLEMS:
