@@ -93,7 +93,7 @@ def test_krang_level_tray_reaches_the_goal_with_the_cup(krang_run, goal) -> None
     assert info["cup_on_tray"] and info["tilt"] < 5.0
 
 
-@pytest.mark.parametrize("goal", KRANG_GOALS[1:])
+@pytest.mark.parametrize("goal", KRANG_GOALS)
 def test_krang_waiter_reaches_the_goal_and_comes_less_close_to_slipping(krang_run, goal) -> None:
     waiter = krang_run(goal, "specific_force")
     assert waiter["goal_distance"] < 0.05 and abs(waiter["xd"]) < 0.05
