@@ -97,6 +97,10 @@ class DisturbanceRejectingTask:
         self.estimate = np.zeros(len(task.weights()))
         self._previous: tuple[Array, Array] | None = None  # (task velocity, commanded xdd*)
         self._key = ("disturbance_rejecting_task", id(self))
+        self._alpha = settings.alpha
+        self._bound = settings.bound
+        # the wrapped task's own J nu when it has one (shared with its PD law), else J @ nu
+        self._velocity = getattr(task, "velocity", None)
 
     def restart(self) -> None:
         """Forget the last step (after a reset, or a jump in the state); keep the estimate."""
@@ -119,14 +123,18 @@ class DisturbanceRejectingTask:
         cached = robot.cache.get(self._key)
         if cached is not None:
             return cached  # type: ignore[return-value]
-        velocity = self.task.jacobian(robot) @ robot.nu
+        velocity = (self._velocity(robot) if self._velocity is not None
+                    else self.task.jacobian(robot) @ robot.nu)  # fmt: skip
         s = self.settings
+        estimate = self.estimate
         if self._previous is not None:
             previous_velocity, previous_command = self._previous
             measured = (velocity - previous_velocity) / s.dt - previous_command
-            self.estimate += s.alpha * (measured - self.estimate)
-            np.clip(self.estimate, -s.bound, s.bound, out=self.estimate)
-        command = self.task.reference_acceleration(robot) - self.estimate
+            estimate += self._alpha * (measured - estimate)
+            # the clamp: np.clip's value, without its overhead on a 3-vector
+            np.minimum(estimate, self._bound, out=estimate)
+            np.maximum(estimate, -self._bound, out=estimate)
+        command = self.task.reference_acceleration(robot) - estimate
         self._previous = (velocity, command)
         robot.cache[self._key] = command
         return command
