@@ -62,29 +62,30 @@ def site_in_axle_frame(robot: RobotModel, site: int) -> tuple[Array, Array, Arra
     if cached is not None:
         return cached  # type: ignore[return-value]
     m, d, lay = robot.model, robot.data, robot.layout
-    jacp = np.zeros((3, m.nv))
-    jacr = np.zeros((3, m.nv))
-    mujoco.mj_jacSite(m, d, jacp, jacr, site)
+    # [jacp; jacr] in one buffer: one product with J_tf for both
+    jac = np.empty((6, m.nv))
+    mujoco.mj_jacSite(m, d, jac[:3], jac[3:], site)
     origin = d.xpos[lay.base_body]
     origin_jac = robot.cache.get("origin_jacobian")
     if origin_jac is None:
         origin_jac = np.zeros((3, m.nv))
         mujoco.mj_jac(m, d, origin_jac, None, origin, lay.base_body)
         robot.cache["origin_jacobian"] = origin_jac
-    J = robot.J_tf
+    jac[:3] -= origin_jac
+    JJ = jac @ robot.J_tf
     if lay.index_psi is None:  # planar: the axle frame is the world's (Rh = I)
         rel = d.site_xpos[site] - origin
-        Jp = (jacp - origin_jac) @ J
-        Jr = jacr @ J
+        Jp, Jr = JJ[:3], JJ[3:]
         R = d.site_xmat[site].reshape(3, 3).copy()
     else:
         Rt = robot.heading_rotation.T
         rel = Rt @ (d.site_xpos[site] - origin)
-        Jp = Rt @ ((jacp - origin_jac) @ J)
-        Jr = Rt @ (jacr @ J)
+        Jp = Rt @ JJ[:3]
+        Jr = Rt @ JJ[3:]
         ipsi = lay.index_psi
-        Jp[0, ipsi] += rel[1]
-        Jp[1, ipsi] -= rel[0]
+        x, y, _ = rel.tolist()
+        Jp[0, ipsi] += y
+        Jp[1, ipsi] -= x
         Jr[2, ipsi] -= 1.0
         R = Rt @ d.site_xmat[site].reshape(3, 3)
     robot.cache[key] = (rel, R, Jp, Jr)
