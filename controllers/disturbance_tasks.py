@@ -95,8 +95,13 @@ class DisturbanceRejectingTask:
         self.settings = settings
         self.name = task.name
         self.estimate = np.zeros(len(task.weights()))
-        self._previous: tuple[Array, Array] | None = None  # (task velocity, commanded xdd*)
+        # (task velocity, commanded xdd*) of the last step, as lists of floats
+        self._previous: tuple[list[float], list[float]] | None = None
         self._key = ("disturbance_rejecting_task", id(self))
+        self._alpha = settings.alpha
+        self._bound = settings.bound
+        # the wrapped task's own J nu when it has one (shared with its PD law), else J @ nu
+        self._velocity = getattr(task, "velocity", None)
 
     def restart(self) -> None:
         """Forget the last step (after a reset, or a jump in the state); keep the estimate."""
@@ -119,14 +124,21 @@ class DisturbanceRejectingTask:
         cached = robot.cache.get(self._key)
         if cached is not None:
             return cached  # type: ignore[return-value]
-        velocity = self.task.jacobian(robot) @ robot.nu
-        s = self.settings
+        velocity = (self._velocity(robot) if self._velocity is not None
+                    else self.task.jacobian(robot) @ robot.nu).tolist()  # fmt: skip
+        estimate = self.estimate
         if self._previous is not None:
+            # per component in Python floats (the same IEEE arithmetic as NumPy's, without a
+            # NumPy call per operation on a 3-vector); the clamp is np.clip's
             previous_velocity, previous_command = self._previous
-            measured = (velocity - previous_velocity) / s.dt - previous_command
-            self.estimate += s.alpha * (measured - self.estimate)
-            np.clip(self.estimate, -s.bound, s.bound, out=self.estimate)
-        command = self.task.reference_acceleration(robot) - self.estimate
-        self._previous = (velocity, command)
+            dt, alpha, bound = self.settings.dt, self._alpha, self._bound
+            values = estimate.tolist()
+            for i, value in enumerate(values):
+                measured = (velocity[i] - previous_velocity[i]) / dt - previous_command[i]
+                value += alpha * (measured - value)
+                values[i] = min(max(value, -bound), bound)
+            estimate[:] = values
+        command = self.task.reference_acceleration(robot) - estimate
+        self._previous = (velocity, command.tolist())
         robot.cache[self._key] = command
         return command

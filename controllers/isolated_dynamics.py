@@ -66,24 +66,30 @@ def isolated_dynamics(robot: RobotModel) -> IsolatedDynamics:
     n = lay.n_min
     if lay.index_x != 0:
         raise ValueError("isolated_dynamics expects x as the first minimal coordinate")
-    a_xx = A[0, 0]
+    a_xx = float(A[0, 0])
     a_xq = A[1:, 0]
-    h_x, h_q = h[0], h[1:]
+    h_x, h_q = float(h[0]), h[1:]
     r = lay.wheel_radius
     k = lay.index_q1 - 1  # q1's place inside q (x removed)
-    A_star = A[1:, 1:] - np.outer(a_xq, a_xq) / a_xx
-    alpha = a_xq[k] / (r * a_xx)
+    # A* = A_qq - a_xq a_xq^T / a_xx (outer products by broadcasting: np.outer's arithmetic,
+    # without its overhead; temporaries updated in place)
+    outer = a_xq[:, None] * a_xq
+    outer /= a_xx
+    A_star = A[1:, 1:] - outer
+    alpha = float(a_xq[k]) / (r * a_xx)
     beta = 1.0 / (1.0 + alpha)
     # (I - beta Bm) M = M - beta a_xq M[k] / (R a_xx), Bm = a_xq e_k^T / (R a_xx)
     scale = beta / (r * a_xx)
-    calA = A_star - scale * np.outer(a_xq, A_star[k])
+    outer = np.multiply(a_xq[:, None], A_star[k], out=outer)
+    outer *= scale
+    calA = A_star - outer
     h_star = h_q - a_xq * h_x / a_xx
-    Ph = h_star - scale * a_xq * h_star[k]
+    Ph = h_star - scale * a_xq * float(h_star[k])
     # xdd = (-tau_1 / R - a_xq^T qdd - h_x) / a_xx with tau_1 = calA[k] qdd + Ph[k]
-    E = np.eye(n, n - 1, k=-1)
+    E = _shift(n).copy()
     e = np.zeros(n)
     E[0] = (-calA[k] / r - a_xq) / a_xx
-    e[0] = (-Ph[k] / r - h_x) / a_xx
+    e[0] = (-float(Ph[k]) / r - h_x) / a_xx
     index_psi = None if lay.index_psi is None else lay.index_psi - 1
     return IsolatedDynamics(
         calA=calA, Ph=Ph, E=E, e=e, q_indices=_q_indices(n), index_q1=k, index_psi=index_psi
@@ -91,6 +97,16 @@ def isolated_dynamics(robot: RobotModel) -> IsolatedDynamics:
 
 
 _Q_INDICES: dict[int, Array] = {}
+_SHIFTS: dict[int, Array] = {}
+
+
+def _shift(n: int) -> Array:
+    """``np.eye(n, n - 1, k=-1)`` (E's rows below x), made once per size, read-only."""
+    if n not in _SHIFTS:
+        shift = np.eye(n, n - 1, k=-1)
+        shift.flags.writeable = False
+        _SHIFTS[n] = shift
+    return _SHIFTS[n]
 
 
 def _q_indices(n: int) -> Array:

@@ -33,6 +33,15 @@ Array = NDArray[np.float64]
 Vec = tuple[float, float, float]
 
 
+def _less_wheels(M: float, c: list[float], m_l: float, lw: list[float], m_r: float,
+                 rw: list[float], mass: float) -> Vec:  # fmt: skip
+    """``(M c - m_l lw - m_r rw) / mass`` per component (spelled out: a generator costs more
+    than the arithmetic)."""
+    return ((M * c[0] - m_l * lw[0] - m_r * rw[0]) / mass,
+            (M * c[1] - m_l * lw[1] - m_r * rw[1]) / mass,
+            (M * c[2] - m_l * lw[2] - m_r * rw[2]) / mass)  # fmt: skip
+
+
 class MotionProbe:
     """World velocities and drift accelerations (``nu_dot = 0``) at ``full_state(q, nu)``.
 
@@ -130,16 +139,17 @@ class MotionProbe:
             mass = M - m_l - m_r
             (c, lw, rw) = (self._subtree_com[base].tolist(), self._xipos[wl].tolist(),
                            self._xipos[wr].tolist())  # fmt: skip
-            position = tuple((M * c[i] - m_l * lw[i] - m_r * rw[i]) / mass for i in range(3))
+            position = _less_wheels(M, c, m_l, lw, m_r, rw, mass)
             mujoco.mj_subtreeVel(m, d)
             c, lw, rw = self._subtree_linvel[self._rows].tolist()
-            velocity = tuple((M * c[i] - m_l * lw[i] - m_r * rw[i]) / mass for i in range(3))
+            velocity = _less_wheels(M, c, m_l, lw, m_r, rw, mass)
             self._qacc[:] = self.qacc0
             mujoco.mj_rnePostConstraint(m, d)
             # the linear part of a subtree's net force is sum m_i (a_i - g)
             c, lw, rw = self._cfrc_int[self._rows, 3:].tolist()
             g = self._gravity
-            drift = tuple((c[i] - lw[i] - rw[i]) / mass + g[i] for i in range(3))
+            drift = ((c[0] - lw[0] - rw[0]) / mass + g[0], (c[1] - lw[1] - rw[1]) / mass + g[1],
+                     (c[2] - lw[2] - rw[2]) / mass + g[2])  # fmt: skip
             self._memo[key] = (position, velocity, drift)  # type: ignore[assignment]
         return self._memo[key]  # type: ignore[return-value]
 

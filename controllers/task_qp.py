@@ -122,29 +122,72 @@ class TaskQP:
         self.probe = RobotModel(robot.model)
         self.motion = MotionProbe(robot)
         self._last_actuators: Array | None = None
+        self._J: Array | None = None  # assembly buffers, made by _buffers
+        self._rows = -1
+
+    def _buffers(self, rows: int, n_min: int) -> None:
+        """(Re)allocate the assembly buffers for ``rows`` task rows (once per task set)."""
+        n, m = self.n, self.M_act.shape[0]
+        self._rows = rows
+        self._J = np.zeros((rows, n_min))
+        self._target = np.zeros(rows)
+        self._w = np.zeros(rows)
+        self._bias = np.zeros(rows)
+        self._JE = np.zeros((rows, n))
+        self._Je = np.zeros(rows)
+        self._T = np.zeros((rows, n))
+        self._b = np.zeros(rows)
+        self._H = np.zeros((n, n))
+        self._g = np.zeros(n)
+        self._reg_eye = self.settings.regularization * np.eye(n)
+        n_limit = len(self._C_limit)
+        self._C = np.zeros((m + n_limit, n))
+        self._C[m:] = self._C_limit
+        self._lower = np.zeros(m + n_limit)
+        self._upper = np.zeros(m + n_limit)
+        self._offset = np.zeros(m)
+        self._drift = np.zeros(n_limit)
 
     def task_rows(self, robot: RobotModel, iso: IsolatedDynamics, tasks: Sequence[Task]
                   ) -> tuple[Array, Array]:  # fmt: skip
-        """``T`` and ``b`` of the stacked weighted tasks."""
-        J = np.vstack([task.jacobian(robot) for task in tasks])
-        target = np.concatenate([task.reference_acceleration(robot) for task in tasks])
-        w = np.concatenate([task.weights() for task in tasks])
-        bias = self._jdot_nu(robot, tasks)
-        T = w[:, None] * (J @ iso.E)
-        b = w * (target - bias - J @ iso.e)
+        """``T`` and ``b`` of the stacked weighted tasks (the QP's buffers: overwritten by the
+        next call, copy to keep)."""
+        blocks = [task.jacobian(robot) for task in tasks]
+        rows = sum(len(block) for block in blocks)
+        J = self._J
+        if J is None or self._rows != rows or J.shape[1] != blocks[0].shape[1]:
+            self._buffers(rows, blocks[0].shape[1])
+            J = self._J
+        target, w, bias = self._target, self._w, self._bias
+        start = 0
+        for task, block in zip(tasks, blocks, strict=True):
+            stop = start + len(block)
+            J[start:stop] = block
+            target[start:stop] = task.reference_acceleration(robot)
+            w[start:stop] = task.weights()
+            start = stop
+        self._jdot_nu(robot, tasks, out=bias)
+        T, b = self._T, self._b
+        np.matmul(J, iso.E, out=self._JE)
+        np.multiply(w[:, None], self._JE, out=T)
+        np.matmul(J, iso.e, out=self._Je)
+        np.subtract(target, bias, out=b)
+        b -= self._Je
+        b *= w
         return T, b
 
-    def _jdot_nu(self, robot: RobotModel, tasks: Sequence[Task]) -> Array:
+    def _jdot_nu(self, robot: RobotModel, tasks: Sequence[Task], out: Array | None = None
+                 ) -> Array:  # fmt: skip
         """``Jdot nu`` = d/dt of ``J(q) nu`` at fixed ``nu``: exact from each task's
         ``jdot_nu`` (``controllers.motion_probe``); by a central difference for a task
-        without one."""
+        without one. Written into ``out`` when given."""
         self.motion.update(robot)
         parts = []
         for task in tasks:
             exact = getattr(task, "jdot_nu", None)
             parts.append(exact(self.motion) if exact is not None
                          else self._jdot_nu_fd(robot, [task]))  # fmt: skip
-        return np.concatenate(parts)
+        return np.concatenate(parts, out=out)
 
     def _jdot_nu_fd(self, robot: RobotModel, tasks: Sequence[Task]) -> Array:
         """``Jdot nu`` by a central difference of ``J nu`` between the states
@@ -160,24 +203,42 @@ class TaskQP:
         return (sides[0] - sides[1]) / (2 * eps)
 
     def constraints(self, robot: RobotModel, iso: IsolatedDynamics) -> tuple[Array, Array, Array]:
-        """``C``, ``lower``, ``upper``: the actuator torque rows, then the joint-limit rows."""
-        offset = self.M_act @ iso.Ph
+        """``C``, ``lower``, ``upper``: the actuator torque rows, then the joint-limit rows (the
+        QP's buffers: overwritten by the next call, copy to keep)."""
+        if self._J is None:
+            self._buffers(0, robot.layout.n_min)
+        m = len(self.M_act)
+        offset, drift = self._offset, self._drift
+        C, lower, upper = self._C, self._lower, self._upper
+        np.matmul(self.M_act, iso.Ph, out=offset)
         h = self.settings.limit_horizon
         index = self._limit_index
-        drift = robot.q[index] + robot.nu[index] * h
-        C = np.concatenate((self.M_act @ iso.calA, self._C_limit))
-        lower = np.concatenate((self.torque_low - offset, 2.0 * (self._limit_min - drift) / h**2))
-        upper = np.concatenate((self.torque_high - offset, 2.0 * (self._limit_max - drift) / h**2))
+        # drift = q + nu h; the bounds 2 (q_lim - drift) / h^2
+        np.multiply(robot.nu[index], h, out=drift)
+        drift += robot.q[index]
+        np.matmul(self.M_act, iso.calA, out=C[:m])
+        np.subtract(self.torque_low, offset, out=lower[:m])
+        np.subtract(self.torque_high, offset, out=upper[:m])
+        scale = h**2
+        for bound, limit in ((lower, self._limit_min), (upper, self._limit_max)):
+            rows = bound[m:]
+            np.subtract(limit, drift, out=rows)
+            rows *= 2.0
+            rows /= scale
         return C, lower, upper
 
     def assemble(self, robot: RobotModel, iso: IsolatedDynamics, tasks: Sequence[Task]
                  ) -> tuple[Array, Array, Array, Array, Array]:  # fmt: skip
         """The QP ``min 0.5 qdd' H qdd + g' qdd  s.t.  lower <= C qdd <= upper`` of this state,
         as ``(H, g, C, lower, upper)`` (what ``solve`` hands ProxQP; the benchmark's peers
-        solve the same arrays)."""
+        solve the same arrays). They are the QP's buffers, overwritten by the next call: copy
+        to keep."""
         T, b = self.task_rows(robot, iso, tasks)
-        H = T.T @ T + self.settings.regularization * np.eye(self.n)
-        g = -T.T @ b
+        H, g = self._H, self._g
+        np.matmul(T.T, T, out=H)
+        H += self._reg_eye
+        np.matmul(T.T, b, out=g)
+        np.negative(g, out=g)
         C, lower, upper = self.constraints(robot, iso)
         return H, g, C, lower, upper
 

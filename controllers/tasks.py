@@ -42,36 +42,50 @@ def rotation_error(R: Array, R_target: Array) -> Array:
     return vector
 
 
+def site_velocity_in_axle_frame(robot: RobotModel, site: int) -> tuple[Array, Array]:
+    """``(Jp nu, Jr nu)`` of :func:`site_in_axle_frame`: the site's linear and angular
+    velocity relative to the axle, in the axle frame. Memoised per robot state."""
+    key = ("site_velocity_in_axle_frame", site)
+    cached = robot.cache.get(key)
+    if cached is None:
+        _, _, Jp, Jr = site_in_axle_frame(robot, site)
+        nu = robot.nu
+        cached = robot.cache[key] = (Jp @ nu, Jr @ nu)
+    return cached  # type: ignore[return-value]
+
+
 def site_in_axle_frame(robot: RobotModel, site: int) -> tuple[Array, Array, Array, Array]:
     """Position, rotation, and Jacobians (linear, angular) over ``nu`` of a site in the axle
     frame (which turns with ``psi`` and does not pitch). Memoised per robot state."""
     key = ("site_in_axle_frame", site)
-    if key in robot.cache:
-        return robot.cache[key]  # type: ignore[return-value]
+    cached = robot.cache.get(key)
+    if cached is not None:
+        return cached  # type: ignore[return-value]
     m, d, lay = robot.model, robot.data, robot.layout
-    jacp = np.zeros((3, m.nv))
-    jacr = np.zeros((3, m.nv))
-    mujoco.mj_jacSite(m, d, jacp, jacr, site)
+    # [jacp; jacr] in one buffer: one product with J_tf for both
+    jac = np.empty((6, m.nv))
+    mujoco.mj_jacSite(m, d, jac[:3], jac[3:], site)
     origin = d.xpos[lay.base_body]
     origin_jac = robot.cache.get("origin_jacobian")
     if origin_jac is None:
         origin_jac = np.zeros((3, m.nv))
         mujoco.mj_jac(m, d, origin_jac, None, origin, lay.base_body)
         robot.cache["origin_jacobian"] = origin_jac
-    J = robot.J_tf
+    jac[:3] -= origin_jac
+    JJ = jac @ robot.J_tf
     if lay.index_psi is None:  # planar: the axle frame is the world's (Rh = I)
         rel = d.site_xpos[site] - origin
-        Jp = (jacp - origin_jac) @ J
-        Jr = jacr @ J
+        Jp, Jr = JJ[:3], JJ[3:]
         R = d.site_xmat[site].reshape(3, 3).copy()
     else:
         Rt = robot.heading_rotation.T
         rel = Rt @ (d.site_xpos[site] - origin)
-        Jp = Rt @ ((jacp - origin_jac) @ J)
-        Jr = Rt @ (jacr @ J)
+        Jp = Rt @ JJ[:3]
+        Jr = Rt @ JJ[3:]
         ipsi = lay.index_psi
-        Jp[0, ipsi] += rel[1]
-        Jp[1, ipsi] -= rel[0]
+        x, y, _ = rel.tolist()
+        Jp[0, ipsi] += y
+        Jp[1, ipsi] -= x
         Jr[2, ipsi] -= 1.0
         R = Rt @ d.site_xmat[site].reshape(3, 3)
     robot.cache[key] = (rel, R, Jp, Jr)
@@ -166,9 +180,13 @@ class FramePositionTask:
     def error(self, robot: RobotModel) -> Array:
         return site_in_axle_frame(robot, self.site)[0] - self.target
 
+    def velocity(self, robot: RobotModel) -> Array:
+        """``J nu``: the site's velocity relative to the axle, in the axle frame."""
+        return site_velocity_in_axle_frame(robot, self.site)[0]
+
     def reference_acceleration(self, robot: RobotModel) -> Array:
-        position, _, Jp, _ = site_in_axle_frame(robot, self.site)
-        return -self.kp * (position - self.target) - self.kv * (Jp @ robot.nu)
+        position = site_in_axle_frame(robot, self.site)[0]
+        return -self.kp * (position - self.target) - self.kv * self.velocity(robot)
 
     def weights(self) -> Array:
         return np.full(3, self.weight)
@@ -197,9 +215,13 @@ class FrameOrientationTask:
     def error(self, robot: RobotModel) -> Array:
         return rotation_error(site_in_axle_frame(robot, self.site)[1], self.target)
 
+    def velocity(self, robot: RobotModel) -> Array:
+        """``J nu``: the site's angular velocity relative to the axle frame, in it."""
+        return site_velocity_in_axle_frame(robot, self.site)[1]
+
     def reference_acceleration(self, robot: RobotModel) -> Array:
-        _, R, _, Jr = site_in_axle_frame(robot, self.site)
-        return -self.kp * rotation_error(R, self.target) - self.kv * (Jr @ robot.nu)
+        R = site_in_axle_frame(robot, self.site)[1]
+        return -self.kp * rotation_error(R, self.target) - self.kv * self.velocity(robot)
 
     def weights(self) -> Array:
         return np.full(3, self.weight)
