@@ -111,7 +111,7 @@ class DecoupledMPCController:
         last = self.high_level.last_solution
         self._recorder.record(
             t=self._step * self.task.control_dt, wipm_state=state,
-            wipm_reference=self.plan.window(ref.mpc_index, 1)[0],
+            wipm_reference=self.plan.state(ref.mpc_index),
             theta_d=ref.theta, thetad_d=ref.thetad, thdd_ref=ref.thdd, tau_0=ref.tau_0,
             thdd_command=thdd, torque=clipped, saturated=saturated,
             mpc_rejected=self.high_level.mpc.rejected, mpc_cost=last.cost,

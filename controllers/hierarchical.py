@@ -244,7 +244,7 @@ class HierarchicalController:
         action = np.clip(solution.actuators, self.task.torque_low, self.task.torque_high)
         self._recorder.record(
             t=self._step * self.task.control_dt, wipm_state=wipm_state(robot),
-            wipm_reference=self._plan_state(self._ref.mpc_index),
+            wipm_reference=self.plan.state(self._ref.mpc_index),
             theta_d=self._ref.theta, thetad_d=self._ref.thetad, thdd_ref=self._ref.thdd,
             tau_0=self._ref.tau_0, torque=action, qp_solved=solution.solved,
             qp_iterations=solution.iterations, qp_failures=self.qp.failures,
@@ -253,12 +253,6 @@ class HierarchicalController:
         )  # fmt: skip
         self._step += 1
         return action
-
-    def _plan_state(self, index: int) -> Array:
-        """The plan's state at MPC index ``index``, the goal state past its end (what
-        ``plan.window(index, 1)[0]`` gives, without building the window)."""
-        states = self.plan.states
-        return states[index] if index < len(states) else self.plan.goal_state
 
     @property
     def diagnostics(self) -> dict[str, Array]:

@@ -122,6 +122,11 @@ class Plan:
     def dt(self) -> float:
         return float(self.times[1] - self.times[0])
 
+    def state(self, index: int) -> np.ndarray:
+        """The state at index ``index``, the goal state past the end (``window(index, 1)[0]``
+        without building the window: the controllers record it every control step)."""
+        return self.states[index] if index < len(self.states) else self.goal_state
+
     def window(self, start: int, count: int) -> np.ndarray:
         """``count`` states from index ``start``, padded with the goal state past the end."""
         out = np.tile(self.goal_state, (count, 1))

@@ -36,6 +36,8 @@ def test_planar_plan_arrives_within_bounds() -> None:
     final = plan.states[-1]
     assert abs(final[2] - 2.0) < 0.01 and np.abs(final[[0, 1, 3]]).max() < 0.01
     assert plan.states.shape == (2001, 4) and plan.controls.shape == (2000, 1)
+    for index in (0, 1000, 2000, 2001, 5000):  # inside the plan, its last state, past its end
+        np.testing.assert_array_equal(plan.state(index), plan.window(index, 1)[0])
 
 
 def test_3d_plan_turns_to_an_offset_goal() -> None:
