@@ -37,11 +37,10 @@ import proxsuite
 import quadprog
 import scipy.sparse as sp
 from numpy.typing import NDArray
-from scipy.linalg.lapack import dposv
 from scipy.optimize import minimize
 
 from benchmarks.qp_recording import RecordedQP
-from controllers.task_qp import QPSettings
+from controllers.task_qp import QPSettings, feasible_unconstrained_minimiser, start_proxqp
 
 FloatArray = NDArray[np.float64]
 SOLUTION_TOLERANCE = 1e-6
@@ -89,16 +88,7 @@ class ProxQPOurs(QPSolver):
 
     def solve(self, qp: RecordedQP) -> FloatArray:
         if self._qp is None:
-            self._qp = proxsuite.proxqp.dense.QP(qp.n, 0, qp.m)
-            self._qp.settings.eps_abs = self.qp_settings.eps_abs
-            self._qp.settings.eps_rel = 0.0
-            self._qp.settings.max_iter = self.qp_settings.max_iterations
-            self._qp.init(qp.H, qp.g, None, None, qp.C, qp.lower, qp.upper,
-                          compute_preconditioner=False)  # fmt: skip
-            self._qp.solve()
-            self._qp.settings.initial_guess = (
-                proxsuite.proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
-            )
+            self._qp = start_proxqp(qp.H, qp.g, qp.C, qp.lower, qp.upper, self.qp_settings)
         else:
             self._qp.update(H=qp.H, g=qp.g, C=qp.C, l=qp.lower, u=qp.upper)
             self._qp.solve()
@@ -123,11 +113,9 @@ class ControllerPath(ProxQPOurs):
 
     def solve(self, qp: RecordedQP) -> FloatArray:
         if self._qp is not None:
-            _, x, info = dposv(qp.H, -qp.g)
-            if info == 0 and np.isfinite(x).all():
-                Cx = qp.C @ x
-                if (Cx >= qp.lower).all() and (Cx <= qp.upper).all():
-                    return x
+            x = feasible_unconstrained_minimiser(qp.H, qp.g, qp.C, qp.lower, qp.upper)
+            if x is not None:
+                return x
         return super().solve(qp)
 
 

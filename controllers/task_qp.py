@@ -90,6 +90,36 @@ def actuator_map(robot: RobotModel) -> Array:
     return M
 
 
+def feasible_unconstrained_minimiser(H: Array, g: Array, C: Array, lower: Array, upper: Array
+                                     ) -> Array | None:  # fmt: skip
+    """``x = -H^-1 g`` (one LAPACK Cholesky solve; ``H`` is symmetric positive definite, being
+    regularised) when it meets every constraint: then it is the convex QP's exact optimum.
+    None otherwise (the QP needs a solver)."""
+    _, x, info = dposv(H, -g)
+    if info != 0 or not np.isfinite(x).all():
+        return None
+    Cx = C @ x
+    return x if (Cx >= lower).all() and (Cx <= upper).all() else None
+
+
+def start_proxqp(H: Array, g: Array, C: Array, lower: Array, upper: Array,
+                 settings: QPSettings) -> proxsuite.proxqp.dense.QP:  # fmt: skip
+    """A dense ProxQP object for this QP, configured as ``settings`` says, solved once, and
+    set to warm start every later ``update`` + ``solve`` from the previous result."""
+    qp = proxsuite.proxqp.dense.QP(len(g), 0, len(C))
+    qp.settings.eps_abs = settings.eps_abs
+    qp.settings.eps_rel = 0.0
+    # no preconditioner: its scaling, computed once from the first H and kept by update(),
+    # stalls badly conditioned task weightings (a weight-100 theta task alone never converged
+    # with it)
+    qp.settings.max_iter = settings.max_iterations
+    qp.init(H, g, None, None, C, lower, upper, compute_preconditioner=False)
+    qp.solve()
+    # warm start only once a previous result exists (ProxQP 0.8 crashes otherwise)
+    qp.settings.initial_guess = proxsuite.proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
+    return qp
+
+
 class TaskQP:
     """Assemble and solve the task QP for one robot (see the module docstring)."""
 
@@ -245,26 +275,11 @@ class TaskQP:
     def solve(self, robot: RobotModel, iso: IsolatedDynamics, tasks: Sequence[Task]) -> QPSolution:
         H, g, C, lower, upper = self.assemble(robot, iso, tasks)
         if self._qp is not None and self.settings.unconstrained_first:
-            # H is symmetric positive definite (regularised): one LAPACK Cholesky solve
-            _, qdd, info = dposv(H, -g)
-            if info == 0:
-                Cx = C @ qdd
-                if (Cx >= lower).all() and (Cx <= upper).all() and np.isfinite(qdd).all():
-                    return self._solution(iso, qdd, iterations=0)
+            qdd = feasible_unconstrained_minimiser(H, g, C, lower, upper)
+            if qdd is not None:
+                return self._solution(iso, qdd, iterations=0)
         if self._qp is None:
-            self._qp = proxsuite.proxqp.dense.QP(self.n, 0, C.shape[0])
-            self._qp.settings.eps_abs = self.settings.eps_abs
-            self._qp.settings.eps_rel = 0.0
-            # no preconditioner: its scaling, computed once from the first H and kept by
-            # update(), stalls badly conditioned task weightings (a weight-100 theta task alone
-            # never converged with it)
-            self._qp.settings.max_iter = self.settings.max_iterations
-            self._qp.init(H, g, None, None, C, lower, upper, compute_preconditioner=False)
-            self._qp.solve()
-            # warm start only once a previous result exists (ProxQP 0.8 crashes otherwise)
-            self._qp.settings.initial_guess = (
-                proxsuite.proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
-            )
+            self._qp = start_proxqp(H, g, C, lower, upper, self.settings)
         else:
             self._qp.update(H=H, g=g, C=C, l=lower, u=upper)
             self._qp.solve()
