@@ -137,7 +137,6 @@ class TaskQP:
             joint = m.dof_jntid[dof]
             if m.jnt_limited[joint]:
                 limited.append((k + 1 + j, lay.index_q1 + 1 + j, *m.jnt_range[joint]))
-        self._limited = limited
         self.n = lay.n_min - 1
         # the joint-limit rows, vectorised: qdd column, minimal index, range
         columns, indices, q_min, q_max = (np.array(v) for v in zip(*limited, strict=True)) if (
