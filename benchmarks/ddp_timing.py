@@ -16,7 +16,7 @@ from typing import Any
 import jax
 import numpy as np
 
-from benchmarks.solvers import GOALS, krang_params
+from benchmarks.ddp_bench import GOALS, krang_params
 from controllers.mpc import ModelPredictiveController
 from controllers.planning import PlanConfig, plan_to_goal, planning_problem
 from controllers.wipm import WIPMParams

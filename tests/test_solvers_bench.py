@@ -156,3 +156,15 @@ def test_qp_peers_agree_on_a_constrained_qp() -> None:
             active = np.minimum(C @ x_ref - qp.lower, qp.upper - C @ x_ref) <= 1e-9
             assert active.any()
             assert solution_error(solver.solve(qp), x_ref) <= 1e-6, solver.name
+
+
+def test_ddp_timing_script_runs() -> None:
+    """``python -m benchmarks.ddp_timing`` (the DDP alone, caller vs bare compiled call): it
+    runs on the planar problem and its MPC step is traced once."""
+    from benchmarks.ddp_bench import krang_params
+    from benchmarks.ddp_timing import bench
+
+    params, theta0 = krang_params()
+    out = bench("planar", params, theta0, reps=1, mpc_steps=3)
+    assert out["plan_iterations"] >= 1 and out["mpc_traces"] == 1
+    assert all(math.isfinite(v) and v > 0 for k, v in out.items() if k.endswith("_ms"))
