@@ -168,3 +168,11 @@ def test_ddp_timing_script_runs() -> None:
     out = bench("planar", params, theta0, reps=1, mpc_steps=3)
     assert out["plan_iterations"] >= 1 and out["mpc_traces"] == 1
     assert all(math.isfinite(v) and v > 0 for k, v in out.items() if k.endswith("_ms"))
+
+
+def test_first_call_script_runs(capsys: pytest.CaptureFixture[str]) -> None:
+    """``python -m benchmarks.first_call`` plans, steps the MPC and prints both times."""
+    from benchmarks.first_call import main
+
+    main()
+    assert capsys.readouterr().out.startswith("first plan ")

@@ -1,0 +1,34 @@
+"""The first plan and the first MPC step of a new process: compilation, or loading it from JAX's
+persistent cache (issue 6). Planar WIPM with Krang's ``lambda(q)``, goal 2 m.
+
+    WIP_GYM_JAX_CACHE=$(mktemp -d) python -m benchmarks.first_call   # empty cache: compiles
+
+Run it twice with the same directory: the second process loads what the first compiled.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from benchmarks.ddp_bench import GOALS, krang_params
+from controllers.mpc import ModelPredictiveController
+from controllers.planning import plan_to_goal
+
+
+def main() -> None:
+    params, theta0 = krang_params()
+    state = np.array([theta0, 0.0, 0.0, 0.0])
+    start = time.perf_counter()
+    plan = plan_to_goal(state, params, np.asarray(GOALS["planar"]), planar=True)
+    plan_s = time.perf_counter() - start
+    mpc = ModelPredictiveController(plan)
+    start = time.perf_counter()
+    mpc.step(0, plan.states[0], params)
+    mpc_s = time.perf_counter() - start
+    print(f"first plan {plan_s:.2f} s, first MPC step {mpc_s:.2f} s")
+
+
+if __name__ == "__main__":
+    main()
