@@ -26,9 +26,10 @@ THIS_FILE = Path(__file__).resolve()
 
 NUMBER = r"\d+(?:\.\d+)*"
 #: ``docs/NAME.md`` optionally followed by ``§N`` and its continuations; ``#`` and whitespace
-#: may separate the page from its first section (a comment wrapped onto the next line).
+#: may separate the page from its first section (a comment wrapped onto the next line), and a
+#: Markdown link's target may follow the page (``[docs/X.md](docs/X.md) §2``).
 REFERENCE = re.compile(
-    rf"docs/(?P<page>[A-Za-z0-9_\-]+)\.md"
+    rf"docs/(?P<page>[A-Za-z0-9_\-]+)\.md(?:\]\([^)\s]*\))?"
     rf"(?P<sections>(?:[\s#]*§\s*{NUMBER})"
     rf"(?:\s*(?:,|and|to|or|/)\s*§\s*{NUMBER}|-{NUMBER})*)?"
 )
@@ -186,6 +187,8 @@ def docs(tmp_path: Path) -> Path:
     [
         ("docs/GUIDE.md §1", []),
         ("docs/GUIDE.md §1.2 and docs/GUIDE.md", []),
+        ("[docs/GUIDE.md](docs/GUIDE.md) §3", []),
+        ("[docs/GUIDE.md](docs/GUIDE.md) §4", ["no section 4"]),
         ("(docs/GUIDE.md §1, §3)", []),
         ("# wrapped docs/GUIDE.md\n    # §1.2", []),
         ("docs/GUIDE.md §2", ["no section 2"]),
