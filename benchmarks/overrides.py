@@ -95,10 +95,8 @@ def coerce(value: Any, hint: Any, key: str) -> Any:
     ``key`` when it does not fit."""
     result = _coerce(value, hint)
     if result is _MISSING:
-        raise OverrideError(
-            f"{key}: {json.dumps(value) if _jsonable(value) else value!r} is not a "
-            f"{type_name(hint)}"
-        )
+        shown = json.dumps(value) if _jsonable(value) else repr(value)
+        raise OverrideError(f"{key}: {shown} is not a {type_name(hint)}")
     return result
 
 
