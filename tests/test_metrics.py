@@ -164,3 +164,35 @@ def test_episode_seed_is_base_plus_index() -> None:
         episode_seed(0, -1)
     with pytest.raises(ValueError, match="outside"):
         episode_seed(2**32 - 1, 1)
+
+
+def test_a_cup_moved_a_known_distance_over_the_tray_gives_that_slip_distance() -> None:
+    """MuJoCo as referee: the cup is placed 1 mm further along the tray's x axis before each of
+    50 env steps (at rest, in contact); the metric from the env's info is the 5 cm path, up to
+    the physics of the 1 ms steps between placements."""
+    import gymnasium as gym
+    import mujoco
+
+    import wip_gym  # noqa: F401
+
+    env = gym.make("wip_gym/PlanarTray-v0", max_episode_steps=None, terminate_on_cup_loss=False)
+    observation, reset_info = env.reset(seed=0)
+    base = env.unwrapped
+    model, data = base.model, base.data
+    qpos = model.jnt_qposadr[model.joint("cup").id]
+    dof = model.jnt_dofadr[model.joint("cup").id]
+    tray = model.body("tray").id
+    start = np.array(reset_info["cup_offset"])
+    metrics = EpisodeMetrics(base.dt, reset_info, observation)
+    steps, distance = 50, 0.05
+    for k in range(1, steps + 1):
+        target = start + np.array([distance * k / steps, 0.0, 0.0])
+        data.qpos[qpos : qpos + 3] = data.xpos[tray] + data.xmat[tray].reshape(3, 3) @ target
+        data.qvel[dof : dof + 6] = 0.0
+        mujoco.mj_forward(model, data)
+        observation, _, _, _, info = env.step(np.zeros(env.action_space.shape))
+        metrics.update(info, observation)
+    env.close()
+    result = metrics.result()
+    assert result["cup_slip_distance_m"] == pytest.approx(distance, abs=1e-4)
+    assert result["cup_kept"] is True
