@@ -176,7 +176,12 @@ def test_list_keys_prints_every_key_with_type_and_default(
     assert rows["env.cup_friction"].split() == ["float", "0.3"]
     assert rows["env.goal"].endswith("[2.0, 0.0]")
     assert rows["unified.ee_position_weight"].startswith("float")
-    for key in ("plan.a_max", "plan.q_position", "decoupled.q_theta", "unified.theta_kp"):
+    for key in (
+        "plan.a_max",
+        "plan.q_position",
+        "decoupled.posture_frequency_hz",
+        "unified.theta_kp",
+    ):
         assert key in rows, key
     assert not any(key.startswith("decoupled-mpc.") for key in rows)  # only these controllers
     assert not out.exists()

@@ -116,7 +116,7 @@ def test_precedence_defaults_preset_named_flags_then_set() -> None:
         ("unified.theta_kp", 1, "unified.theta_kp"),  # unified is not in this run
         ("decoupled.nope.deeper", 1, "decoupled.nope.deeper"),
         ("decoupled.plan", 1, "decoupled.plan"),  # a whole sub-config
-        ("decoupled.q_theta.x", 1, "decoupled.q_theta.x"),
+        ("decoupled.plan.dt.x", 1, "decoupled.plan.dt.x"),
         ("nothing", 1, "nothing"),
     ],
 )
@@ -134,6 +134,6 @@ def test_sweeps_may_share_keys_of_controllers_not_in_the_run() -> None:
 def test_valid_settings_list_env_plan_and_controller_keys() -> None:
     spec = resolve_run(KRANG, ["decoupled", "unified"])
     keys = valid_settings(KRANG, spec.configs)
-    assert {"env.goal", "plan.a_max", "plan.ddp.max_iterations", "decoupled.q_theta",
+    assert {"env.goal", "plan.a_max", "plan.ddp.max_iterations", "decoupled.posture_frequency_hz",
             "unified.ee_position_weight", "unified.high_level.plan.a_max"} <= set(keys)  # fmt: skip
     assert keys["unified.ee_position_weight"].default == spec.configs["unified"].ee_position_weight
