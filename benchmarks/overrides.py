@@ -87,6 +87,8 @@ def type_name(hint: Any) -> str:
         return "None"
     if isinstance(hint, type) and not typing.get_args(hint):
         return hint.__name__
+    if typing.get_origin(hint) in (typing.Union, types.UnionType):
+        return " | ".join(type_name(arm) for arm in typing.get_args(hint))
     return str(hint).replace("typing.", "").replace("NoneType", "None")
 
 
