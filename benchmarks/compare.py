@@ -1,7 +1,22 @@
 """``wip-bench compare``: scenarios x controllers x seeds, a table, JSON and videos (issue 3).
 
-Episode ``i`` of a run with ``--seed S`` uses seed ``S + i``. Episodes run in parallel in
-spawned processes with ``--jobs`` (JAX does not survive a fork).
+Episode ``i`` of a run with ``--seed S`` uses ``benchmarks.seeding.episode_seed(S, i)`` (= S + i).
+Episodes run in parallel in spawned processes with ``--jobs`` (JAX does not survive a fork).
+Settings resolve in the order defaults, ``--preset``, named flags, ``--set`` (see
+``benchmarks.overrides``; ``--list-keys`` prints every key). Two progress bars: episodes, and
+the simulated seconds of all episodes (it moves inside a long episode).
+
+Outputs in ``--out``: ``episodes.jsonl`` (one line per episode: ``benchmarks.metrics``, the
+controller's ``counters``, timing) and ``summary.json``:
+
+    {"env", "preset", "overrides": {key: value},
+     "scenario": {every env argument in effect, "env", "duration_s", "control_dt_s",
+                  "episodes", "seed", "seeds", "controllers", "preset"},
+     "controllers": {name: {"config": {...resolved config...}, "episodes": n,
+                            "<flag>_rate": {"rate", "ci95": [low, high], "n"} | null,
+                            "<metric>": {"mean", "std", "min", "max", "n"} | null,
+                            "counters": {name: {"mean", "std", "min", "max", "n"}},
+                            "control_time_ms": {"mean", "std", "min", "max", "p99"}}}}
 """
 
 from __future__ import annotations
@@ -9,115 +24,200 @@ from __future__ import annotations
 import argparse
 import json
 import multiprocessing
-from concurrent.futures import ProcessPoolExecutor
+import queue
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 from tqdm import tqdm
 
-from benchmarks.episode import run_episode
-from benchmarks.registry import controller_names
+from benchmarks import controller_shim
+from benchmarks.episode import compare_episode
+from benchmarks.overrides import (
+    RunSpec,
+    config_dict,
+    format_keys,
+    parse_assignment,
+    resolve_run,
+    valid_settings,
+)
+from benchmarks.presets import PRESET_NAMES
 from benchmarks.scenario import (
     DEFAULT_DURATION_S,
     Push,
-    Scenario,
     check_task_flags,
     parse_controllers,
     resolve_env_id,
 )
+from benchmarks.seeding import episode_seed
+from benchmarks.statistics import describe, rate
 
 DEFAULT_ENV = "wip_gym/PlanarTray-v0"
+RATES = ("success", "goal_reached", "cup_kept", "tray_kept", "fell")
+METRICS = (
+    "time_to_goal_s",
+    "final_goal_error_m",
+    "max_tray_tilt_deg",
+    "max_ee_error_m",
+    "max_cup_friction_use",
+    "cup_friction_use_p99",
+    "slipping_time_s",
+    "cup_slip_distance_m",
+    "tray_slip_distance_m",
+    "max_cup_tilt_deg",
+    "cup_lost_at_s",
+    "time_at_actuator_limit_s",
+    "sim_time_s",
+    "real_time_factor",
+    "setup_s",
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--env", default=DEFAULT_ENV, help="env id (wip_gym/NAME or NAME)")
     parser.add_argument(
         "--controllers",
-        default=",".join(controller_names()),
-        help=f"comma-separated, from {controller_names()}",
+        default=",".join(controller_shim.controller_names()),
+        help=f"comma-separated, from {controller_shim.controller_names()}",
     )
     parser.add_argument("--episodes", type=int, default=1)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--preset",
+        choices=PRESET_NAMES,
+        help="a named configuration: paper = the authors' (5 m straight, free tray with rim, "
+        "the configs' .paper())",
+    )
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        dest="overrides",
+        help="env.<argument>, plan.<field> or <controller>.<field.path>; JSON value "
+        "(repeatable; see --list-keys)",
+    )
+    parser.add_argument(
+        "--list-keys", action="store_true", help="print every --set key, its type and default"
+    )
     parser.add_argument("--goal", type=float, nargs="+", metavar=("X", "Y"))
     parser.add_argument(
         "--push",
         help="NEWTONS@SECONDS[:DURATION] along the heading (a backward push: --push=-80@2)",
     )
-    parser.add_argument("--payload", type=float, default=0.0, metavar="KG")
+    parser.add_argument("--payload", type=float, metavar="KG", help="env.payload_mass")
     parser.add_argument(
         "--payload-time",
         type=float,
-        default=0.0,
         metavar="SECONDS",
         help="when the payload appears in the hand (0: from the start)",
     )
     parser.add_argument("--cup-friction", type=float, metavar="MU")
     parser.add_argument("--duration", type=float, default=DEFAULT_DURATION_S, metavar="SECONDS")
-    parser.add_argument("--model", default="nominal", choices=["nominal", "oracle"])
+    parser.add_argument(
+        "--model", choices=["nominal", "oracle"], help="every controller's model (nominal)"
+    )
     parser.add_argument("--jobs", type=int, default=1)
     parser.add_argument("--video", action="store_true", help="mp4 per controller (1st episode)")
     parser.add_argument("--out", default="out/compare")
 
 
-def scenario_from_args(args: argparse.Namespace) -> tuple[Scenario, list[str]]:
-    """Validate the flags; raise ValueError with the valid choices."""
+def named_env_flags(args: argparse.Namespace) -> dict[str, Any]:
+    """The env arguments the named flags set (only those given)."""
+    flags: dict[str, Any] = {}
+    if args.goal is not None:
+        flags["goal"] = args.goal[0] if len(args.goal) == 1 else tuple(args.goal)
+    if args.push:
+        push = Push.parse(args.push)
+        flags.update(push_force=push.force, push_time=push.time, push_duration=push.duration)
+    if args.payload is not None:
+        flags["payload_mass"] = args.payload
+    if args.payload_time is not None:
+        flags["payload_time"] = args.payload_time
+    if args.cup_friction is not None:
+        flags["cup_friction"] = args.cup_friction
+    return flags
+
+
+def spec_from_args(args: argparse.Namespace) -> RunSpec:
+    """Validate the flags and resolve the run; raise ValueError naming the bad flag or key
+    and the valid choices (nothing has run or been written yet)."""
     env_id = resolve_env_id(args.env)
     names = parse_controllers(args.controllers)
     if args.episodes < 1:
         raise ValueError(f"--episodes must be >= 1, got {args.episodes}")
     if args.jobs < 1:
         raise ValueError(f"--jobs must be >= 1, got {args.jobs}")
+    if not (np.isfinite(args.duration) and args.duration > 0):
+        raise ValueError(f"--duration must be positive, got {args.duration}")
     check_task_flags(env_id, args.goal, args.cup_friction)
     for flag, value in (("--payload", args.payload), ("--payload-time", args.payload_time)):
-        if not np.isfinite(value) or value < 0:
+        if value is not None and (not np.isfinite(value) or value < 0):
             raise ValueError(f"{flag} must be finite and >= 0, got {value}")
-    scenario = Scenario(
-        env_id=env_id,
-        goal=tuple(args.goal) if args.goal is not None else None,
-        push=Push.parse(args.push) if args.push else None,
-        payload_mass=args.payload,
-        payload_time=args.payload_time,
-        cup_friction=args.cup_friction,
-        duration=args.duration,
-        model=args.model,
+    overrides = dict(parse_assignment(text) for text in args.overrides)
+    controller_flags = {"model": args.model} if args.model is not None else {}
+    spec = resolve_run(
+        env_id, names, args.preset, named_env_flags(args), controller_flags, overrides
     )
-    scenario.make_env().close()  # the env validates the task values (goal shape, ...)
-    return scenario, names
+    gym.make(env_id, **spec.env_kwargs).close()  # the env validates the values (goal shape)
+    return spec
 
 
-def _stat(values: list[float | None], how: tuple[str, str] = ("mean", "max")) -> Any:
-    present = [v for v in values if v is not None]
-    if not present:
-        return None
-    funcs = {"mean": np.mean, "max": np.max, "p99": lambda v: np.percentile(v, 99)}
-    return {k: float(funcs[k](present)) for k in how}
+def list_keys(args: argparse.Namespace) -> str:
+    """``--list-keys``: every key of this env and these controllers (defaults after the
+    preset)."""
+    env_id = resolve_env_id(args.env)
+    spec = resolve_run(env_id, parse_controllers(args.controllers), args.preset)
+    return format_keys(valid_settings(env_id, spec.configs))
 
 
-def _rate(values: list[bool | None]) -> float | None:
-    present = [v for v in values if v is not None]
-    return float(np.mean(present)) if present else None
+def scenario_record(spec: RunSpec, args: argparse.Namespace, seeds: list[int]) -> dict[str, Any]:
+    """``summary["scenario"]``: every env argument in effect and the run's settings."""
+    env = gym.make(spec.env_id, **spec.env_kwargs)
+    base = env.unwrapped
+    record = spec.env_arguments()
+    record.update(
+        env=spec.env_id,
+        goal=[float(v) for v in base.goal],
+        duration_s=args.duration,
+        control_dt_s=float(base.dt),
+        episodes=args.episodes,
+        seed=args.seed,
+        seeds=seeds,
+        controllers=list(spec.configs),
+        preset=spec.preset,
+    )
+    if "cup_pose" in env.observation_space.spaces:  # a tray task
+        record.setdefault("tray_attachment", "welded")  # shim: the only attachment before free
+    if spec.skipped:
+        record["preset_skipped"] = list(spec.skipped)
+    env.close()
+    return record
 
 
 def summarize(episodes: list[dict[str, Any]], control_times: list[np.ndarray]) -> dict[str, Any]:
+    """Every metric over the episodes with its spread, every flag as a rate with its Wilson
+    95 % interval, the controller's counters, the control time over all steps."""
     times = np.concatenate(control_times) * 1e3
-    sim = sum(e["sim_time_s"] for e in episodes)
-    wall = sum(e["sim_time_s"] / e["real_time_factor"] for e in episodes)
-    return {
-        "episodes": len(episodes),
-        "success_rate": _rate([e["success"] for e in episodes]),
-        "goal_reached_rate": _rate([e["goal_reached"] for e in episodes]),
-        "cup_kept_rate": _rate([e["cup_kept"] for e in episodes]),
-        "fell_rate": _rate([e["fell"] for e in episodes]),
-        "time_to_goal_s": _stat([e["time_to_goal_s"] for e in episodes]),
-        "final_goal_error_m": _stat([e["final_goal_error_m"] for e in episodes]),
-        "max_tray_tilt_deg": _stat([e["max_tray_tilt_deg"] for e in episodes]),
-        "max_ee_error_m": _stat([e["max_ee_error_m"] for e in episodes]),
-        "max_cup_friction_use": _stat([e["max_cup_friction_use"] for e in episodes]),
-        "control_time_ms": {"mean": float(times.mean()), "p99": float(np.percentile(times, 99))},
-        "real_time_factor": float(sim / wall),
-        "setup_s": float(np.mean([e["setup_s"] for e in episodes])),
+    summary: dict[str, Any] = {"episodes": len(episodes)}
+    for flag in RATES:
+        summary[f"{flag}_rate"] = rate([e.get(flag) for e in episodes])
+    for metric in METRICS:
+        summary[metric] = describe([e.get(metric) for e in episodes])
+    counter_names = sorted({k for e in episodes for k in e.get("counters", {})})
+    summary["counters"] = {
+        k: describe([e.get("counters", {}).get(k) for e in episodes]) for k in counter_names
     }
+    summary["control_time_ms"] = {
+        "mean": float(times.mean()),
+        "std": float(times.std()),
+        "min": float(times.min()),
+        "max": float(times.max()),
+        "p99": float(np.percentile(times, 99)),
+    }
+    return summary
 
 
 def _fmt(value: Any, spec: str) -> str:
@@ -127,64 +227,148 @@ def _fmt(value: Any, spec: str) -> str:
 def format_table(summary: dict[str, Any]) -> str:
     header = (
         f"{'controller':<16}{'success':>8}{'goal':>6}{'cup':>6}{'fell':>6}"
-        f"{'t_goal s':>10}{'err m':>8}{'tilt deg':>10}{'fric use':>10}"
-        f"{'ctrl ms':>9}{'RTF':>7}"
+        f"{'t_goal s':>10}{'err m':>8}{'tilt deg':>10}{'fric use':>10}{'slip s':>8}"
+        f"{'slip cm':>9}{'ctrl ms':>9}{'RTF':>7}"
     )
-    lines = [f"{summary['env']}  ({json.dumps(summary['scenario'])})", header, "-" * len(header)]
+    scenario = {k: summary["scenario"][k] for k in ("env", "goal", "duration_s", "preset")}
+    lines = [
+        f"{summary['env']}  {json.dumps(scenario)}  overrides {json.dumps(summary['overrides'])}",
+        "(means over episodes; fric use: peak, mean over episodes)",
+        header,
+        "-" * len(header),
+    ]
     for name, s in summary["controllers"].items():
 
-        def mean(key: str, s: dict[str, Any] = s) -> Any:
-            return None if s[key] is None else s[key]["mean"]
+        def mean(key: str, s: dict[str, Any] = s, scale: float = 1.0) -> Any:
+            return None if s[key] is None else s[key]["mean"] * scale
 
-        def peak(key: str, s: dict[str, Any] = s) -> Any:
-            return None if s[key] is None else s[key]["max"]
+        def share(key: str, s: dict[str, Any] = s) -> Any:
+            return None if s[key] is None else s[key]["rate"]
 
         lines.append(
-            f"{name:<16}{_fmt(s['success_rate'], '.2f'):>8}{_fmt(s['goal_reached_rate'], '.2f'):>6}"
-            f"{_fmt(s['cup_kept_rate'], '.2f'):>6}{_fmt(s['fell_rate'], '.2f'):>6}"
-            f"{_fmt(mean('time_to_goal_s'), '.2f'):>10}{_fmt(peak('final_goal_error_m'), '.3f'):>8}"
-            f"{_fmt(peak('max_tray_tilt_deg'), '.2f'):>10}"
-            f"{_fmt(peak('max_cup_friction_use'), '.2f'):>10}"
-            f"{s['control_time_ms']['mean']:>9.3f}{s['real_time_factor']:>7.2f}"
+            f"{name:<16}{_fmt(share('success_rate'), '.2f'):>8}"
+            f"{_fmt(share('goal_reached_rate'), '.2f'):>6}"
+            f"{_fmt(share('cup_kept_rate'), '.2f'):>6}{_fmt(share('fell_rate'), '.2f'):>6}"
+            f"{_fmt(mean('time_to_goal_s'), '.2f'):>10}{_fmt(mean('final_goal_error_m'), '.3f'):>8}"
+            f"{_fmt(mean('max_tray_tilt_deg'), '.2f'):>10}"
+            f"{_fmt(mean('max_cup_friction_use'), '.2f'):>10}"
+            f"{_fmt(mean('slipping_time_s'), '.3f'):>8}"
+            f"{_fmt(mean('cup_slip_distance_m', scale=100.0), '.2f'):>9}"
+            f"{s['control_time_ms']['mean']:>9.3f}{mean('real_time_factor'):>7.2f}"
         )
     return "\n".join(lines)
 
 
-def run(args: argparse.Namespace) -> dict[str, Any]:
-    scenario, names = scenario_from_args(args)
+class _SimulatedSeconds:
+    """The bar of simulated seconds over all episodes, fed ``(task_index, seconds)`` (counted
+    in whole milliseconds, shown in seconds)."""
+
+    def __init__(self, tasks: int, duration: float) -> None:
+        self.duration_ms = int(round(duration * 1e3))
+        self.done_ms = [0] * tasks
+        self.bar = tqdm(
+            total=tasks * self.duration_ms,
+            desc="simulated",
+            unit="s",
+            unit_scale=1e-3,
+            position=1,
+            leave=False,
+        )
+
+    def __call__(self, report: tuple[int, float]) -> None:
+        index, seconds = report
+        now = min(self.duration_ms, int(round(seconds * 1e3)))
+        if now > self.done_ms[index]:
+            self.bar.update(now - self.done_ms[index])
+            self.done_ms[index] = now
+
+    def finish(self, index: int) -> None:
+        """An episode ended (perhaps early: a fall, a lost cup): count its whole duration."""
+        self((index, self.duration_ms * 1e-3))
+
+    def close(self) -> None:
+        self.bar.close()
+
+
+def _run_tasks(tasks: list[tuple[Any, ...]], jobs: int, duration: float) -> list[Any]:
+    results: list[Any] = [None] * len(tasks)
+    episodes_bar = tqdm(total=len(tasks), desc="episodes", unit="ep", position=0)
+    simulated = _SimulatedSeconds(len(tasks), duration)
+    try:
+        if jobs == 1:
+            for k, task in enumerate(tasks):
+                results[k] = compare_episode(*task, progress=simulated)
+                simulated.finish(k)
+                episodes_bar.update()
+            return results
+        context = multiprocessing.get_context("spawn")
+        with context.Manager() as manager:
+            reports = manager.Queue()
+            with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
+                futures = {
+                    pool.submit(compare_episode, *task, progress=reports): k
+                    for k, task in enumerate(tasks)
+                }
+                pending = set(futures)
+                while pending:
+                    done, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
+                    while True:
+                        try:
+                            simulated(reports.get_nowait())
+                        except queue.Empty:
+                            break
+                    for future in done:
+                        k = futures[future]
+                        results[k] = future.result()
+                        simulated.finish(k)
+                        episodes_bar.update()
+        return results
+    finally:
+        simulated.close()
+        episodes_bar.close()
+
+
+def run(args: argparse.Namespace) -> dict[str, Any] | None:
+    if args.list_keys:
+        print(list_keys(args))
+        return None
+    spec = spec_from_args(args)
+    names = list(spec.configs)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    seeds = [episode_seed(args.seed, i) for i in range(args.episodes)]
     tasks = []
     for name in names:
-        for i in range(args.episodes):
+        for i, seed in enumerate(seeds):
             video = str(out / f"video_{name}.mp4") if (args.video and i == 0) else None
-            tasks.append((scenario, name, args.seed + i, video))
-    results: list[dict[str, Any]] = [{} for _ in tasks]
-    bar = tqdm(total=len(tasks), desc="episodes", unit="ep")
-    if args.jobs == 1:
-        for k, task in enumerate(tasks):
-            results[k] = run_episode(*task)
-            bar.update()
-    else:
-        context = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=args.jobs, mp_context=context) as pool:
-            futures = {pool.submit(run_episode, *task): k for k, task in enumerate(tasks)}
-            for future in futures:
-                results[futures[future]] = future.result()
-                bar.update()
-    bar.close()
+            tasks.append(
+                (
+                    len(tasks),
+                    spec.env_id,
+                    spec.env_kwargs,
+                    name,
+                    spec.configs[name],
+                    seed,
+                    args.duration,
+                    video,
+                )
+            )
+    outcomes = _run_tasks(tasks, args.jobs, args.duration)
+    results = [metrics for metrics, _ in outcomes]
     with open(out / "episodes.jsonl", "w") as f:
         for r in results:
-            f.write(json.dumps({k: v for k, v in r.items() if not k.startswith("_")}) + "\n")
+            f.write(json.dumps(r) + "\n")
     summary: dict[str, Any] = {
-        "env": scenario.env_id,
-        "scenario": scenario.describe(),
+        "env": spec.env_id,
+        "preset": spec.preset,
+        "overrides": spec.overrides,
+        "scenario": scenario_record(spec, args, seeds),
         "controllers": {},
     }
-    summary["scenario"].update(episodes=args.episodes, seed=args.seed, controllers=names)
     for name in names:
-        mine = [r for r in results if r["controller"] == name]
-        summary["controllers"][name] = summarize(mine, [r["_control_times"] for r in mine])
+        mine = [k for k, r in enumerate(results) if r["controller"] == name]
+        stats = summarize([results[k] for k in mine], [outcomes[k][1] for k in mine])
+        summary["controllers"][name] = {"config": config_dict(spec.configs[name]), **stats}
     with open(out / "summary.json", "w") as f:
         json.dump(summary, f, indent=2)
     print(format_table(summary))

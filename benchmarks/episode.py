@@ -1,117 +1,82 @@
-"""One closed-loop episode of a controller on a scenario, and its metrics (README "Metrics")."""
+"""One episode of ``wip-bench compare``: the rollout, with a video and progress reports.
+
+``compare_episode`` is what compare's worker processes run; it is a top-level function with
+picklable arguments (spawned processes), and reports simulated seconds through ``progress``
+(a callable in-process, or a queue across processes).
+"""
 
 from __future__ import annotations
 
-import time
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
+from numpy.typing import NDArray
 
-from benchmarks.registry import make_policy
-from benchmarks.scenario import Scenario
+from benchmarks.metrics import time_to_goal
+from benchmarks.rollout import ProgressHook, rollout
 from wip_gym.video import open_video
 
-GOAL_TOLERANCE_M = 0.05
-STOP_SPEED_M_S = 0.05
 VIDEO_FPS = 30.0
 
-
-def time_to_goal(t: np.ndarray, distance: np.ndarray, speed: np.ndarray) -> float | None:
-    """The earliest time from which the robot stays within 5 cm of the goal and slower than
-    5 cm/s until the episode's end; None if it never does."""
-    ok = (distance < GOAL_TOLERANCE_M) & (speed < STOP_SPEED_M_S)
-    if len(ok) == 0 or not ok[-1]:
-        return None
-    failures = np.flatnonzero(~ok)
-    first = 0 if len(failures) == 0 else failures[-1] + 1
-    return float(t[first])
+__all__ = ["VideoRecorder", "compare_episode", "time_to_goal"]
 
 
-def run_episode(
-    scenario: Scenario,
+class VideoRecorder:
+    """An ``on_step`` hook writing every ``1 / VIDEO_FPS`` s of the episode to an mp4."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self._writer: Any = None
+        self._every = 1
+
+    def __call__(self, env: gym.Env, info: dict[str, Any], step_index: int) -> None:
+        if step_index == 0:
+            self._every = max(1, int(round(1.0 / (VIDEO_FPS * env.unwrapped.dt))))
+            self._writer = open_video(self.path, VIDEO_FPS, env.render())
+        elif step_index % self._every == 0:
+            self._writer.append_data(env.render())
+
+    def close(self) -> None:
+        if self._writer is not None:
+            self._writer.close()
+            self._writer = None
+
+
+def compare_episode(
+    task_index: int,
+    env_id: str,
+    env_kwargs: Mapping[str, Any],
     controller: str,
+    config: Any,
     seed: int,
-    video_path: str | Path | None = None,
-    width: int = 480,
-    height: int = 320,
-) -> dict[str, Any]:
-    """Run one episode; return its metrics (JSON-ready) and the policy's per-step compute
-    times under the private key ``_control_times``."""
-    render = {"render_mode": "rgb_array", "width": width, "height": height} if video_path else {}
-    env = scenario.make_env(**render)
-    setup_start = time.perf_counter()
-    observation, info = env.reset(seed=seed)
-    policy = make_policy(controller, env, scenario.model)
-    policy.reset(observation, info)
-    setup_s = time.perf_counter() - setup_start
-
-    dt = env.unwrapped.dt
-    steps = int(round(scenario.duration / dt))
-    every = max(1, int(round(1.0 / (VIDEO_FPS * dt))))
-    writer = None
+    duration: float,
+    video_path: str | None = None,
+    video_size: tuple[int, int] = (480, 320),
+    progress: Any = None,
+) -> tuple[dict[str, Any], NDArray[np.float64]]:
+    """One rollout; its metrics and per-step control times. ``progress`` is None, a queue
+    (``.put``) or a callable that receives ``(task_index, simulated_s)`` tuples."""
+    kwargs = dict(env_kwargs)
+    recorder = None
     if video_path is not None:
-        writer = open_video(video_path, VIDEO_FPS, env.render())
-    has_cup = "cup_on_tray" in info
-    has_ee = "ee_error" in info
-    times = np.zeros(steps)
-    distance = np.zeros(steps)
-    speed = np.zeros(steps)
-    control_times = np.zeros(steps)
-    fell = False
-    cup_kept = True if has_cup else None
-    max_tilt = info.get("tray_tilt_deg", 0.0) if has_cup else None
-    max_ee = 0.0 if has_ee else None
-    max_friction = 0.0 if has_cup else None
-    loop_time = 0.0
-    n = 0
-    for n in range(steps):
-        tick = time.perf_counter()
-        action = policy(observation)
-        tock = time.perf_counter()
-        observation, _, terminated, truncated, info = env.step(action)
-        loop_time += time.perf_counter() - tick
-        control_times[n] = tock - tick
-        times[n] = (n + 1) * dt
-        distance[n] = info["goal_distance"]
-        speed[n] = abs(info["xd"])
-        fell = fell or info["fallen"]
-        if has_cup:
-            cup_kept = cup_kept and info["cup_on_tray"]
-            max_tilt = max(max_tilt, info["tray_tilt_deg"])
-            max_friction = max(max_friction, info["cup_friction_use"])
-        if has_ee:
-            max_ee = max(max_ee, info["ee_error"])
-        if writer is not None and (n + 1) % every == 0:
-            writer.append_data(env.render())
-        if terminated or truncated:
-            break
-    if writer is not None:
-        writer.close()
-    env.close()
-    n_steps = n + 1
-    reached_at = (
-        None if fell else time_to_goal(times[:n_steps], distance[:n_steps], speed[:n_steps])
-    )
-    goal_reached = reached_at is not None
-    result: dict[str, Any] = {
-        "controller": controller,
-        "seed": seed,
-        "steps": n_steps,
-        "sim_time_s": n_steps * dt,
-        "fell": bool(fell),
-        "goal_reached": goal_reached,
-        "time_to_goal_s": reached_at,
-        "final_goal_error_m": float(distance[n_steps - 1]),
-        "cup_kept": cup_kept,
-        "success": bool(goal_reached and not fell and cup_kept is not False),
-        "max_tray_tilt_deg": max_tilt,
-        "max_ee_error_m": max_ee,
-        "max_cup_friction_use": max_friction,
-        "control_time_ms_mean": float(control_times[:n_steps].mean() * 1e3),
-        "control_time_ms_p99": float(np.percentile(control_times[:n_steps], 99) * 1e3),
-        "real_time_factor": float(n_steps * dt / loop_time),
-        "setup_s": setup_s,
-        "_control_times": control_times[:n_steps],
-    }
-    return result
+        width, height = video_size
+        kwargs.update(render_mode="rgb_array", width=width, height=height)
+        recorder = VideoRecorder(video_path)
+    report: ProgressHook | None = None
+    if progress is not None:
+        send = progress.put if hasattr(progress, "put") else progress
+
+        def report(simulated_s: float) -> None:
+            send((task_index, simulated_s))
+
+    try:
+        episode = rollout(
+            env_id, kwargs, controller, config, seed, duration, on_step=recorder, progress=report
+        )
+    finally:
+        if recorder is not None:
+            recorder.close()
+    return episode.metrics, episode.control_times

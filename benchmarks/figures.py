@@ -35,8 +35,9 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
-from benchmarks.episode import time_to_goal
-from benchmarks.registry import controller_names, make_policy
+from benchmarks.controller_shim import controller_names
+from benchmarks.overrides import resolve_run
+from benchmarks.rollout import rollout
 from benchmarks.scenario import Scenario, check_task_flags, parse_controllers, resolve_env_id
 from controllers.planning import Plan
 from controllers.wipm_problem import PLANAR_STATE, SPATIAL_STATE
@@ -149,7 +150,7 @@ class Run:
             observation at ``times[k]``).
         plan: the offline plan the controller follows, if it has one.
         actuators: actuator names, in action order.
-        fell, cup_lost_at, reached_at: outcome (``reached_at``: ``episode.time_to_goal``).
+        fell, cup_lost_at, reached_at: outcome (``reached_at``: ``metrics.time_to_goal``).
         snapshots: the rendered instants.
     """
 
@@ -310,62 +311,65 @@ def render_snapshots(env: Any, qpos: Array, qvel: Array, com_world: Array, axle_
 
 def run_controller(scenario: Scenario, controller: str, seed: int, width: int, height: int
                    ) -> Run:  # fmt: skip
-    """One seeded episode of ``controller`` on ``scenario``, recorded for the figures."""
-    extra: dict[str, Any] = {"render_mode": "rgb_array", "width": width, "height": height}
+    """One seeded episode of ``controller`` on ``scenario`` (the one rollout, its metrics),
+    recorded for the figures."""
+    env_kwargs: dict[str, Any] = {
+        **scenario.env_kwargs(),
+        "render_mode": "rgb_array",
+        "width": width,
+        "height": height,
+    }
     if "Tray" in scenario.env_id:
-        extra["terminate_on_cup_loss"] = False  # show what happens to the cup
-    env = scenario.make_env(**extra)
-    try:
-        observation, info = env.reset(seed=seed)
-        policy = make_policy(controller, env, scenario.model)
-        policy.reset(observation, info)
+        env_kwargs["terminate_on_cup_loss"] = False  # show what happens to the cup
+    spec = resolve_run(scenario.env_id, [controller], controller_flags={"model": scenario.model})
+    rows: dict[str, list[float]] = {}
+    qpos, qvel, com_world, axle_world = [], [], [], []
+
+    def record(env: Any, info: dict[str, Any], step_index: int) -> None:
         base = env.unwrapped
-        robot = base.robot
+        if step_index == 0:
+            for key, value in info.items():
+                if np.ndim(value) == 0 and not key.startswith("reward"):
+                    rows[key] = []
+        for key, values in rows.items():
+            values.append(float(info[key]))
+        qpos.append(base.data.qpos.copy())
+        qvel.append(base.data.qvel.copy())
+        axle = base.robot.axle_position
+        axle_world.append(axle)
+        com_world.append(axle + base.robot.heading_rotation @ base.robot.com)
+
+    episode = rollout(
+        scenario.env_id,
+        env_kwargs,
+        controller,
+        spec.configs[controller],
+        seed,
+        scenario.duration,
+        on_step=record,
+        keep_env=True,
+    )
+    env = episode.env
+    assert env is not None  # keep_env
+    try:
+        base = env.unwrapped
         dt = float(base.dt)
-        steps = int(round(scenario.duration / dt))
-        scalars = [k for k, v in info.items() if np.ndim(v) == 0 and not k.startswith("reward")]
-        rows: dict[str, list[float]] = {k: [] for k in scalars}
-        qpos, qvel, com_world, axle_world = [], [], [], []
-
-        def record(info: dict[str, Any]) -> None:
-            for key in scalars:
-                rows[key].append(float(info[key]))
-            qpos.append(base.data.qpos.copy())
-            qvel.append(base.data.qvel.copy())
-            axle = robot.axle_position
-            axle_world.append(axle)
-            com_world.append(axle + robot.heading_rotation @ robot.com)
-
-        record(info)
-        fell = False
-        for _ in range(steps):
-            observation, _, terminated, truncated, info = env.step(policy(observation))
-            record(info)
-            fell = bool(info["fallen"])
-            if fell or terminated or truncated:
-                break
         times = np.arange(len(qpos)) * dt
-        series = {k: np.asarray(v) for k, v in rows.items()}
-        cup_lost_at = None
-        if "cup_on_tray" in series and not series["cup_on_tray"].all():
-            cup_lost_at = float(times[np.argmin(series["cup_on_tray"])])
-        reached = None if fell else time_to_goal(
-            times, series["goal_distance"], np.abs(series["xd"])
-        )  # fmt: skip
+        metrics = episode.metrics
         run = Run(
             controller=controller,
             env_id=scenario.env_id,
             goal=base.goal,
             dt=dt,
-            planar=robot.layout.planar,
+            planar=base.robot.layout.planar,
             times=times,
-            info=series,
-            diagnostics=dict(policy.diagnostics),
-            plan=getattr(policy, "plan", None),
+            info={k: np.asarray(v) for k, v in rows.items()},
+            diagnostics=dict(episode.policy.diagnostics),
+            plan=getattr(episode.policy, "plan", None),
             actuators=[base.model.actuator(i).name for i in range(base.model.nu)],
-            fell=fell,
-            cup_lost_at=cup_lost_at,
-            reached_at=reached,
+            fell=bool(metrics["fell"]),
+            cup_lost_at=metrics["cup_lost_at_s"],
+            reached_at=metrics["time_to_goal_s"],
         )
         run.snapshots = render_snapshots(
             env, np.array(qpos), np.array(qvel), np.array(com_world), np.array(axle_world), run

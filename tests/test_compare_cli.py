@@ -3,27 +3,33 @@
 from __future__ import annotations
 
 import json
+import warnings
 from pathlib import Path
 
 import pytest
 
 from benchmarks.cli import main
 
-SUMMARY_KEYS = {
-    "episodes",
-    "success_rate",
-    "goal_reached_rate",
-    "cup_kept_rate",
-    "fell_rate",
+RATE_KEYS = {"success_rate", "goal_reached_rate", "cup_kept_rate", "tray_kept_rate", "fell_rate"}
+METRIC_KEYS = {
     "time_to_goal_s",
     "final_goal_error_m",
     "max_tray_tilt_deg",
     "max_ee_error_m",
     "max_cup_friction_use",
-    "control_time_ms",
+    "cup_friction_use_p99",
+    "slipping_time_s",
+    "cup_slip_distance_m",
+    "tray_slip_distance_m",
+    "max_cup_tilt_deg",
+    "cup_lost_at_s",
+    "time_at_actuator_limit_s",
+    "sim_time_s",
     "real_time_factor",
     "setup_s",
 }
+SUMMARY_KEYS = {"config", "episodes", "counters", "control_time_ms"} | RATE_KEYS | METRIC_KEYS
+SPREAD = {"mean", "std", "min", "max", "n"}
 TIMING_KEYS = {"control_time_ms_mean", "control_time_ms_p99", "real_time_factor", "setup_s"}
 
 
@@ -45,20 +51,36 @@ def test_summary_schema_and_episode_lines(tmp_path: Path) -> None:
         "0.3",
         "--seed",
         "5",
+        "--set",
+        "env.reset_noise_scale=0.02",
     )
     assert summary["env"] == "wip_gym/PlanarTray-v0"
+    assert summary["overrides"] == {"env.reset_noise_scale": 0.02} and summary["preset"] is None
     scenario = summary["scenario"]
-    for key in ("goal", "cup_friction", "payload_mass", "push", "duration_s", "model", "seed"):
-        assert key in scenario
-    assert scenario["cup_friction"] == 0.3 and scenario["model"] == "nominal"
+    for key in ("goal", "cup_friction", "payload_mass", "push_force", "duration_s", "seed",
+                "tray_attachment", "frame_skip", "terminate_on_cup_loss"):  # fmt: skip
+        assert key in scenario, key
+    assert scenario["cup_friction"] == 0.3 and scenario["reset_noise_scale"] == 0.02
+    assert scenario["seeds"] == [5, 6]
     stats = summary["controllers"]["decoupled"]
     assert set(stats) == SUMMARY_KEYS
     assert stats["episodes"] == 2
-    assert set(stats["control_time_ms"]) == {"mean", "p99"}
-    assert set(stats["max_tray_tilt_deg"]) == {"mean", "max"}
+    assert stats["config"]["model"] == "nominal" and "plan" in stats["config"]
+    for key in METRIC_KEYS - {"time_to_goal_s", "cup_lost_at_s"}:
+        assert set(stats[key]) == SPREAD and stats[key]["n"] == 2, key
+        assert stats[key]["min"] <= stats[key]["mean"] <= stats[key]["max"], key
+    for key in RATE_KEYS:
+        assert stats[key]["n"] == 2 and stats[key]["ci95"][0] <= stats[key]["rate"], key
+    assert set(stats["control_time_ms"]) == {"mean", "std", "min", "max", "p99"}
+    assert all(set(v) == SPREAD for v in stats["counters"].values())
     assert stats["time_to_goal_s"] is None  # 0.3 s is too short to arrive
     lines = [json.loads(line) for line in (tmp_path / "episodes.jsonl").read_text().splitlines()]
     assert [line["seed"] for line in lines] == [5, 6]
+    # the summary's spread is that of the episodes' lines
+    peaks = [line["max_cup_friction_use"] for line in lines]
+    assert stats["max_cup_friction_use"]["min"] == min(peaks)
+    assert stats["max_cup_friction_use"]["max"] == max(peaks)
+    assert lines[0]["max_cup_friction_use"] != lines[1]["max_cup_friction_use"]  # seeds differ
 
 
 def test_no_cup_metrics_are_null_without_a_tray(tmp_path: Path) -> None:
@@ -117,3 +139,67 @@ def test_parallel_jobs_give_the_same_numbers(tmp_path: Path) -> None:
 def test_video_is_written(tmp_path: Path) -> None:
     run(tmp_path, "--env", "WIP-v0", "--controllers", "decoupled", "--duration", "0.2", "--video")
     assert (tmp_path / "video_decoupled.mp4").stat().st_size > 1000
+
+
+@pytest.mark.parametrize(
+    ("flags", "message"),
+    [
+        (["--set", "env.nope=1"], "env.nope"),
+        (["--set", "env.cup_friction=abc"], "env.cup_friction"),
+        (["--set", "plan.a_max=[1]"], "plan.a_max"),
+        (["--set", "decoupled.nope=1"], "decoupled.nope"),
+        (["--set", "unified.theta_kp=1"], "unified.theta_kp"),  # not in --controllers
+        (["--set", "env.goal"], "KEY=VALUE"),
+        (["--set", "env.goal=[1, 2]", "--env", "Planar-v0"], "goal"),  # the env rejects it
+    ],
+)
+def test_bad_overrides_exit_2_naming_the_key_and_write_nothing(
+    flags: list[str], message: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "out"
+    with pytest.raises(SystemExit) as exit_info:
+        main(["compare", "--out", str(out), "--controllers", "decoupled", *flags])
+    assert exit_info.value.code == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_list_keys_prints_every_key_with_type_and_default(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "out"
+    main(["compare", "--env", "KrangTray-v0", "--controllers", "decoupled,unified",
+          "--list-keys", "--out", str(out)])  # fmt: skip
+    rows = {
+        line.split()[0]: line.split(None, 1)[1] for line in capsys.readouterr().out.splitlines()
+    }
+    assert rows["env.cup_friction"].split() == ["float", "0.3"]
+    assert rows["env.goal"].endswith("[2.0, 0.0]")
+    assert rows["unified.ee_position_weight"].startswith("float")
+    for key in (
+        "plan.a_max",
+        "plan.q_position",
+        "decoupled.posture_frequency_hz",
+        "unified.theta_kp",
+    ):
+        assert key in rows, key
+    assert not any(key.startswith("decoupled-mpc.") for key in rows)  # only these controllers
+    assert not out.exists()
+
+
+def test_preset_paper_runs_and_records_its_settings(tmp_path: Path) -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # settings the preset cannot apply until env/ctrl land
+        summary = run(
+            tmp_path, "--env", "PlanarTray-v0", "--controllers", "decoupled", "--preset",
+            "paper", "--duration", "0.3", "--cup-friction", "0.4",
+        )  # fmt: skip
+    scenario = summary["scenario"]
+    assert summary["preset"] == "paper" and scenario["preset"] == "paper"
+    assert scenario["goal"] == [5.0, 0.0]  # the preset's 5 m straight
+    assert scenario["cup_friction"] == 0.4  # a named flag beats the preset
+    if "tray_attachment" not in scenario.get("preset_skipped", []):
+        assert scenario["tray_attachment"] == "free" and scenario["tray_rim"] == 0.005
+    stats = summary["controllers"]["decoupled"]
+    assert stats["episodes"] == 1 and stats["fell_rate"]["rate"] == 0.0
+    assert stats["max_cup_friction_use"]["std"] == 0.0  # one episode: spread reported as 0

@@ -4,55 +4,44 @@ the start (the WIP rolls back to lean forward: non-minimum phase) against the re
     python -m tools.lurch_trace --env wip_gym/PlanarTray-v0 --goal 2 --duration 8 \
         --a-max 2.5 --q-position 100 --theta-max 0.3
 
-Every controller gets the same offline plan settings (``PlanConfig``; the flags change
-``a_max``, the running weight on position and ``theta_max`` from their defaults: a faster plan,
-the one knob ``wip-bench compare`` does not expose). Per controller (seed 0, nominal models,
-one episode each, sequentially): the plan's peak acceleration, how far the axle rolls back,
-when it is back at its start (the lurch's end), the peak cup friction use and tray tilt
-during the lurch and after it, and whether the cup stayed on the tray.
+Every controller gets the same offline plan settings (the flags set ``plan.a_max``,
+``plan.q_position`` and ``plan.theta_max``, the keys of ``wip-bench compare --set``; ``--set``
+and ``--preset`` take any other key). The episodes run through the benchmark's one rollout
+(``benchmarks.rollout``), so the cup's metrics are the benchmark's. Per controller (seed 0,
+nominal models, one episode each, sequentially): the plan's peak acceleration, how far the
+axle rolls back, when it is back at its start (the lurch's end), the peak cup friction use
+and tray tilt during the lurch and after it, and whether the cup stayed on the tray.
 """
 
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
-import gymnasium as gym
 import numpy as np
 
-import wip_gym  # noqa: F401
-from controllers.decoupled import DecoupledConfig, DecoupledController
-from controllers.decoupled_mpc import DecoupledMPCConfig, DecoupledMPCController
-from controllers.hierarchical import HierarchicalConfig, HierarchicalController
-from controllers.high_level import HighLevelConfig
-from controllers.planning import PlanConfig
-
-
-def make_policy(name: str, env: gym.Env, plan: PlanConfig):  # noqa: ANN201
-    """The benchmark's controller ``name`` with the plan settings ``plan``."""
-    if name == "decoupled":
-        return DecoupledController.for_env(env, DecoupledConfig(plan=plan))
-    high_level = HighLevelConfig(plan=plan)
-    if name == "decoupled-mpc":
-        return DecoupledMPCController.for_env(env, DecoupledMPCConfig(high_level=high_level))
-    modes = {"unified": "level", "unified-waiter": "specific_force"}
-    config = HierarchicalConfig(tray_mode=modes[name], high_level=high_level)  # type: ignore[arg-type]
-    return HierarchicalController.for_env(env, config)
+from benchmarks.overrides import parse_assignment, resolve_run
+from benchmarks.rollout import rollout
+from benchmarks.scenario import resolve_env_id
 
 
 def trace(env_id: str, controller: str, goal: float, friction: float, seconds: float,
-          plan: PlanConfig) -> dict:  # fmt: skip
-    env = gym.make(env_id, goal=goal, cup_friction=friction)
-    observation, info = env.reset(seed=0)
-    policy = make_policy(controller, env, plan)
-    policy.reset(observation, info)
-    rows = []
-    for n in range(int(round(seconds / env.unwrapped.dt))):
-        observation, _, terminated, _, info = env.step(policy(observation))
-        rows.append(((n + 1) * env.unwrapped.dt, info["x"], info["xd"],
-                     info["cup_friction_use"], info["tray_tilt_deg"]))  # fmt: skip
-        if terminated:
-            break
-    env.close()
+          overrides: dict[str, Any], preset: str | None = None) -> dict:  # fmt: skip
+    """One episode (seed 0) of ``controller``; the lurch's numbers and the time series."""
+    spec = resolve_run(
+        env_id, [controller], preset, {"goal": goal, "cup_friction": friction}, {}, overrides
+    )
+    rows: list[tuple[float, ...]] = []
+
+    def record(env: Any, info: dict[str, Any], step_index: int) -> None:
+        if step_index > 0:
+            rows.append((step_index * env.unwrapped.dt, info["x"], info["xd"],
+                         info["cup_friction_use"], info["tray_tilt_deg"]))  # fmt: skip
+
+    episode = rollout(
+        env_id, spec.env_kwargs, controller, spec.configs[controller], 0, seconds, on_step=record
+    )
+    policy = episode.policy
     t, x, xd, friction_use, tilt = np.array(rows).T
     back = np.flatnonzero((x > 0.0) & (t > t[np.argmin(x)]))
     end = int(back[0]) if len(back) else len(t) - 1
@@ -69,7 +58,7 @@ def trace(env_id: str, controller: str, goal: float, friction: float, seconds: f
         "rest_friction": float(friction_use[rest].max()) if end + 1 < len(t) else float("nan"),
         "rest_tilt_deg": float(tilt[rest].max()) if end + 1 < len(t) else float("nan"),
         "peak_speed": float(xd.max()),
-        "cup_kept": bool(info["cup_on_tray"]),
+        "cup_kept": bool(episode.metrics["cup_kept"]),
         "series": np.array(rows),
     }
 
@@ -98,21 +87,29 @@ def main() -> None:
     parser.add_argument("--cup-friction", type=float, default=0.3)
     parser.add_argument("--duration", type=float, default=8.0)
     parser.add_argument("--controllers", default="decoupled,decoupled-mpc,unified,unified-waiter")
-    parser.add_argument("--a-max", type=float, default=None, help="m/s^2 (default 0.5 mu g)")
-    parser.add_argument("--q-position", type=float, default=PlanConfig.q_position)
-    parser.add_argument("--theta-max", type=float, default=PlanConfig.theta_max)
+    parser.add_argument("--a-max", type=float, help="plan.a_max, m/s^2 (default: cup-safe)")
+    parser.add_argument("--q-position", type=float, help="plan.q_position")
+    parser.add_argument("--theta-max", type=float, help="plan.theta_max, rad")
+    parser.add_argument("--preset", help="a wip-bench compare preset (paper)")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        dest="overrides", help="a wip-bench compare --set key")  # fmt: skip
     parser.add_argument("--trace", default="", help="controllers whose time series to print")
     parser.add_argument("--window", default="0:2", help="START:STOP s of the time series")
     parser.add_argument("--every", type=float, default=0.05, help="s between rows")
     args = parser.parse_args()
-    plan = PlanConfig(a_max=args.a_max, q_position=args.q_position, theta_max=args.theta_max)
+    env_id = resolve_env_id(args.env)
+    overrides = {f"plan.{name}": value for name, value in (
+        ("a_max", args.a_max), ("q_position", args.q_position), ("theta_max", args.theta_max),
+    ) if value is not None}  # fmt: skip
+    overrides.update(parse_assignment(text) for text in args.overrides)
     header = ("controller", "plan peak a", "roll back cm", "lurch ends s", "lurch: friction (at s)",
               "lurch: tilt deg", "after: friction", "after: tilt deg", "peak xd",
               "cup kept")  # fmt: skip
     print("| " + " | ".join(header) + " |")
     print("|" + "---|" * len(header))
     for name in args.controllers.split(","):
-        r = trace(args.env, name, args.goal, args.cup_friction, args.duration, plan)
+        r = trace(env_id, name, args.goal, args.cup_friction, args.duration, overrides,
+                  args.preset)  # fmt: skip
         if r["plan_violations"]:
             print(f"plan violations: {r['plan_violations']}")
         print(f"| {name} | {r['plan_peak_a']:.2f} | {r['roll_back_cm']:.1f} | "

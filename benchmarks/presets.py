@@ -1,0 +1,48 @@
+"""Named scenario presets of ``wip-bench compare --preset``: the env side (the controllers'
+side is each config's constructor of the same name, ``default_config(name, preset=...)``).
+
+``paper``: the comparison as the authors ran it (docs/AUTHORS_CONFIG.md §5.3): a 5 m drive
+straight ahead; in tray tasks the tray a free body resting on the hand(s) with a 5 mm rim,
+friction 0.3 tray-cup and tray-hand. The plan and controller settings (the authors' DDP weights,
+no acceleration cap, the unified controller's task weights) come from ``Config.paper()``.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Mapping
+from typing import Any
+
+PRESET_NAMES = ("paper",)
+
+PAPER_GOAL_M = 5.0  # docs/AUTHORS_CONFIG.md §5.3: 5 m straight ahead
+PAPER_TRAY = {  # docs/AUTHORS_CONFIG.md §5.3: the authors' tray and cup
+    "tray_attachment": "free",
+    "tray_rim": 0.005,
+    "cup_friction": 0.3,
+    "tray_friction": 0.3,
+}
+
+
+def env_arguments(
+    preset: str | None, env_id: str, settings: Mapping[str, Any]
+) -> tuple[dict[str, Any], list[str]]:
+    """The preset's env arguments for ``env_id`` (``settings``: its ``env.<argument>`` keys)
+    and the names of those this env does not accept (skipped with a warning)."""
+    if preset is None:
+        return {}, []
+    if preset not in PRESET_NAMES:
+        raise ValueError(f"unknown preset {preset!r}; valid: {list(PRESET_NAMES)}")
+    from benchmarks.overrides import is_planar
+
+    wanted: dict[str, Any] = {"goal": PAPER_GOAL_M if is_planar(env_id) else (PAPER_GOAL_M, 0.0)}
+    if "env.cup_friction" in settings and "Tray" in env_id:
+        wanted.update(PAPER_TRAY)
+    accepted = {k: v for k, v in wanted.items() if f"env.{k}" in settings}
+    skipped = [k for k in wanted if k not in accepted]
+    if skipped:
+        warnings.warn(
+            f"{env_id} does not take {skipped} yet: --preset {preset} runs without them",
+            stacklevel=2,
+        )
+    return accepted, skipped
