@@ -6,6 +6,8 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import signal
+import threading
 import time
 from pathlib import Path
 
@@ -206,3 +208,40 @@ def test_the_interim_runner_applies_env_and_plan_keys_and_rejects_others():
     for bad in ({"env.bogus": 1}, {"plan.bogus": 1}, {"decoupled.bogus": 1}, {"bogus": 1}):
         with pytest.raises(ValueError, match="bogus"):
             run_configured_episode("wip_gym/PlanarTray-v0", "decoupled", bad, 5, 0.2)
+
+
+def test_ctrl_c_loses_only_the_episodes_in_flight(cluster, tmp_path):
+    spec = parse_spec(SPEC.replace("seeds = 2", "seeds = 4"))  # 16 episodes
+
+    def slow(job):
+        time.sleep(0.5)
+        return {"success": True, "max_cup_friction_use": 0.1}
+
+    timer = threading.Timer(2.5, lambda: os.kill(os.getpid(), signal.SIGINT))
+    timer.start()
+    summary = run_sweep(spec, tmp_path, workers=2, episode_fn=slow, progress=False)
+    timer.join()
+    rows = read_rows(tmp_path)
+    assert summary["interrupted"] is True
+    assert 0 < len(rows) < 16
+    assert all(r["status"] == "ok" for r in rows)
+    assert summary["episodes_missing"] == 16 - len(rows)
+    resumed = run_sweep(spec, tmp_path, workers=2, episode_fn=slow, progress=False)
+    assert resumed["episodes_run"] == 16 - len(rows)
+    assert len({r["id"] for r in read_rows(tmp_path)}) == len(read_rows(tmp_path)) == 16
+
+
+def test_a_worker_that_dies_is_retried(cluster, tmp_path):
+    spec = parse_spec(SPEC.replace("seeds = 2", "seeds = 1").replace(', "unified"', ""))
+    marker = tmp_path / "died_once"
+
+    def dies_once(job):
+        if job["cell"]["env.cup_friction"] == 0.2 and not marker.exists():
+            marker.touch()
+            os._exit(1)  # the worker process dies mid-episode
+        return {"success": True}
+
+    summary = run_sweep(spec, tmp_path / "out", workers=2, episode_fn=dies_once, progress=False)
+    assert marker.exists()
+    assert summary["episodes_failed"] == 0 and summary["episodes_ok"] == 2
+    assert len(read_rows(tmp_path / "out")) == 2
