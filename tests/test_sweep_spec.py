@@ -10,7 +10,7 @@ import pytest
 
 from benchmarks.cli import main
 from benchmarks.sweep.keys import validate_key
-from benchmarks.sweep.report import build_summary
+from benchmarks.sweep.report import write_report
 from benchmarks.sweep.spec import SpecError, parse_spec
 from benchmarks.sweep.stats import paired_success_difference, wilson_interval
 from benchmarks.sweep.store import cut_torn_tail, read_rows
@@ -219,7 +219,7 @@ def _row(identity: str, commit: str, status: str = "ok") -> dict:
     }
 
 
-def test_the_report_says_when_commits_are_mixed_and_the_store_survives_a_torn_line(tmp_path):
+def test_the_report_says_when_commits_are_mixed_and_survives_a_torn_line(tmp_path):
     spec = parse_spec(ISSUE_SPEC, validate_env=False)
     episodes = spec.episodes()
     with open(tmp_path / "episodes.jsonl", "w") as f:
@@ -228,7 +228,10 @@ def test_the_report_says_when_commits_are_mixed_and_the_store_survives_a_torn_li
         f.write(json.dumps(_row(episodes[1].id, "bbb")) + "\n")  # the rerun wins
         f.write('{"id": "torn", "sta')
     assert [r["id"] for r in read_rows(tmp_path)] == [episodes[0].id] + [episodes[1].id] * 2
-    summary = build_summary(spec, None, tmp_path)
+    summary = write_report(spec, tmp_path)
+    assert "rows from more than one commit are mixed" in (tmp_path / "report.md").read_text()
+    for metric in ("success_rate", "max_cup_friction_use"):
+        assert (tmp_path / f"heatmap_{metric}.png").stat().st_size > 0
     assert summary["mixed_commits"] is True
     assert summary["commits"] == ["aaa", "bbb"]
     assert summary["episodes_ok"] == 2

@@ -33,6 +33,12 @@ def _metric(controller: Mapping[str, Any], metric: str) -> float:
     return np.nan if value is None else float(value)
 
 
+def _text_colour(image: Any, value: float) -> str:
+    """Black on light cells, white on dark ones."""
+    red, green, blue, _ = image.cmap(image.norm(value))
+    return "black" if 0.299 * red + 0.587 * green + 0.114 * blue > 0.5 else "white"
+
+
 def _slug(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.=-]+", "_", text).strip("_")
 
@@ -55,6 +61,7 @@ def _heatmaps(spec: SweepSpec, summary: Mapping[str, Any], directory: Path) -> l
                 1,
                 len(spec.controllers),
                 squeeze=False,
+                sharey=True,
                 figsize=(3.2 * len(spec.controllers) + 1.0, 3.2),
             )
             image = None
@@ -69,7 +76,16 @@ def _heatmaps(spec: SweepSpec, summary: Mapping[str, Any], directory: Path) -> l
                 )
                 for i, j in itertools.product(range(len(ys)), range(len(xs))):
                     if np.isfinite(grid[i, j]):
-                        ax.text(j, i, f"{grid[i, j]:.2f}", ha="center", va="center", fontsize=8)
+                        colour = _text_colour(image, grid[i, j])
+                        ax.text(
+                            j,
+                            i,
+                            f"{grid[i, j]:.2f}",
+                            ha="center",
+                            va="center",
+                            fontsize=8,
+                            color=colour,
+                        )
                 ax.set_xticks(range(len(xs)), [str(x) for x in xs])
                 ax.set_yticks(range(len(ys)), [str(y) for y in ys])
                 ax.set_xlabel(x_axis)
