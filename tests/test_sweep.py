@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 import ray
 
+from benchmarks.sweep import runner
 from benchmarks.sweep._shim import run_configured_episode
 from benchmarks.sweep.runner import RAY_TEMP_DIR, run_sweep
 from benchmarks.sweep.spec import parse_spec
@@ -245,3 +246,24 @@ def test_a_worker_that_dies_is_retried(cluster, tmp_path):
     assert marker.exists()
     assert summary["episodes_failed"] == 0 and summary["episodes_ok"] == 2
     assert len(read_rows(tmp_path / "out")) == 2
+
+
+def test_an_episode_deaf_to_the_alarm_is_killed_by_the_driver(cluster, tmp_path, monkeypatch):
+    monkeypatch.setattr(runner, "HARD_LIMIT_MARGIN_S", 2.0)  # hard limit 1.5 * 1 + 2 = 3.5 s
+    spec = parse_spec(
+        SPEC.replace("seeds = 2", "seeds = 1\ntimeout = 1").replace(', "unified"', "")
+    )
+
+    def stuck(job):
+        if job["cell"]["env.cup_friction"] == 0.4:
+            signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGALRM})  # like a long C call
+            time.sleep(60)
+        return {"success": True}
+
+    start = time.monotonic()
+    summary = run_sweep(spec, tmp_path, workers=2, episode_fn=stuck, progress=False)
+    assert time.monotonic() - start < 30
+    rows = {r["cell"]["env.cup_friction"]: r for r in read_rows(tmp_path)}
+    assert rows[0.2]["status"] == "ok"
+    assert rows[0.4]["status"] == "error" and "worker was killed" in rows[0.4]["error"]
+    assert summary["episodes_failed"] == 1
