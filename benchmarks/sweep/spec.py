@@ -16,7 +16,8 @@ Grammar (every table optional except the top-level keys marked required)::
     [random]                             # drawn per episode from its seed
     "env.push_force" = { uniform = [-60.0, 60.0] }   # also loguniform = [lo, hi], choice = [..]
     [report]
-    axes = ["env.cup_friction"]          # one or two grid axes for the plots
+    axes = ["env.cup_friction"]          # one or two grid axes for the plots (default: the
+                                         # grid's axes if it has one or two; else no plots)
 
 A key appears in at most one of ``[set]``, ``[grid]`` and ``[random]``. Values are JSON values
 (finite numbers, strings, booleans, arrays). Every problem raises :class:`SpecError` (a
