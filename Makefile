@@ -1,7 +1,7 @@
 # The two commands that do everything on a fresh machine:
 #   make demo   the main job: wip-bench compare on PlanarTray-v0 (table, summary.json, video)
 #   make test   create .venv if missing, install the project with its pinned deps and the
-#               benchmark peers (the `bench` extra), run pytest
+#               benchmark peers (the `bench` extra) and Ray (the `sweep` extra), run pytest
 VENV   ?= .venv
 PYTHON ?= python3
 PY     := $(VENV)/bin/python
@@ -14,7 +14,7 @@ $(PY):
 	$(PY) -m pip install --quiet --upgrade pip
 
 $(STAMP): pyproject.toml constraints.txt | $(PY)
-	$(PY) -m pip install --quiet -c constraints.txt -e ".[dev,bench]"
+	$(PY) -m pip install --quiet -c constraints.txt -e ".[dev,bench,sweep]"
 	touch $(STAMP)
 
 install: $(STAMP)

@@ -4,6 +4,7 @@ wip-bench compare --env PlanarTray-v0 --controllers decoupled --episodes 3 --vid
 wip-bench figures --env PlanarTray-v0 --out docs/figures
 wip-bench solvers --json out/solvers.json
 wip-bench profile --env KrangTray-v0 --controller unified --json out/profile.json
+wip-bench sweep benchmarks/sweeps/claim_map.toml --out out/claim_map
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import argparse
 import sys
 
 from benchmarks import compare, figures, profile, solvers
+from benchmarks.sweep import cli as sweep_cli
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -29,6 +31,10 @@ def build_parser() -> argparse.ArgumentParser:
         "profile", help="one closed-loop episode's time per control step, part by part"
     )
     profile.add_arguments(profile_parser)
+    sweep_parser = commands.add_parser(
+        "sweep", help="a map over cells x controllers x seeds on Ray (or --report DIR)"
+    )
+    sweep_cli.add_arguments(sweep_parser)
     return parser
 
 
@@ -44,6 +50,8 @@ def main(argv: list[str] | None = None) -> int:
             solvers.run(args)
         elif args.command == "profile":
             profile.run(args)
+        elif args.command == "sweep":
+            return sweep_cli.run(args)
     except ValueError as error:
         parser.error(str(error))  # exits with status 2 and the message
     return 0

@@ -1,0 +1,160 @@
+"""The sweep's plots: heatmaps over the two ``[report]`` axes (one panel per controller, one
+figure per metric and per combination of the other grid axes), or a line plot for one axis."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import re
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from benchmarks.sweep.spec import SweepSpec  # noqa: E402
+
+PLOT_METRICS = {
+    "success_rate": ("success rate", (0.0, 1.0), "RdYlGn"),
+    "max_cup_friction_use": ("mean peak friction use", (0.0, 1.0), "viridis_r"),
+}
+
+
+def _metric(controller: Mapping[str, Any], metric: str) -> float:
+    if metric == "success_rate":
+        value = controller["success_rate"]
+    else:
+        stat = controller["stats"][metric]
+        value = None if stat is None else stat["mean"]
+    return np.nan if value is None else float(value)
+
+
+def _text_colour(image: Any, value: float) -> str:
+    """Black on light cells, white on dark ones."""
+    red, green, blue, _ = image.cmap(image.norm(value))
+    return "black" if 0.299 * red + 0.587 * green + 0.114 * blue > 0.5 else "white"
+
+
+def _slug(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.=-]+", "_", text).strip("_")
+
+
+def _cell_lookup(summary: Mapping[str, Any]) -> dict[str, Mapping[str, Any]]:
+    return {json.dumps(c["parameters"], sort_keys=True): c for c in summary["cells"]}
+
+
+def _heatmaps(spec: SweepSpec, summary: Mapping[str, Any], directory: Path) -> list[str]:
+    x_axis, y_axis = spec.report_axes
+    others = [k for k in spec.grid if k not in spec.report_axes]
+    cells = _cell_lookup(summary)
+    names = []
+    for fixed in itertools.product(*(spec.grid[k] for k in others)):
+        fixed_params = dict(zip(others, fixed, strict=True))
+        suffix = "".join(f"_{k.split('.')[-1]}={v}" for k, v in fixed_params.items())
+        for metric, (label, limits, cmap) in PLOT_METRICS.items():
+            xs, ys = spec.grid[x_axis], spec.grid[y_axis]
+            fig, axes = plt.subplots(
+                1,
+                len(spec.controllers),
+                squeeze=False,
+                sharey=True,
+                figsize=(3.2 * len(spec.controllers) + 1.0, 3.2),
+            )
+            image = None
+            for ax, controller in zip(axes[0], spec.controllers, strict=True):
+                grid = np.full((len(ys), len(xs)), np.nan)
+                for i, y in enumerate(ys):
+                    for j, x in enumerate(xs):
+                        key = json.dumps({**fixed_params, x_axis: x, y_axis: y}, sort_keys=True)
+                        grid[i, j] = _metric(cells[key]["controllers"][controller], metric)
+                image = ax.imshow(
+                    grid, origin="lower", vmin=limits[0], vmax=limits[1], cmap=cmap, aspect="auto"
+                )
+                for i, j in itertools.product(range(len(ys)), range(len(xs))):
+                    if np.isfinite(grid[i, j]):
+                        colour = _text_colour(image, grid[i, j])
+                        ax.text(
+                            j,
+                            i,
+                            f"{grid[i, j]:.2f}",
+                            ha="center",
+                            va="center",
+                            fontsize=8,
+                            color=colour,
+                        )
+                ax.set_xticks(range(len(xs)), [str(x) for x in xs])
+                ax.set_yticks(range(len(ys)), [str(y) for y in ys])
+                ax.set_xlabel(x_axis)
+                ax.set_title(controller, fontsize=10)
+            axes[0][0].set_ylabel(y_axis)
+            fig.colorbar(image, ax=axes[0].tolist(), label=label, shrink=0.9)
+            title = f"{spec.env}: {label}"
+            if fixed_params:
+                title += " (" + ", ".join(f"{k}={v}" for k, v in fixed_params.items()) + ")"
+            fig.suptitle(title, fontsize=10)
+            name = f"heatmap_{metric}{_slug(suffix)}.png"
+            fig.savefig(directory / name, dpi=110, bbox_inches="tight")
+            plt.close(fig)
+            names.append(name)
+    return names
+
+
+def _line_plots(spec: SweepSpec, summary: Mapping[str, Any], directory: Path) -> list[str]:
+    (axis,) = spec.report_axes
+    others = [k for k in spec.grid if k != axis]
+    cells = _cell_lookup(summary)
+    names = []
+    for fixed in itertools.product(*(spec.grid[k] for k in others)):
+        fixed_params = dict(zip(others, fixed, strict=True))
+        values = spec.grid[axis]
+        numeric = all(isinstance(v, int | float) and not isinstance(v, bool) for v in values)
+        xs = np.asarray(values, dtype=float) if numeric else np.arange(len(values))
+        fig, axes = plt.subplots(1, 2, figsize=(9.0, 3.4))
+        for controller in spec.controllers:
+            chosen = [
+                cells[json.dumps({**fixed_params, axis: v}, sort_keys=True)]["controllers"][
+                    controller
+                ]
+                for v in values
+            ]
+            rate = np.array([_metric(c, "success_rate") for c in chosen])
+            ci = np.array([c["success_ci95"] or [np.nan, np.nan] for c in chosen], dtype=float)
+            axes[0].errorbar(
+                xs,
+                rate,
+                yerr=[rate - ci[:, 0], ci[:, 1] - rate],
+                marker="o",
+                capsize=3,
+                label=controller,
+            )
+            friction = [_metric(c, "max_cup_friction_use") for c in chosen]
+            axes[1].plot(xs, friction, marker="o", label=controller)
+        axes[0].set_ylabel("success rate (95 % Wilson)")
+        axes[0].set_ylim(-0.05, 1.05)
+        axes[1].set_ylabel("mean peak friction use")
+        for ax in axes:
+            ax.set_xlabel(axis)
+            if not numeric:
+                ax.set_xticks(xs, [str(v) for v in values])
+        axes[0].legend(fontsize=8)
+        suffix = "".join(f"_{k.split('.')[-1]}={v}" for k, v in fixed_params.items())
+        fig.suptitle(f"{spec.env}" + (f" ({suffix.strip('_')})" if suffix else ""), fontsize=10)
+        name = f"line_{_slug(axis)}{_slug(suffix)}.png"
+        fig.savefig(directory / name, dpi=110, bbox_inches="tight")
+        plt.close(fig)
+        names.append(name)
+    return names
+
+
+def write_plots(spec: SweepSpec, summary: Mapping[str, Any], directory: str | Path) -> list[str]:
+    """The plots' file names (in ``directory``)."""
+    directory = Path(directory)
+    if len(spec.report_axes) == 2:
+        return _heatmaps(spec, summary, directory)
+    if len(spec.report_axes) == 1:
+        return _line_plots(spec, summary, directory)
+    return []
