@@ -14,8 +14,8 @@ from pathlib import Path
 import pytest
 import ray
 
+from benchmarks.rollout import run_configured_episode
 from benchmarks.sweep import runner
-from benchmarks.sweep._shim import run_configured_episode
 from benchmarks.sweep.runner import RAY_TEMP_DIR, run_sweep
 from benchmarks.sweep.spec import parse_spec
 from benchmarks.sweep.store import read_rows
@@ -194,7 +194,7 @@ def test_workers_get_the_jax_settings_before_jax_starts(cluster, tmp_path):
         assert m["cache"] != "None"
 
 
-def test_the_interim_runner_applies_env_and_plan_keys_and_rejects_others():
+def test_the_episode_runner_applies_env_and_plan_keys_and_rejects_others():
     base = {"env.cup_friction": 0.3}
     plain = run_configured_episode("wip_gym/PlanarTray-v0", "decoupled", base, 5, 0.2)
     heavier = run_configured_episode(

@@ -1,8 +1,8 @@
 """The one place the sweep calls the episode runner.
 
 ``run_configured_episode(env_id, controller, overrides, seed, duration, preset)`` returns one
-episode's JSON-ready metrics. Until the project's configured rollout lands it is the interim
-:mod:`benchmarks.sweep._shim`; swapping the import below is the whole change.
+episode's JSON-ready metrics: the project's one rollout (:mod:`benchmarks.rollout`), the same
+function ``wip-bench compare`` runs, so a sweep's metrics are defined where compare's are.
 """
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from benchmarks.sweep._shim import run_configured_episode
+from benchmarks.rollout import run_configured_episode
 
 __all__ = ["run_configured_episode", "run_episode_job"]
 
