@@ -1,0 +1,151 @@
+"""Offscreen frames of a model's state through a named camera, with settings chosen for speed,
+and renderers that close themselves before the interpreter tears EGL down.
+
+Render settings (measured by ``wip-bench render --benchmark``, see ``benchmarks/render.py``):
+shadows and reflections off, no multisample anti-aliasing. The two-light scene keeps links
+apart by shading without shadow maps; the cost of each is in the module's README entry.
+"""
+
+from __future__ import annotations
+
+import atexit
+import weakref
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+
+from wip_gym.camera import COMPUTED_CAMERAS, TrackingCamera, camera_names
+
+
+@dataclass(frozen=True)
+class RenderSettings:
+    """What a frame costs (defaults: the fast settings, chosen in ``benchmarks/render.py``).
+
+    Attributes:
+        shadows: shadow maps for the lights (``mjRND_SHADOW``).
+        reflections: floor reflections (``mjRND_REFLECTION``; the floor is not reflective).
+        offsamples: multisample anti-aliasing samples of the offscreen buffer (0: none).
+        skybox: draw the sky gradient (``mjRND_SKYBOX``).
+    """
+
+    shadows: bool = False
+    reflections: bool = False
+    offsamples: int = 0
+    skybox: bool = True
+
+    def __post_init__(self) -> None:
+        if self.offsamples not in (0, 2, 4, 8, 16):
+            raise ValueError(f"offsamples must be one of 0, 2, 4, 8, 16, got {self.offsamples}")
+
+
+FAST = RenderSettings()
+QUALITY = RenderSettings(shadows=True, reflections=True, offsamples=4)
+
+# Live renderers, closed by the atexit hook before module teardown (which would otherwise
+# free EGL contexts after their library is gone and print tracebacks).
+_LIVE: weakref.WeakSet[FrameRenderer] = weakref.WeakSet()
+
+
+@atexit.register
+def _close_live_renderers() -> None:
+    for renderer in list(_LIVE):
+        renderer.close()
+
+
+def check_size(width: int, height: int) -> None:
+    """A frame size H.264 accepts: positive and even (yuv420p halves both)."""
+    for name, value in (("width", width), ("height", height)):
+        if not isinstance(value, int | np.integer) or value < 2 or value % 2:
+            raise ValueError(f"{name} must be an even integer >= 2 (H.264), got {value!r}")
+
+
+class FrameRenderer:
+    """Renders ``(model, data)`` to RGB arrays through one camera.
+
+    Args:
+        model: the model (its offscreen buffer must be at least ``width`` x ``height``).
+        width, height: frame size in pixels (even, for H.264).
+        camera: ``follow`` (default), ``tray`` or an MJCF camera name.
+        settings: shadows, reflections, anti-aliasing.
+    """
+
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        width: int,
+        height: int,
+        camera: str = "follow",
+        settings: RenderSettings = FAST,
+    ) -> None:
+        check_size(width, height)
+        valid = camera_names(model)
+        if camera not in valid:
+            raise ValueError(f"unknown camera {camera!r}; valid: {valid}")
+        self.model = model
+        self.width, self.height = int(width), int(height)
+        self.camera_name = camera
+        self.settings = settings
+        offsamples = model.vis.quality.offsamples
+        model.vis.quality.offsamples = settings.offsamples
+        model.vis.global_.offwidth = max(model.vis.global_.offwidth, self.width)
+        model.vis.global_.offheight = max(model.vis.global_.offheight, self.height)
+        try:
+            self._renderer: mujoco.Renderer | None = mujoco.Renderer(model, self.height, self.width)
+        finally:
+            model.vis.quality.offsamples = offsamples
+        flags = self._renderer.scene.flags
+        flags[mujoco.mjtRndFlag.mjRND_SHADOW] = settings.shadows
+        flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = settings.reflections
+        flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = settings.skybox
+        self._camera = mujoco.MjvCamera()
+        self._tracking: TrackingCamera | None = None
+        if camera in COMPUTED_CAMERAS:
+            self._tracking = TrackingCamera(model, camera)
+        else:
+            self._camera.type = mujoco.mjtCamera.mjCAMERA_FIXED
+            self._camera.fixedcamid = model.camera(camera).id
+        self._option = mujoco.MjvOption()
+        _LIVE.add(self)
+
+    def render(
+        self, data: mujoco.MjData, hidden_geoms: Iterable[int] = (), depth: bool = False
+    ) -> NDArray[np.uint8] | NDArray[np.float32]:
+        """The frame of the state in ``data`` (its kinematics must be current, e.g. after
+        ``mj_forward`` or a step); ``hidden_geoms`` are left out of the picture (a payload not
+        yet in the hand). ``depth``: the depth image instead (metres)."""
+        if self._renderer is None:
+            raise RuntimeError("render() after close()")
+        if self._tracking is not None:
+            self._tracking.update(self._camera, data, self.width / self.height)
+        renderer = self._renderer
+        renderer.update_scene(data, camera=self._camera, scene_option=self._option)
+        hidden = set(hidden_geoms)
+        if hidden:
+            scene = renderer.scene
+            for i in range(scene.ngeom):
+                geom = scene.geoms[i]
+                if geom.objtype == mujoco.mjtObj.mjOBJ_GEOM and geom.objid in hidden:
+                    geom.rgba[3] = 0.0
+        if depth:
+            renderer.enable_depth_rendering()
+            try:
+                return renderer.render()
+            finally:
+                renderer.disable_depth_rendering()
+        return renderer.render()
+
+    def close(self) -> None:
+        """Free the GL context (idempotent)."""
+        renderer, self._renderer = self._renderer, None
+        if renderer is not None:
+            renderer.close()
+        _LIVE.discard(self)
+
+    def __enter__(self) -> FrameRenderer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
