@@ -34,7 +34,9 @@ class CameraConfig:
     """How the computed cameras frame the robot (chosen by eye on every registered env).
 
     Attributes:
-        height_fraction: the robot's height over the frame's height (the issue's two thirds).
+        height_fraction: the robot's reset height over the frame's height in the look-at plane;
+            its near side is closer, so its silhouette is ~15 % taller (68 % measured at 0.6, the
+            "two thirds of the frame" asked for).
         elevation_deg: ``follow``'s elevation (negative: looking down), a little above the
             axle so the floor's grid shows the motion.
         tray_distance_m: ``tray``'s distance from the plate's top centre.
@@ -42,7 +44,7 @@ class CameraConfig:
         tray_elevation_deg: ``tray``'s elevation (looking down onto the plate).
     """
 
-    height_fraction: float = 2.0 / 3.0
+    height_fraction: float = 0.6
     elevation_deg: float = -12.0
     tray_distance_m: float = 1.1
     tray_azimuth_deg: float = 55.0

@@ -44,15 +44,24 @@ class RenderSettings:
 FAST = RenderSettings()
 QUALITY = RenderSettings(shadows=True, reflections=True, offsamples=4)
 
-# Live renderers, closed by the atexit hook before module teardown (which would otherwise
-# free EGL contexts after their library is gone and print tracebacks).
+# Live renderers, closed at exit. MuJoCo's EGL backend registers ``eglTerminate`` with atexit
+# when it makes its first context; atexit runs last-registered first, so the hook below is
+# registered after that (on the first renderer) and closes every live renderer before EGL
+# terminates. Otherwise their finalizers run after it and print EGL tracebacks.
 _LIVE: weakref.WeakSet[FrameRenderer] = weakref.WeakSet()
+_exit_hook_registered = False
 
 
-@atexit.register
 def _close_live_renderers() -> None:
     for renderer in list(_LIVE):
         renderer.close()
+
+
+def _register_exit_hook() -> None:
+    global _exit_hook_registered
+    if not _exit_hook_registered:
+        atexit.register(_close_live_renderers)
+        _exit_hook_registered = True
 
 
 def check_size(width: int, height: int) -> None:
@@ -108,20 +117,42 @@ class FrameRenderer:
             self._camera.type = mujoco.mjtCamera.mjCAMERA_FIXED
             self._camera.fixedcamid = model.camera(camera).id
         self._option = mujoco.MjvOption()
+        self._scratch = mujoco.MjData(model)
         _LIVE.add(self)
+        _register_exit_hook()  # after the first GL context: runs before eglTerminate
 
     def render(
         self, data: mujoco.MjData, hidden_geoms: Iterable[int] = (), depth: bool = False
     ) -> NDArray[np.uint8] | NDArray[np.float32]:
-        """The frame of the state in ``data`` (its kinematics must be current, e.g. after
-        ``mj_forward`` or a step); ``hidden_geoms`` are left out of the picture (a payload not
-        yet in the hand). ``depth``: the depth image instead (metres)."""
+        """The frame of the state ``data.qpos`` (``data`` itself is not touched: after
+        ``mj_step`` its kinematics belong to the previous positions, so they are recomputed
+        on a private copy); ``hidden_geoms`` are left out of the picture (a payload not yet
+        in the hand). ``depth``: the depth image instead (metres)."""
+        return self.render_qpos(data.qpos, hidden_geoms, depth, data.mocap_pos, data.mocap_quat)
+
+    def render_qpos(
+        self,
+        qpos: NDArray[np.float64],
+        hidden_geoms: Iterable[int] = (),
+        depth: bool = False,
+        mocap_pos: NDArray[np.float64] | None = None,
+        mocap_quat: NDArray[np.float64] | None = None,
+    ) -> NDArray[np.uint8] | NDArray[np.float32]:
+        """The frame of the positions ``qpos`` (the model's full ``nq``): what a replay of a
+        recorded state draws, identical to the live frame of the same state."""
         if self._renderer is None:
             raise RuntimeError("render() after close()")
+        scratch = self._scratch
+        scratch.qpos[:] = qpos
+        if mocap_pos is not None and self.model.nmocap:
+            scratch.mocap_pos[:] = mocap_pos
+            scratch.mocap_quat[:] = mocap_quat
+        mujoco.mj_kinematics(self.model, scratch)
+        mujoco.mj_camlight(self.model, scratch)
         if self._tracking is not None:
-            self._tracking.update(self._camera, data, self.width / self.height)
+            self._tracking.update(self._camera, scratch, self.width / self.height)
         renderer = self._renderer
-        renderer.update_scene(data, camera=self._camera, scene_option=self._option)
+        renderer.update_scene(scratch, camera=self._camera, scene_option=self._option)
         hidden = set(hidden_geoms)
         if hidden:
             scene = renderer.scene

@@ -1,0 +1,293 @@
+"""Videos rendered from a recording (``wip_gym.recording``), never inside the control loop.
+
+The model is rebuilt from the recorded scenario (``gymnasium.make(env_id, **env_kwargs)``) and
+each recorded state is drawn with the same ``FrameRenderer`` the env's ``render()`` uses, so a
+replayed frame equals the live frame of the same state. :func:`render_video` writes one
+episode; :func:`render_grid` puts several (the controllers of one run) side by side in sync,
+one labelled panel each, an episode that ended early holding its last frame.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import imageio.v2 as imageio
+import numpy as np
+from numpy.typing import NDArray
+
+import wip_gym  # noqa: F401  (registers the environments)
+from wip_gym.overlay import OverlayValues, draw_overlay
+from wip_gym.recording import Recording
+from wip_gym.renderer import FAST, FrameRenderer, RenderSettings, check_size
+
+DEFAULT_SIZE = (480, 320)
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """``WxH`` (even integers, for H.264) as ``(width, height)``."""
+    try:
+        width, height = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise ValueError(f"bad size {text!r}: expected WxH, e.g. 480x320") from None
+    check_size(width, height)
+    return width, height
+
+
+def open_video(path: str | Path, fps: float, first_frame: NDArray[np.uint8]) -> Any:
+    """An imageio mp4 writer (H.264, ``veryfast`` preset) with its first frame written; frame
+    sizes must be even (no resizing).
+
+    imageio-ffmpeg starts ffmpeg with ``subprocess`` (fork + exec), which JAX warns about once
+    JAX has started threads; the child execs ffmpeg at once, so the warning is silenced here.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    check_size(first_frame.shape[1], first_frame.shape[0])
+    writer = imageio.get_writer(
+        path,
+        fps=fps,
+        codec="libx264",
+        quality=7,
+        macro_block_size=2,
+        ffmpeg_params=["-preset", "veryfast"],
+    )
+    with warnings.catch_warnings():
+        warnings.filterwarnings(
+            "ignore", message=r"os\.fork\(\) was called", category=RuntimeWarning
+        )
+        writer.append_data(first_frame)
+    return writer
+
+
+def frame_count(recording: Recording, fps: float) -> int:
+    """Frames of the episode's video at ``fps``: one at reset, then one per ``1 / fps`` of the
+    episode (``steps * dt`` long)."""
+    return 1 + int(math.floor(recording.steps * recording.dt * fps + 1e-6))
+
+
+def source_index(recording: Recording, fps: float, j: int) -> int:
+    """The recorded frame shown as frame ``j`` at ``fps``: the one nearest in time to
+    ``j / fps`` (the last one once the episode has ended: it holds)."""
+    times = recording.time
+    target = times[0] + j / fps
+    k = int(np.searchsorted(times, target))
+    if k >= len(times):
+        return len(times) - 1
+    if k > 0 and target - times[k - 1] <= times[k] - target:
+        return k - 1
+    return k
+
+
+def overlay_values(recording: Recording, k: int) -> OverlayValues:
+    """Frame ``k``'s overlay numbers."""
+    t = float(recording.time[k])
+    tilt = float(recording.tray_tilt_deg[k])
+    use = float(recording.friction_use[k])
+    lost_at = recording.cup_lost_at
+    lost = not math.isnan(lost_at) and t >= lost_at
+    return OverlayValues(
+        time=t,
+        goal_distance=float(recording.goal_distance[k]),
+        tray_tilt_deg=None if math.isnan(tilt) else tilt,
+        friction_use=None if math.isnan(use) else use,
+        cup_lost=lost,
+        cup_lost_at=lost_at if lost else None,
+        label=recording.label,
+    )
+
+
+class Replay:
+    """Draws a recording's frames on a model rebuilt from its scenario.
+
+    Args:
+        recording: what to draw.
+        width, height: frame size (even).
+        camera: ``follow``, ``tray`` or an MJCF camera (see ``wip_gym.camera``).
+        overlay: draw the label and numbers (``wip_gym.overlay``).
+        settings: render settings.
+    """
+
+    def __init__(
+        self,
+        recording: Recording,
+        width: int = DEFAULT_SIZE[0],
+        height: int = DEFAULT_SIZE[1],
+        camera: str = "follow",
+        overlay: bool = True,
+        settings: RenderSettings = FAST,
+    ) -> None:
+        self.recording = recording
+        self.overlay = overlay
+        self._env = gym.make(recording.env_id, max_episode_steps=None, **recording.env_kwargs)
+        base = self._env.unwrapped
+        base.reset(seed=0)
+        model = base.model
+        if recording.qpos.shape[1] != model.nq:
+            raise ValueError(
+                f"recording has nq={recording.qpos.shape[1]}, the rebuilt {recording.env_id} "
+                f"model has nq={model.nq}: recorded with another version of the scene"
+            )
+        model.site_pos[model.site("goal").id, :2] = recording.goal
+        self._payload_geoms = [
+            g for g in range(model.ngeom) if model.body(model.geom_bodyid[g]).name == "payload"
+        ]
+        self._renderer = FrameRenderer(model, width, height, camera=camera, settings=settings)
+
+    def frame(self, k: int) -> NDArray[np.uint8]:
+        """Recorded frame ``k``, drawn."""
+        rec = self.recording
+        hidden = () if rec.payload_visible[k] else self._payload_geoms
+        image = self._renderer.render_qpos(rec.qpos[k], hidden)
+        if self.overlay:
+            image = draw_overlay(image, overlay_values(rec, k))
+        return image
+
+    def frames(self, fps: float | None = None, count: int | None = None) -> Iterator[np.ndarray]:
+        """The video's frames at ``fps`` (default: the recording's), ``count`` of them (default:
+        the episode's; more hold the last frame). A recorded frame is drawn once and repeated
+        while it is the one shown."""
+        rec = self.recording
+        fps = rec.fps if fps is None else fps
+        if fps > rec.fps + 1e-9:
+            raise ValueError(
+                f"fps {fps} is above the recording's {rec.fps}: record at a higher rate"
+            )
+        count = frame_count(rec, fps) if count is None else count
+        last_k, image = -1, None
+        for j in range(count):
+            k = source_index(rec, fps, j)
+            if k != last_k:
+                image = self.frame(k)
+                last_k = k
+            yield image
+
+    def close(self) -> None:
+        self._renderer.close()
+        self._env.close()
+
+    def __enter__(self) -> Replay:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def render_video(
+    recording: Recording,
+    path: str | Path,
+    *,
+    size: tuple[int, int] = DEFAULT_SIZE,
+    fps: float | None = None,
+    camera: str = "follow",
+    overlay: bool = True,
+    settings: RenderSettings = FAST,
+) -> int:
+    """Write ``recording`` as an mp4 at ``fps`` (default: the recording's); returns the number
+    of frames written."""
+    fps = recording.fps if fps is None else fps
+    with Replay(recording, *size, camera=camera, overlay=overlay, settings=settings) as replay:
+        frames = replay.frames(fps)
+        written = 1
+        with open_video(path, fps, next(frames)) as writer:
+            for image in frames:
+                writer.append_data(image)
+                written += 1
+    return written
+
+
+def grid_layout(panels: int) -> tuple[int, int]:
+    """``(rows, columns)`` for ``panels`` panels: as square as possible, wider than high."""
+    if panels < 1:
+        raise ValueError(f"a grid needs at least one panel, got {panels}")
+    columns = math.ceil(math.sqrt(panels))
+    return math.ceil(panels / columns), columns
+
+
+def tile(images: Sequence[np.ndarray], rows: int, columns: int) -> NDArray[np.uint8]:
+    """Panels (same size) in row-major order; empty cells black."""
+    height, width = images[0].shape[:2]
+    out = np.zeros((rows * height, columns * width, 3), dtype=np.uint8)
+    for i, image in enumerate(images):
+        r, c = divmod(i, columns)
+        out[r * height : (r + 1) * height, c * width : (c + 1) * width] = image
+    return out
+
+
+def _held(frames: Iterator[np.ndarray], count: int) -> Iterator[np.ndarray]:
+    """``frames`` cut or padded to ``count`` by holding the last one."""
+    produced, last = 0, None
+    for image in frames:
+        if produced >= count:
+            return
+        last = image
+        produced += 1
+        yield image
+    if last is None:
+        raise ValueError("a grid panel has no frames")
+    for _ in range(count - produced):
+        yield last
+
+
+def render_grid(
+    recordings: Sequence[Recording],
+    path: str | Path,
+    *,
+    size: tuple[int, int] = DEFAULT_SIZE,
+    fps: float | None = None,
+    camera: str = "follow",
+    settings: RenderSettings = FAST,
+    panel_videos: Sequence[str | Path] | None = None,
+) -> dict[str, Any]:
+    """Write the recordings side by side in sync (``size`` per panel, each labelled by its
+    recording's label); the video lasts as long as the longest episode, the shorter ones
+    holding their last frame. With ``panel_videos`` (the per-recording mp4s already rendered
+    at this ``size``, ``fps`` and camera), their frames are decoded instead of drawn again.
+    Returns the layout: ``{"frames", "fps", "rows", "columns", "panel_size", "panels"}``."""
+    if not recordings:
+        raise ValueError("render_grid needs at least one recording")
+    fps = recordings[0].fps if fps is None else fps
+    rows, columns = grid_layout(len(recordings))
+    count = max(frame_count(r, fps) for r in recordings)
+    replays: list[Replay] = []
+    readers: list[Any] = []
+    sources: list[Iterator[np.ndarray]] = []
+    try:
+        if panel_videos is not None:
+            if len(panel_videos) != len(recordings):
+                raise ValueError("panel_videos must give one video per recording")
+            for video in panel_videos:
+                reader = imageio.get_reader(video)
+                readers.append(reader)
+                sources.append(_held(iter(reader), count))
+        else:
+            for rec in recordings:
+                replay = Replay(rec, *size, camera=camera, settings=settings)
+                replays.append(replay)
+                sources.append(_held(replay.frames(fps), count))
+        first = tile([next(s) for s in sources], rows, columns)
+        if first.shape[:2] != (rows * size[1], columns * size[0]):
+            raise ValueError(
+                f"panel videos are {first.shape[1] // columns}x{first.shape[0] // rows}, "
+                f"expected {size[0]}x{size[1]}"
+            )
+        with open_video(path, fps, first) as writer:
+            for _ in range(count - 1):
+                writer.append_data(tile([next(s) for s in sources], rows, columns))
+    finally:
+        for replay in replays:
+            replay.close()
+        for reader in readers:
+            reader.close()
+    return {
+        "frames": count,
+        "fps": fps,
+        "rows": rows,
+        "columns": columns,
+        "panel_size": list(size),
+        "panels": [r.label for r in recordings],
+    }
