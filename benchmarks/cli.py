@@ -4,6 +4,7 @@ wip-bench compare --env PlanarTray-v0 --controllers decoupled --episodes 3 --vid
 wip-bench figures --env PlanarTray-v0 --out docs/figures
 wip-bench solvers --json out/solvers.json
 wip-bench profile --env KrangTray-v0 --controller unified --json out/profile.json
+wip-bench render out/compare --camera tray --size 640x480
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from benchmarks import compare, figures, profile, solvers
+from benchmarks import compare, figures, profile, render, solvers
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -29,6 +30,10 @@ def build_parser() -> argparse.ArgumentParser:
         "profile", help="one closed-loop episode's time per control step, part by part"
     )
     profile.add_arguments(profile_parser)
+    render_parser = commands.add_parser(
+        "render", help="re-render a recorded compare run's videos without simulating"
+    )
+    render.add_arguments(render_parser)
     return parser
 
 
@@ -44,6 +49,8 @@ def main(argv: list[str] | None = None) -> int:
             solvers.run(args)
         elif args.command == "profile":
             profile.run(args)
+        elif args.command == "render":
+            render.run(args)
     except ValueError as error:
         parser.error(str(error))  # exits with status 2 and the message
     return 0

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import multiprocessing
+import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
@@ -18,6 +19,7 @@ from tqdm import tqdm
 
 from benchmarks.episode import run_episode
 from benchmarks.registry import controller_names
+from benchmarks.render import VideoJobs, add_video_arguments, recording_file, video_options
 from benchmarks.scenario import (
     DEFAULT_DURATION_S,
     Push,
@@ -56,7 +58,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--duration", type=float, default=DEFAULT_DURATION_S, metavar="SECONDS")
     parser.add_argument("--model", default="nominal", choices=["nominal", "oracle"])
     parser.add_argument("--jobs", type=int, default=1)
-    parser.add_argument("--video", action="store_true", help="mp4 per controller (1st episode)")
+    add_video_arguments(parser, default_kind=None)  # --video [each|grid|both] of the 1st episode
     parser.add_argument("--out", default="out/compare")
 
 
@@ -152,27 +154,39 @@ def format_table(summary: dict[str, Any]) -> str:
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
     scenario, names = scenario_from_args(args)
+    env = scenario.make_env()
+    videos = video_options(args, env.unwrapped.model)
+    env.close()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     tasks = []
     for name in names:
         for i in range(args.episodes):
-            video = str(out / f"video_{name}.mp4") if (args.video and i == 0) else None
-            tasks.append((scenario, name, args.seed + i, video))
+            record = str(recording_file(out, name)) if (videos and i == 0) else None
+            fps = videos.fps if videos else None
+            tasks.append((scenario, name, args.seed + i, record, fps))
+    # videos render from the recordings in another process while the next episodes run
+    jobs = VideoJobs(out, videos) if videos else None
     results: list[dict[str, Any]] = [{} for _ in tasks]
     bar = tqdm(total=len(tasks), desc="episodes", unit="ep")
+
+    def done(k: int, result: dict[str, Any]) -> None:
+        results[k] = result
+        bar.update()
+        if jobs is not None and tasks[k][3] is not None:
+            jobs.submit(tasks[k][1])
+
     if args.jobs == 1:
         for k, task in enumerate(tasks):
-            results[k] = run_episode(*task)
-            bar.update()
+            done(k, run_episode(*task))
     else:
         context = multiprocessing.get_context("spawn")
         with ProcessPoolExecutor(max_workers=args.jobs, mp_context=context) as pool:
             futures = {pool.submit(run_episode, *task): k for k, task in enumerate(tasks)}
             for future in futures:
-                results[futures[future]] = future.result()
-                bar.update()
+                done(futures[future], future.result())
     bar.close()
+    episodes_done = time.perf_counter()
     with open(out / "episodes.jsonl", "w") as f:
         for r in results:
             f.write(json.dumps({k: v for k, v in r.items() if not k.startswith("_")}) + "\n")
@@ -189,7 +203,12 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         json.dump(summary, f, indent=2)
     print(format_table(summary))
     print(f"\nwrote {out / 'summary.json'} and {out / 'episodes.jsonl'}")
-    if args.video:
-        for name in names:
-            print(f"video: {out / f'video_{name}.mp4'}")
+    if jobs is not None:
+        rendered = jobs.finish(names)
+        for video in rendered["videos"]:
+            print(f"video: {video}")
+        print(
+            f"videos: {rendered['render_process_s']:.1f} s of rendering, "
+            f"{time.perf_counter() - episodes_done:.1f} s of it after the last episode"
+        )
     return summary

@@ -10,11 +10,10 @@ import numpy as np
 
 from benchmarks.registry import make_policy
 from benchmarks.scenario import Scenario
-from wip_gym.video import open_video
+from wip_gym.recording import DEFAULT_FPS, EpisodeRecorder
 
 GOAL_TOLERANCE_M = 0.05
 STOP_SPEED_M_S = 0.05
-VIDEO_FPS = 30.0
 
 
 def time_to_goal(t: np.ndarray, distance: np.ndarray, speed: np.ndarray) -> float | None:
@@ -32,14 +31,13 @@ def run_episode(
     scenario: Scenario,
     controller: str,
     seed: int,
-    video_path: str | Path | None = None,
-    width: int = 480,
-    height: int = 320,
+    recording_path: str | Path | None = None,
+    fps: float | None = None,
 ) -> dict[str, Any]:
     """Run one episode; return its metrics (JSON-ready) and the policy's per-step compute
-    times under the private key ``_control_times``."""
-    render = {"render_mode": "rgb_array", "width": width, "height": height} if video_path else {}
-    env = scenario.make_env(**render)
+    times under the private key ``_control_times``. With ``recording_path``, the episode is
+    recorded at ``fps`` (default 30) for its video (``wip_gym.recording``; rendered afterwards)."""
+    env = scenario.make_env()
     setup_start = time.perf_counter()
     observation, info = env.reset(seed=seed)
     policy = make_policy(controller, env, scenario.model)
@@ -48,10 +46,11 @@ def run_episode(
 
     dt = env.unwrapped.dt
     steps = int(round(scenario.duration / dt))
-    every = max(1, int(round(1.0 / (VIDEO_FPS * dt))))
-    writer = None
-    if video_path is not None:
-        writer = open_video(video_path, VIDEO_FPS, env.render())
+    recorder = None
+    if recording_path is not None:
+        rate = DEFAULT_FPS if fps is None else fps
+        recorder = EpisodeRecorder(rate, controller, scenario.env_id, scenario.env_kwargs())
+        recorder.on_reset(env, info)
     has_cup = "cup_on_tray" in info
     has_ee = "ee_error" in info
     times = np.zeros(steps)
@@ -82,12 +81,12 @@ def run_episode(
             max_friction = max(max_friction, info["cup_friction_use"])
         if has_ee:
             max_ee = max(max_ee, info["ee_error"])
-        if writer is not None and (n + 1) % every == 0:
-            writer.append_data(env.render())
+        if recorder is not None:
+            recorder.on_step(env, info, n)
         if terminated or truncated:
             break
-    if writer is not None:
-        writer.close()
+    if recorder is not None:
+        recorder.save(recording_path)
     env.close()
     n_steps = n + 1
     reached_at = (

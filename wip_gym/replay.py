@@ -64,6 +64,19 @@ def open_video(path: str | Path, fps: float, first_frame: NDArray[np.uint8]) -> 
     return writer
 
 
+def read_frames(path: str | Path) -> Iterator[NDArray[np.uint8]]:
+    """The frames of a video, decoded one at a time (ffmpeg started as in :func:`open_video`)."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings(
+            "ignore", message=r"os\.fork\(\) was called", category=RuntimeWarning
+        )
+        reader = imageio.get_reader(path)
+    try:
+        yield from reader.iter_data()
+    finally:
+        reader.close()
+
+
 def frame_count(recording: Recording, fps: float) -> int:
     """Frames of the episode's video at ``fps``: one at reset, then one per ``1 / fps`` of the
     episode (``steps * dt`` long)."""
@@ -254,16 +267,12 @@ def render_grid(
     rows, columns = grid_layout(len(recordings))
     count = max(frame_count(r, fps) for r in recordings)
     replays: list[Replay] = []
-    readers: list[Any] = []
     sources: list[Iterator[np.ndarray]] = []
     try:
         if panel_videos is not None:
             if len(panel_videos) != len(recordings):
                 raise ValueError("panel_videos must give one video per recording")
-            for video in panel_videos:
-                reader = imageio.get_reader(video)
-                readers.append(reader)
-                sources.append(_held(iter(reader), count))
+            sources = [_held(read_frames(video), count) for video in panel_videos]
         else:
             for rec in recordings:
                 replay = Replay(rec, *size, camera=camera, settings=settings)
@@ -281,8 +290,8 @@ def render_grid(
     finally:
         for replay in replays:
             replay.close()
-        for reader in readers:
-            reader.close()
+        for source in sources:
+            source.close()  # closes the decoders
     return {
         "frames": count,
         "fps": fps,

@@ -1,0 +1,247 @@
+"""Videos of a ``wip-bench`` run, rendered from its recordings (``wip_gym.recording``).
+
+``wip-bench compare --video`` records each controller's first episode at the video rate
+(``recording_<controller>.npz`` in the output directory) and hands the recording to a
+rendering process while the next episode runs, so rendering neither touches control timing nor
+waits for the whole run. ``wip-bench render DIR`` draws a recorded run again (another camera,
+size or rate) without simulating:
+
+    wip-bench render out/demo --camera tray --size 640x480 --fps 25
+
+Outputs: ``video_<controller>.mp4`` (``--video each``), ``video_grid.mp4`` with every
+controller side by side in sync (``--video grid``), or both (``--video both``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing
+import os
+import time
+from concurrent.futures import Future, ProcessPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from wip_gym.camera import camera_names
+from wip_gym.recording import DEFAULT_FPS, Recording
+from wip_gym.replay import DEFAULT_SIZE, parse_size, render_grid, render_video
+
+VIDEO_KINDS = ("each", "grid", "both")
+GRID_FILE = "video_grid.mp4"
+
+
+def recording_file(out: Path, controller: str) -> Path:
+    return out / f"recording_{controller}.npz"
+
+
+def video_file(out: Path, controller: str) -> Path:
+    return out / f"video_{controller}.mp4"
+
+
+@dataclass(frozen=True)
+class VideoOptions:
+    """What to render: ``kind`` (``each``: one mp4 per controller, ``grid``: all side by side,
+    ``both``), the frame ``size`` (width, height; per panel in the grid), ``fps``, ``camera``."""
+
+    kind: str = "each"
+    size: tuple[int, int] = DEFAULT_SIZE
+    fps: float = DEFAULT_FPS
+    camera: str = "follow"
+
+    def __post_init__(self) -> None:
+        if self.kind not in VIDEO_KINDS:
+            raise ValueError(f"--video must be one of {list(VIDEO_KINDS)}, got {self.kind!r}")
+        if not self.fps > 0:
+            raise ValueError(f"--fps must be positive, got {self.fps}")
+
+    @property
+    def each(self) -> bool:
+        return self.kind in ("each", "both")
+
+    @property
+    def grid(self) -> bool:
+        return self.kind in ("grid", "both")
+
+
+def add_video_arguments(parser: argparse.ArgumentParser, default_kind: str | None) -> None:
+    """``--video [KIND]``, ``--fps``, ``--size WxH``, ``--camera NAME``."""
+    parser.add_argument(
+        "--video",
+        nargs="?",
+        const="each",
+        default=default_kind,
+        choices=VIDEO_KINDS,
+        help="each: an mp4 per controller (the default with a bare --video); grid: "
+        f"{GRID_FILE}, every controller side by side; both",
+    )
+    parser.add_argument(
+        "--fps",
+        type=float,
+        help=f"video frame rate (compare: {DEFAULT_FPS:g}, also the recording's; render: the "
+        "recording's or lower)",
+    )
+    parser.add_argument(
+        "--size", default="x".join(map(str, DEFAULT_SIZE)), metavar="WxH", help="per panel, even"
+    )
+    parser.add_argument(
+        "--camera", default="follow", help="follow (the robot from its side), tray, or MJCF"
+    )
+
+
+def video_options(
+    args: argparse.Namespace, model: Any, default_fps: float = DEFAULT_FPS
+) -> VideoOptions | None:
+    """The video flags checked against the scenario's ``model`` (None without ``--video``)."""
+    if args.video is None:
+        return None
+    fps = default_fps if args.fps is None else args.fps
+    valid = camera_names(model)
+    if args.camera not in valid:
+        raise ValueError(f"unknown --camera {args.camera!r}; valid: {valid}")
+    return VideoOptions(args.video, parse_size(args.size), fps, args.camera)
+
+
+def _render_one(recording_path: str, video_path: str, options: VideoOptions) -> float:
+    """(In a rendering process.) One controller's video; returns its wall time (s)."""
+    start = time.perf_counter()
+    recording = Recording.load(recording_path)
+    render_video(recording, video_path, size=options.size, fps=options.fps, camera=options.camera)
+    return time.perf_counter() - start
+
+
+def _render_grid(
+    recording_paths: list[str], grid_path: str, options: VideoOptions, panels: list[str] | None
+) -> float:
+    start = time.perf_counter()
+    recordings = [Recording.load(p) for p in recording_paths]
+    layout = render_grid(
+        recordings,
+        grid_path,
+        size=options.size,
+        fps=options.fps,
+        camera=options.camera,
+        panel_videos=panels,
+    )
+    Path(grid_path).with_suffix(".json").write_text(json.dumps(layout, indent=2) + "\n")
+    return time.perf_counter() - start
+
+
+class VideoJobs:
+    """Renders a run's videos in one background process (spawned: JAX and EGL do not survive
+    a fork), one controller as soon as its recording is saved.
+
+    Use: ``submit(controller)`` after saving ``recording_file(out, controller)``; ``finish(
+    controllers)`` waits, renders the grid and returns ``{"videos": [...], "render_s": ...}``.
+    ``workers``: rendering processes (0: render in this process, e.g. on a single core).
+    """
+
+    def __init__(self, out: Path, options: VideoOptions, workers: int = 1) -> None:
+        self.out = Path(out)
+        self.options = options
+        self._pool: ProcessPoolExecutor | None = None
+        if workers > 0:
+            self._pool = ProcessPoolExecutor(
+                max_workers=workers, mp_context=multiprocessing.get_context("spawn")
+            )
+        self._futures: list[Future[float]] = []
+        self._seconds: list[float] = []
+        self._started = time.perf_counter()
+
+    def _run(self, function: Any, *args: Any) -> None:
+        if self._pool is None:
+            self._seconds.append(function(*args))
+        else:
+            self._futures.append(self._pool.submit(function, *args))
+
+    def submit(self, controller: str) -> None:
+        """Render ``controller``'s video now (if ``each``)."""
+        if self.options.each:
+            self._run(
+                _render_one,
+                str(recording_file(self.out, controller)),
+                str(video_file(self.out, controller)),
+                self.options,
+            )
+
+    def finish(self, controllers: list[str]) -> dict[str, Any]:
+        """Wait for the videos, then render the grid; the paths and the rendering time."""
+        try:
+            for future in self._futures:
+                self._seconds.append(future.result())
+            self._futures = []
+            videos = (
+                [str(video_file(self.out, c)) for c in controllers] if self.options.each else []
+            )
+            if self.options.grid:
+                # panels decoded from the controllers' videos when they exist: not drawn twice
+                panels = videos if self.options.each else None
+                recordings = [str(recording_file(self.out, c)) for c in controllers]
+                grid = str(self.out / GRID_FILE)
+                self._run(_render_grid, recordings, grid, self.options, panels)
+                for future in self._futures:
+                    self._seconds.append(future.result())
+                videos.append(grid)
+        finally:
+            self.close()
+        return {
+            "videos": videos,
+            "render_process_s": float(sum(self._seconds)),
+            "wall_since_start_s": time.perf_counter() - self._started,
+        }
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
+
+
+# ------------------------------------------------------------------ wip-bench render
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("dir", help="a wip-bench compare output directory (recording_*.npz)")
+    add_video_arguments(parser, default_kind="both")
+    parser.add_argument("--out", help="where to write the videos (default: DIR)")
+
+
+def recorded_controllers(directory: Path) -> list[str]:
+    """The controllers recorded in ``directory``: in ``summary.json``'s order when there is
+    one, else by name."""
+    found = {p.name[len("recording_") : -len(".npz")] for p in directory.glob("recording_*.npz")}
+    if not found:
+        raise ValueError(f"no recording_*.npz in {directory}: run wip-bench compare --video")
+    summary = directory / "summary.json"
+    if summary.exists():
+        order = list(json.loads(summary.read_text()).get("controllers", {}))
+        return [c for c in order if c in found] + sorted(found - set(order))
+    return sorted(found)
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    directory = Path(args.dir)
+    controllers = recorded_controllers(directory)
+    first = Recording.load(recording_file(directory, controllers[0]))
+    import gymnasium as gym
+
+    env = gym.make(first.env_id, **first.env_kwargs)
+    try:
+        options = video_options(args, env.unwrapped.model, first.fps)
+    finally:
+        env.close()
+    assert options is not None
+    out = Path(args.out) if args.out else directory
+    out.mkdir(parents=True, exist_ok=True)
+    if out != directory:
+        for c in controllers:  # the grid and a later render find them beside the videos
+            target = recording_file(out, c)
+            target.write_bytes(recording_file(directory, c).read_bytes())
+    cores = os.cpu_count() or 1
+    workers = min(cores, len(controllers)) if cores > 1 and options.each else 0
+    jobs = VideoJobs(out, options, workers=workers)
+    for c in controllers:
+        jobs.submit(c)
+    result = jobs.finish(controllers)
+    for video in result["videos"]:
+        print(f"video: {video}")
+    print(f"rendered in {result['wall_since_start_s']:.1f} s")
+    return result
