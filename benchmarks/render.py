@@ -103,6 +103,26 @@ def video_options(
     return VideoOptions(args.video, parse_size(args.size), fps, args.camera)
 
 
+def _start_worker() -> None:
+    """(In a rendering process, first.) One llvmpipe thread per rendering process unless the
+    user set ``LP_NUM_THREADS``: the other core runs the control loop. Read by Mesa when the
+    first GL context is made, i.e. here, before any frame."""
+    os.environ.setdefault("LP_NUM_THREADS", "1")
+
+
+def _warm_up() -> float:
+    """(In a rendering process.) Import the rendering stack and make a GL context while the
+    first episode runs, so the first video does not wait for them."""
+    start = time.perf_counter()
+    import mujoco
+
+    from wip_gym.renderer import FrameRenderer
+
+    xml = "<mujoco><worldbody><camera name='warm_up'/></worldbody></mujoco>"
+    FrameRenderer(mujoco.MjModel.from_xml_string(xml), 16, 16, camera="warm_up").close()
+    return time.perf_counter() - start
+
+
 def _render_one(recording_path: str, video_path: str, options: VideoOptions) -> float:
     """(In a rendering process.) One controller's video; returns its wall time (s)."""
     start = time.perf_counter()
@@ -143,11 +163,15 @@ class VideoJobs:
         self._pool: ProcessPoolExecutor | None = None
         if workers > 0:
             self._pool = ProcessPoolExecutor(
-                max_workers=workers, mp_context=multiprocessing.get_context("spawn")
+                max_workers=workers,
+                mp_context=multiprocessing.get_context("spawn"),
+                initializer=_start_worker,
             )
         self._futures: list[Future[float]] = []
         self._seconds: list[float] = []
         self._started = time.perf_counter()
+        if self._pool is not None:
+            self._futures.append(self._pool.submit(_warm_up))
 
     def _run(self, function: Any, *args: Any) -> None:
         if self._pool is None:
