@@ -166,7 +166,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             fps = videos.fps if videos else None
             tasks.append((scenario, name, args.seed + i, record, fps))
     # videos render from the recordings in another process while the next episodes run
-    jobs = VideoJobs(out, videos) if videos else None
+    jobs = VideoJobs(out, videos, controllers=names) if videos else None
     results: list[dict[str, Any]] = [{} for _ in tasks]
     bar = tqdm(total=len(tasks), desc="episodes", unit="ep")
 

@@ -132,7 +132,11 @@ def _render_one(recording_path: str, video_path: str, options: VideoOptions) -> 
 
 
 def _render_grid(
-    recording_paths: list[str], grid_path: str, options: VideoOptions, panels: list[str] | None
+    recording_paths: list[str],
+    grid_path: str,
+    options: VideoOptions,
+    panels: list[str | None],
+    also_write: list[str | None],
 ) -> float:
     start = time.perf_counter()
     recordings = [Recording.load(p) for p in recording_paths]
@@ -143,6 +147,7 @@ def _render_grid(
         fps=options.fps,
         camera=options.camera,
         panel_videos=panels,
+        also_write=also_write,
     )
     Path(grid_path).with_suffix(".json").write_text(json.dumps(layout, indent=2) + "\n")
     return time.perf_counter() - start
@@ -153,13 +158,22 @@ class VideoJobs:
     a fork), one controller as soon as its recording is saved.
 
     Use: ``submit(controller)`` after saving ``recording_file(out, controller)``; ``finish(
-    controllers)`` waits, renders the grid and returns ``{"videos": [...], "render_s": ...}``.
+    controllers)`` waits, renders the grid and returns ``{"videos": [...], ...}``. With both
+    kinds, the last of ``controllers`` is drawn once, into its video and the grid together.
     ``workers``: rendering processes (0: render in this process, e.g. on a single core).
     """
 
-    def __init__(self, out: Path, options: VideoOptions, workers: int = 1) -> None:
+    def __init__(
+        self,
+        out: Path,
+        options: VideoOptions,
+        workers: int = 1,
+        controllers: list[str] | None = None,
+    ) -> None:
         self.out = Path(out)
         self.options = options
+        both = options.each and options.grid
+        self._with_grid = controllers[-1] if (both and controllers) else None
         self._pool: ProcessPoolExecutor | None = None
         if workers > 0:
             self._pool = ProcessPoolExecutor(
@@ -180,8 +194,8 @@ class VideoJobs:
             self._futures.append(self._pool.submit(function, *args))
 
     def submit(self, controller: str) -> None:
-        """Render ``controller``'s video now (if ``each``)."""
-        if self.options.each:
+        """Render ``controller``'s video now (if ``each``; the last one with the grid)."""
+        if self.options.each and controller != self._with_grid:
             self._run(
                 _render_one,
                 str(recording_file(self.out, controller)),
@@ -200,10 +214,13 @@ class VideoJobs:
             )
             if self.options.grid:
                 # panels decoded from the controllers' videos when they exist: not drawn twice
-                panels = videos if self.options.each else None
+                each, last = self.options.each, self._with_grid
+                panels = [str(video_file(self.out, c)) if each and c != last else None
+                          for c in controllers]  # fmt: skip
+                own = [str(video_file(self.out, c)) if c == last else None for c in controllers]
                 recordings = [str(recording_file(self.out, c)) for c in controllers]
                 grid = str(self.out / GRID_FILE)
-                self._run(_render_grid, recordings, grid, self.options, panels)
+                self._run(_render_grid, recordings, grid, self.options, panels, own)
                 for future in self._futures:
                     self._seconds.append(future.result())
                 videos.append(grid)
@@ -261,7 +278,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             target.write_bytes(recording_file(directory, c).read_bytes())
     cores = os.cpu_count() or 1
     workers = min(cores, len(controllers)) if cores > 1 and options.each else 0
-    jobs = VideoJobs(out, options, workers=workers)
+    jobs = VideoJobs(out, options, workers=workers, controllers=controllers)
     for c in controllers:
         jobs.submit(c)
     result = jobs.finish(controllers)

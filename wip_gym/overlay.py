@@ -71,15 +71,15 @@ def draw_overlay(frame: NDArray[np.uint8], values: OverlayValues) -> NDArray[np.
     height, width = out.shape[:2]
     size = max(9, height // 20)
     pad = max(2, size // 3)
-    lines = []
+    lines: list[tuple[str, int]] = []  # (text, font size): the label larger
     if values.label:
-        lines.append(values.label)
-    lines.append(f"t {values.time:5.2f} s   goal {values.goal_distance:4.2f} m")
+        lines.append((values.label, size + size // 3))
+    lines.append((f"t {values.time:5.2f} s   goal {values.goal_distance:4.2f} m", size))
     if values.tray_tilt_deg is not None:
-        lines.append(f"tray tilt {values.tray_tilt_deg:4.1f} deg")
-    line_h = size + pad
-    text_w = int(max(_font(size).getlength(line) for line in lines)) + 2 * pad
-    _shade(out, (0, 0, text_w, len(lines) * line_h + pad))
+        lines.append((f"tray tilt {values.tray_tilt_deg:4.1f} deg", size))
+    tops = np.cumsum([pad] + [h + pad for _, h in lines]).tolist()
+    text_w = int(max(_font(h).getlength(text) for text, h in lines)) + 2 * pad
+    _shade(out, (0, 0, text_w, tops[-1]))
     bar_h = size + 2 * pad
     if values.friction_use is not None:
         _shade(out, (0, height - bar_h, width, height))
@@ -89,9 +89,8 @@ def draw_overlay(frame: NDArray[np.uint8], values: OverlayValues) -> NDArray[np.
         lost_text = f"CUP LOST{when}"
     image = Image.fromarray(out)
     draw = ImageDraw.Draw(image)
-    for i, line in enumerate(lines):
-        font = _font(size)
-        draw.text((pad, pad + i * line_h), line, fill=(255, 255, 255), font=font)
+    for (text, h), top in zip(lines, tops, strict=False):
+        draw.text((pad, top), text, fill=(255, 255, 255), font=_font(h))
     if values.friction_use is not None:
         use = values.friction_use
         caption = f"cup friction use {use:4.2f}"

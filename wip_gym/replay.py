@@ -246,6 +246,22 @@ def _held(frames: Iterator[np.ndarray], count: int) -> Iterator[np.ndarray]:
         yield last
 
 
+def _tee(frames: Iterator[np.ndarray], path: str | Path, fps: float) -> Iterator[np.ndarray]:
+    """``frames``, also written to their own video at ``path`` (closed when exhausted or
+    closed)."""
+    writer = None
+    try:
+        for image in frames:
+            if writer is None:
+                writer = open_video(path, fps, image)
+            else:
+                writer.append_data(image)
+            yield image
+    finally:
+        if writer is not None:
+            writer.close()
+
+
 def render_grid(
     recordings: Sequence[Recording],
     path: str | Path,
@@ -254,30 +270,43 @@ def render_grid(
     fps: float | None = None,
     camera: str = "follow",
     settings: RenderSettings = FAST,
-    panel_videos: Sequence[str | Path] | None = None,
+    panel_videos: Sequence[str | Path | None] | None = None,
+    also_write: Sequence[str | Path | None] | None = None,
 ) -> dict[str, Any]:
     """Write the recordings side by side in sync (``size`` per panel, each labelled by its
     recording's label); the video lasts as long as the longest episode, the shorter ones
-    holding their last frame. With ``panel_videos`` (the per-recording mp4s already rendered
-    at this ``size``, ``fps`` and camera), their frames are decoded instead of drawn again.
+    holding their last frame.
+
+    ``panel_videos[i]``: recording ``i``'s mp4, already rendered at this ``size``, ``fps`` and
+    camera, decoded instead of drawn again (None: drawn). ``also_write[i]``: a drawn panel is
+    also written to its own video there, in the same pass (the last controller of a run, whose
+    video and the grid would otherwise wait for each other).
     Returns the layout: ``{"frames", "fps", "rows", "columns", "panel_size", "panels"}``."""
     if not recordings:
         raise ValueError("render_grid needs at least one recording")
+    n = len(recordings)
+    panel_videos = [None] * n if panel_videos is None else list(panel_videos)
+    also_write = [None] * n if also_write is None else list(also_write)
+    if len(panel_videos) != n or len(also_write) != n:
+        raise ValueError(f"panel_videos and also_write must have one entry per recording ({n})")
     fps = recordings[0].fps if fps is None else fps
-    rows, columns = grid_layout(len(recordings))
+    rows, columns = grid_layout(n)
     count = max(frame_count(r, fps) for r in recordings)
     replays: list[Replay] = []
+    inner: list[Iterator[np.ndarray]] = []
     sources: list[Iterator[np.ndarray]] = []
     try:
-        if panel_videos is not None:
-            if len(panel_videos) != len(recordings):
-                raise ValueError("panel_videos must give one video per recording")
-            sources = [_held(read_frames(video), count) for video in panel_videos]
-        else:
-            for rec in recordings:
+        for rec, video, own in zip(recordings, panel_videos, also_write, strict=True):
+            if video is not None:
+                frames = read_frames(video)
+            else:
                 replay = Replay(rec, *size, camera=camera, settings=settings)
                 replays.append(replay)
-                sources.append(_held(replay.frames(fps), count))
+                frames = replay.frames(fps)
+                if own is not None:
+                    frames = _tee(frames, own, fps)
+            inner.append(frames)
+            sources.append(_held(frames, count))
         first = tile([next(s) for s in sources], rows, columns)
         if first.shape[:2] != (rows * size[1], columns * size[0]):
             raise ValueError(
@@ -288,10 +317,10 @@ def render_grid(
             for _ in range(count - 1):
                 writer.append_data(tile([next(s) for s in sources], rows, columns))
     finally:
+        for source in sources + inner:
+            source.close()  # closes the decoders and the panels' own videos
         for replay in replays:
             replay.close()
-        for source in sources:
-            source.close()  # closes the decoders
     return {
         "frames": count,
         "fps": fps,
