@@ -24,9 +24,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import imageio.v2 as imageio
+
 from wip_gym.camera import camera_names
 from wip_gym.recording import DEFAULT_FPS, Recording
-from wip_gym.replay import DEFAULT_SIZE, parse_size, render_grid, render_video
+from wip_gym.replay import DEFAULT_SIZE, grid_still, parse_size, render_grid, render_video
 
 VIDEO_KINDS = ("each", "grid", "both")
 GRID_FILE = "video_grid.mp4"
@@ -243,6 +245,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("dir", help="a wip-bench compare output directory (recording_*.npz)")
     add_video_arguments(parser, default_kind="both")
     parser.add_argument("--out", help="where to write the videos (default: DIR)")
+    parser.add_argument(
+        "--still",
+        metavar="PNG",
+        help="instead of videos: one grid frame, lossless, as a PNG (e.g. a README figure)",
+    )
+    parser.add_argument(
+        "--at", type=float, default=0.0, metavar="SECONDS", help="the --still frame's time"
+    )
 
 
 def recorded_controllers(directory: Path) -> list[str]:
@@ -270,6 +280,13 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     finally:
         env.close()
     assert options is not None
+    if args.still:
+        recordings = [Recording.load(recording_file(directory, c)) for c in controllers]
+        image = grid_still(recordings, args.at, size=options.size, camera=options.camera)
+        Path(args.still).parent.mkdir(parents=True, exist_ok=True)
+        imageio.imwrite(args.still, image)
+        print(f"still: {args.still} ({image.shape[1]}x{image.shape[0]}, t = {args.at:g} s)")
+        return {"still": args.still}
     out = Path(args.out) if args.out else directory
     out.mkdir(parents=True, exist_ok=True)
     if out != directory:

@@ -176,3 +176,31 @@ def test_no_traceback_at_exit_without_close() -> None:
     )
     assert done.returncode == 0 and "rendered" in done.stdout
     assert "Traceback" not in done.stderr and "Exception ignored" not in done.stderr, done.stderr
+
+
+def test_replay_draws_a_still_robot_once(tmp_path: Path) -> None:
+    """Frames whose state moved less than the still tolerance reuse the drawn scene (only the
+    overlay changes) and look like the exact frames; a state that moved is drawn again."""
+    env = gym.make("wip_gym/Planar-v0")
+    recorder = EpisodeRecorder(fps=30)
+    _, info = env.reset(seed=0)
+    recorder.on_reset(env, info)
+    for n in range(300):
+        _, _, _, _, info = env.step(np.zeros(env.action_space.shape))
+        recorder.on_step(env, info, n)
+    env.close()
+    recording = recorder.recording()
+    rng = np.random.default_rng(0)
+    still = recording.qpos[1] + rng.uniform(-5e-5, 5e-5, recording.qpos[1:6].shape)
+    recording.qpos[1:6] = still  # frames 1-5: "standing still"; 6-9 fall on
+    with Replay(recording, 160, 112) as replay:
+        drawn = []
+        render_qpos = replay._renderer.render_qpos
+        replay._renderer.render_qpos = lambda q, *a: drawn.append(q) or render_qpos(q, *a)
+        frames = list(replay.frames())
+        assert len(drawn) == len(frames) - 4  # frames 2-5 reuse frame 1's scene
+        exact = Replay(recording, 160, 112, still_tolerance=0.0)
+        for k in (2, 5, 8):
+            assert np.abs(frames[k].astype(int) - exact.frame(k).astype(int)).mean() < 0.5
+        exact.close()
+        assert not np.array_equal(frames[2], frames[3])  # the overlay's time moves on

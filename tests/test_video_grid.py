@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 import gymnasium as gym
+import imageio.v2 as imageio
 import numpy as np
 import pytest
 
@@ -63,6 +64,12 @@ def test_compare_writes_a_labelled_grid_and_render_redraws_it(tmp_path: Path) ->
     redrawn = _frames(again / "video_grid.mp4")
     assert len(redrawn) == len(grid) and redrawn[0].shape == grid[0].shape
     assert np.abs(redrawn[0].astype(int) - grid[0].astype(int)).mean() > 10  # another view
+
+    still = tmp_path / "still.png"
+    main(["render", str(tmp_path), "--still", str(still), "--size", size])
+    image = imageio.imread(still)
+    assert image.shape == grid[0].shape  # the grid's first frame, lossless
+    assert np.abs(image.astype(int) - grid[0].astype(int)).mean() < 3  # (the codec's loss)
 
 
 def test_an_episode_that_ends_early_holds_its_last_frame(tmp_path: Path) -> None:

@@ -26,6 +26,10 @@ from wip_gym.recording import Recording
 from wip_gym.renderer import FAST, FrameRenderer, RenderSettings, check_size
 
 DEFAULT_SIZE = (480, 320)
+# A state that moved less than this (m or rad, any qpos entry) since the last drawn frame is
+# not drawn again: 0.1 mm at the default framing (a 480 x 320 frame spans ~2.5 m) is 1/50 of a
+# pixel. Once a controller has arrived, about half the frames of a 25 s episode are such.
+STILL_TOLERANCE = 1e-4
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -123,6 +127,8 @@ class Replay:
         camera: ``follow``, ``tray`` or an MJCF camera (see ``wip_gym.camera``).
         overlay: draw the label and numbers (``wip_gym.overlay``).
         settings: render settings.
+        still_tolerance: in :meth:`frames`, the largest change of any ``qpos`` entry (m, rad)
+            below which the scene is not drawn again (:data:`STILL_TOLERANCE`; 0: always).
     """
 
     def __init__(
@@ -133,6 +139,7 @@ class Replay:
         camera: str = "follow",
         overlay: bool = True,
         settings: RenderSettings = FAST,
+        still_tolerance: float = STILL_TOLERANCE,
     ) -> None:
         self.recording = recording
         self.overlay = overlay
@@ -150,12 +157,25 @@ class Replay:
             g for g in range(model.ngeom) if model.body(model.geom_bodyid[g]).name == "payload"
         ]
         self._renderer = FrameRenderer(model, width, height, camera=camera, settings=settings)
+        self.still_tolerance = still_tolerance
+        self._scene: NDArray[np.uint8] | None = None
+        self._scene_of: int | None = None  # the recorded frame self._scene shows
 
-    def frame(self, k: int) -> NDArray[np.uint8]:
-        """Recorded frame ``k``, drawn."""
+    def frame(self, k: int, still_from: int | None = None) -> NDArray[np.uint8]:
+        """Recorded frame ``k``, drawn. ``still_from``: a frame whose scene (not its overlay)
+        is reused when the state has not moved since by more than ``still_tolerance``."""
         rec = self.recording
-        hidden = () if rec.payload_visible[k] else self._payload_geoms
-        image = self._renderer.render_qpos(rec.qpos[k], hidden)
+        if (
+            still_from is not None
+            and self._scene_of == still_from
+            and rec.payload_visible[k] == rec.payload_visible[still_from]
+            and np.abs(rec.qpos[k] - rec.qpos[still_from]).max() <= self.still_tolerance
+        ):
+            image = self._scene
+        else:
+            hidden = () if rec.payload_visible[k] else self._payload_geoms
+            image = self._renderer.render_qpos(rec.qpos[k], hidden)
+            self._scene, self._scene_of = image, k
         if self.overlay:
             image = draw_overlay(image, overlay_values(rec, k))
         return image
@@ -163,7 +183,8 @@ class Replay:
     def frames(self, fps: float | None = None, count: int | None = None) -> Iterator[np.ndarray]:
         """The video's frames at ``fps`` (default: the recording's), ``count`` of them (default:
         the episode's; more hold the last frame). A recorded frame is drawn once and repeated
-        while it is the one shown."""
+        while it is the one shown; a robot standing still (within ``still_tolerance``) is not
+        drawn again, only its overlay."""
         rec = self.recording
         fps = rec.fps if fps is None else fps
         if fps > rec.fps + 1e-9:
@@ -175,7 +196,7 @@ class Replay:
         for j in range(count):
             k = source_index(rec, fps, j)
             if k != last_k:
-                image = self.frame(k)
+                image = self.frame(k, still_from=self._scene_of)
                 last_k = k
             yield image
 
@@ -329,3 +350,30 @@ def render_grid(
         "panel_size": list(size),
         "panels": [r.label for r in recordings],
     }
+
+
+def grid_still(
+    recordings: Sequence[Recording],
+    at: float = 0.0,
+    *,
+    size: tuple[int, int] = DEFAULT_SIZE,
+    camera: str = "follow",
+    settings: RenderSettings = FAST,
+) -> NDArray[np.uint8]:
+    """One frame of the grid: every recording at time ``at`` (s; an episode that ended before
+    shows its last frame), drawn losslessly (for a figure)."""
+    if not recordings:
+        raise ValueError("grid_still needs at least one recording")
+    if not math.isfinite(at) or at < 0:
+        raise ValueError(f"at must be a time >= 0 s, got {at}")
+    rows, columns = grid_layout(len(recordings))
+    images = []
+    for rec in recordings:
+        with Replay(rec, *size, camera=camera, settings=settings) as replay:
+            images.append(replay.frame(_at(rec, at)))
+    return tile(images, rows, columns)
+
+
+def _at(recording: Recording, at: float) -> int:
+    """The recorded frame nearest to time ``at`` (the last one after the end)."""
+    return int(np.argmin(np.abs(recording.time - min(at, recording.time[-1]))))
