@@ -79,7 +79,7 @@ class FrameRenderer:
 
     Args:
         model: the model (its offscreen buffer must be at least ``width`` x ``height``).
-        width, height: frame size in pixels (even, for H.264).
+        width, height: frame size in pixels (even ones for an H.264 video).
         camera: ``follow`` (default), ``tray`` or an MJCF camera name.
         settings: shadows, reflections, anti-aliasing.
     """
@@ -92,7 +92,9 @@ class FrameRenderer:
         camera: str = "follow",
         settings: RenderSettings = FAST,
     ) -> None:
-        check_size(width, height)
+        for name, value in (("width", width), ("height", height)):
+            if not isinstance(value, int | np.integer) or value < 1:
+                raise ValueError(f"{name} must be a positive integer, got {value!r}")
         valid = camera_names(model)
         if camera not in valid:
             raise ValueError(f"unknown camera {camera!r}; valid: {valid}")
