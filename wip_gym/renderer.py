@@ -1,12 +1,14 @@
 """Offscreen frames of a model's state through a named camera, with settings chosen for speed,
 and renderers that close themselves before the interpreter tears EGL down.
 
-Render settings (``python -m benchmarks.render_cost``, 480 x 320, Mesa llvmpipe on this 2-core
-machine, PlanarTray-v0; median ms per frame, mean |pixel difference| to the chosen frame):
-chosen (no shadows, no reflections, no anti-aliasing) 17.5 ms; shadows 144 ms (8x, difference
-5.5: a shadow under the robot); 4x multisample anti-aliasing 85 ms (5x, difference 0.24: edges
-only); reflections the same picture (the floor is not reflective). Links stay apart by their
-colours and the two lights' shading, so the fast settings are the default; ``QUALITY`` has all.
+Render settings (``python -m benchmarks.render_cost``, 480 x 320, Mesa llvmpipe on the 2-core
+development machine while other jobs ran, so +-50 %; median ms per frame over two runs each of
+PlanarTray-v0 and KrangTray-v0, and the mean |pixel difference| to the chosen frame, 0-255):
+chosen (no shadows, no reflections, no anti-aliasing) 15-24 ms; with shadows 64-150 ms
+(difference 5.4-5.5: the robot's shadow); with 4x multisample anti-aliasing 60-85 ms
+(difference 0.24-0.28: edges only); with reflections the identical picture (difference 0: the
+floor is not reflective). Links stay apart by their colours and the two lights' shading, so the
+fast settings are the default; ``QUALITY`` turns all three on.
 """
 
 from __future__ import annotations
