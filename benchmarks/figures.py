@@ -312,6 +312,7 @@ def run_controller(scenario: Scenario, controller: str, seed: int, width: int, h
                    ) -> Run:  # fmt: skip
     """One seeded episode of ``controller`` on ``scenario``, recorded for the figures."""
     extra: dict[str, Any] = {"render_mode": "rgb_array", "width": width, "height": height}
+    extra["camera_name"] = "track"  # a fixed MJCF camera: its matrices project the marks
     if "Tray" in scenario.env_id:
         extra["terminate_on_cup_loss"] = False  # show what happens to the cup
     env = scenario.make_env(**extra)

@@ -16,6 +16,7 @@ from gymnasium.envs.mujoco.mujoco_env import MujocoEnv
 from numpy.typing import NDArray
 
 from wip_gym.assets import mjcf_path
+from wip_gym.camera import COMPUTED_CAMERAS
 from wip_gym.overlay import OverlayValues, draw_overlay
 from wip_gym.renderer import FrameRenderer
 from wip_gym.robot_model import RobotModel
@@ -146,7 +147,9 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             default_camera_config=DEFAULT_CAMERA_CONFIG,
             width=width,
             height=height,
-            camera_name=None,  # render() below draws rgb/depth frames through its own camera
+            # render() below draws rgb/depth through its own renderer; an MJCF camera's id is
+            # also Gymnasium's (mujoco_renderer.camera_id, e.g. for projecting points)
+            camera_name=None if self._render_camera in COMPUTED_CAMERAS else self._render_camera,
             **kwargs,
         )
         self.metadata = {
