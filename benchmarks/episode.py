@@ -49,7 +49,9 @@ def run_episode(
     recorder = None
     if recording_path is not None:
         rate = DEFAULT_FPS if fps is None else fps
-        recorder = EpisodeRecorder(rate, controller, scenario.env_id, scenario.env_kwargs())
+        recorder = EpisodeRecorder(
+            rate, controller, scenario.env_id, scenario.env_kwargs(), meta={"seed": seed}
+        )
         recorder.on_reset(env, info)
     has_cup = "cup_on_tray" in info
     has_ee = "ee_error" in info

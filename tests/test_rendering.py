@@ -90,7 +90,7 @@ def test_replayed_frame_equals_live_frame(tmp_path: Path) -> None:
     it (payload appearing mid-episode included)."""
     kwargs = {"payload_mass": 1.0, "payload_time": 0.1}
     env = gym.make("wip_gym/KrangTray-v0", render_mode="rgb_array", width=160, height=112, **kwargs)
-    recorder = EpisodeRecorder(fps=30, label="zero")
+    recorder = EpisodeRecorder(fps=30, label="zero", meta={"seed": 3})
     _, info = env.reset(seed=3)
     recorder.on_reset(env, info)
     live = [env.render()]
@@ -105,7 +105,7 @@ def test_replayed_frame_equals_live_frame(tmp_path: Path) -> None:
     path = recorder.save(tmp_path / "run.npz")
     recording = Recording.load(path)
     assert recording.env_id == "wip_gym/KrangTray-v0"
-    assert recording.env_kwargs == kwargs
+    assert recording.env_kwargs == kwargs and recording.meta == {"seed": 3}
     assert recording.frames == len(live) == frame_count(recording, 30) == 7
     assert not recording.payload_visible[0] and recording.payload_visible[-1]
     with Replay(recording, 160, 112, overlay=False) as replay:
@@ -124,6 +124,26 @@ def test_overlay_marks_slip_and_cup_loss() -> None:
     banner = (lost[..., 0] > 180) & (lost[..., 1] < 40) & (lost[..., 2] < 40)
     assert banner[:30].sum() > 100  # the red "CUP LOST" banner at the top
     assert not np.array_equal(calm[:20, :60], frame[:20, :60])  # the label is drawn
+
+
+def test_render_overlay_is_off_unless_asked() -> None:
+    frames = []
+    for overlay in (False, True):
+        env = gym.make(
+            "wip_gym/PlanarTray-v0",
+            render_mode="rgb_array",
+            width=240,
+            height=160,
+            render_overlay=overlay,
+        )
+        env.reset(seed=0)
+        frames.append(env.render().astype(int))
+        env.close()
+    plain, drawn = frames
+    changed = np.abs(plain - drawn).max(axis=2) > 30
+    assert changed[:30, :80].mean() > 0.2  # the text box at the top left
+    assert changed[-12:].mean() > 0.2  # the friction bar at the bottom
+    assert not changed[60:120, 90:150].any()  # the robot itself is not covered
 
 
 def test_frame_interval_decimates_to_30_fps() -> None:

@@ -70,6 +70,7 @@ class Recording:
         cup_on_tray, payload_visible: per frame.
         cup_lost_at: the step time at which the cup left the tray (NaN: never), at the
             control rate, not rounded to a frame.
+        meta: what the recorder was given to keep (e.g. the seed).
     """
 
     env_id: str
@@ -168,6 +169,7 @@ class EpisodeRecorder:
         fps: the video rate.
         label: the panel's name (the controller).
         env_id, env_kwargs: the scenario; read from ``env.spec`` when omitted.
+        meta: anything JSON-able kept with the recording (e.g. the seed).
     """
 
     def __init__(
@@ -176,11 +178,13 @@ class EpisodeRecorder:
         label: str = "",
         env_id: str | None = None,
         env_kwargs: dict[str, Any] | None = None,
+        meta: dict[str, Any] | None = None,
     ) -> None:
         if not math.isfinite(fps) or fps <= 0:
             raise ValueError(f"fps must be positive, got {fps}")
         self.fps = float(fps)
         self.label = label
+        self.meta = dict(meta or {})
         self._scenario = None if env_id is None else (env_id, dict(env_kwargs or {}))
         self._rows: dict[str, list[Any]] = {}
         self._every = 0
@@ -242,6 +246,7 @@ class EpisodeRecorder:
             steps=self._steps,
             goal=self._goal,
             cup_lost_at=self._cup_lost_at,
+            meta=self.meta,
             **rows,
         )
 
