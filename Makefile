@@ -1,5 +1,6 @@
 # The two commands that do everything on a fresh machine:
-#   make demo   the main job: wip-bench compare on PlanarTray-v0 (table, summary.json, video)
+#   make demo   the main job: wip-bench compare on PlanarTray-v0 (table, summary.json, one video
+#               per controller and video_grid.mp4 with all of them side by side)
 #   make test   create .venv if missing, install the project with its pinned deps and the
 #               benchmark peers (the `bench` extra) and Ray (the `sweep` extra), run pytest
 VENV   ?= .venv
@@ -28,7 +29,7 @@ lint: $(STAMP)
 
 demo: $(STAMP)
 	MUJOCO_GL=$${MUJOCO_GL:-egl} $(VENV)/bin/wip-bench compare --env wip_gym/PlanarTray-v0 \
-		--episodes 1 --video --out out/demo
+		--episodes 1 --video both --out out/demo
 
 clean:
 	rm -rf $(VENV) build dist *.egg-info

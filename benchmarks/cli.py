@@ -5,6 +5,7 @@ wip-bench figures --env PlanarTray-v0 --out docs/figures
 wip-bench solvers --json out/solvers.json
 wip-bench profile --env KrangTray-v0 --controller unified --json out/profile.json
 wip-bench sweep benchmarks/sweeps/claim_map.toml --out out/claim_map
+wip-bench render out/compare --camera tray --size 640x480
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from benchmarks import compare, figures, profile, solvers
+from benchmarks import compare, figures, profile, render, solvers
 from benchmarks.sweep import cli as sweep_cli
 
 
@@ -35,6 +36,10 @@ def build_parser() -> argparse.ArgumentParser:
         "sweep", help="a map over cells x controllers x seeds on Ray (or --report DIR)"
     )
     sweep_cli.add_arguments(sweep_parser)
+    render_parser = commands.add_parser(
+        "render", help="re-render a recorded compare run's videos without simulating"
+    )
+    render.add_arguments(render_parser)
     return parser
 
 
@@ -52,6 +57,8 @@ def main(argv: list[str] | None = None) -> int:
             profile.run(args)
         elif args.command == "sweep":
             return sweep_cli.run(args)
+        elif args.command == "render":
+            render.run(args)
     except ValueError as error:
         parser.error(str(error))  # exits with status 2 and the message
     return 0

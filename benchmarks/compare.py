@@ -25,6 +25,7 @@ import argparse
 import json
 import multiprocessing
 import queue
+import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from pathlib import Path
 from typing import Any
@@ -44,6 +45,7 @@ from benchmarks.overrides import (
     valid_settings,
 )
 from benchmarks.presets import PRESET_NAMES
+from benchmarks.render import VideoJobs, add_video_arguments, recording_file, video_options
 from benchmarks.scenario import (
     DEFAULT_DURATION_S,
     Push,
@@ -120,7 +122,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--model", choices=["nominal", "oracle"], help="every controller's model (nominal)"
     )
     parser.add_argument("--jobs", type=int, default=1)
-    parser.add_argument("--video", action="store_true", help="mp4 per controller (1st episode)")
+    add_video_arguments(parser, default_kind=None)  # --video [each|grid|both] of the 1st episode
     parser.add_argument("--out", default="out/compare")
 
 
@@ -290,7 +292,9 @@ class _SimulatedSeconds:
         self.bar.close()
 
 
-def _run_tasks(tasks: list[tuple[Any, ...]], jobs: int, duration: float) -> list[Any]:
+def _run_tasks(
+    tasks: list[tuple[Any, ...]], jobs: int, duration: float, on_done: Any = None
+) -> list[Any]:
     results: list[Any] = [None] * len(tasks)
     episodes_bar = tqdm(total=len(tasks), desc="episodes", unit="ep", position=0)
     simulated = _SimulatedSeconds(len(tasks), duration)
@@ -300,6 +304,8 @@ def _run_tasks(tasks: list[tuple[Any, ...]], jobs: int, duration: float) -> list
                 results[k] = compare_episode(*task, progress=simulated)
                 simulated.finish(k)
                 episodes_bar.update()
+                if on_done is not None:
+                    on_done(k)
             return results
         context = multiprocessing.get_context("spawn")
         with context.Manager() as manager:
@@ -322,6 +328,8 @@ def _run_tasks(tasks: list[tuple[Any, ...]], jobs: int, duration: float) -> list
                         results[k] = future.result()
                         simulated.finish(k)
                         episodes_bar.update()
+                        if on_done is not None:
+                            on_done(k)
         return results
     finally:
         simulated.close()
@@ -334,13 +342,16 @@ def run(args: argparse.Namespace) -> dict[str, Any] | None:
         return None
     spec = spec_from_args(args)
     names = list(spec.configs)
+    env = gym.make(spec.env_id, max_episode_steps=None, **spec.env_kwargs)
+    videos = video_options(args, env.unwrapped.model)
+    env.close()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     seeds = [episode_seed(args.seed, i) for i in range(args.episodes)]
     tasks = []
     for name in names:
         for i, seed in enumerate(seeds):
-            video = str(out / f"video_{name}.mp4") if (args.video and i == 0) else None
+            record = str(recording_file(out, name)) if (videos and i == 0) else None
             tasks.append(
                 (
                     len(tasks),
@@ -350,10 +361,19 @@ def run(args: argparse.Namespace) -> dict[str, Any] | None:
                     spec.configs[name],
                     seed,
                     args.duration,
-                    video,
+                    record,
+                    videos.fps if videos else None,
                 )
             )
-    outcomes = _run_tasks(tasks, args.jobs, args.duration)
+    # videos render from the recordings in another process while the next episodes run
+    jobs = VideoJobs(out, videos, controllers=names) if videos else None
+
+    def render_when_recorded(k: int) -> None:
+        if jobs is not None and tasks[k][7] is not None:
+            jobs.submit(tasks[k][3])
+
+    outcomes = _run_tasks(tasks, args.jobs, args.duration, on_done=render_when_recorded)
+    episodes_done = time.perf_counter()
     results = [metrics for metrics, _ in outcomes]
     with open(out / "episodes.jsonl", "w") as f:
         for r in results:
@@ -373,7 +393,12 @@ def run(args: argparse.Namespace) -> dict[str, Any] | None:
         json.dump(summary, f, indent=2)
     print(format_table(summary))
     print(f"\nwrote {out / 'summary.json'} and {out / 'episodes.jsonl'}")
-    if args.video:
-        for name in names:
-            print(f"video: {out / f'video_{name}.mp4'}")
+    if jobs is not None:
+        rendered = jobs.finish(names)
+        for video in rendered["videos"]:
+            print(f"video: {video}")
+        print(
+            f"videos: {rendered['render_process_s']:.1f} s of rendering, "
+            f"{time.perf_counter() - episodes_done:.1f} s of it after the last episode"
+        )
     return summary

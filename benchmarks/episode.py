@@ -8,7 +8,6 @@ picklable arguments (spawned processes), and reports simulated seconds through `
 from __future__ import annotations
 
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -17,32 +16,24 @@ from numpy.typing import NDArray
 
 from benchmarks.metrics import time_to_goal
 from benchmarks.rollout import ProgressHook, rollout
-from wip_gym.video import open_video
+from wip_gym.recording import DEFAULT_FPS, EpisodeRecorder
 
-VIDEO_FPS = 30.0
-
-__all__ = ["VideoRecorder", "compare_episode", "time_to_goal"]
+__all__ = ["RecordingHook", "compare_episode", "time_to_goal"]
 
 
-class VideoRecorder:
-    """An ``on_step`` hook writing every ``1 / VIDEO_FPS`` s of the episode to an mp4."""
+class RecordingHook:
+    """Adapts :class:`wip_gym.recording.EpisodeRecorder` to the rollout's ``on_step`` hook
+    (index 0 is the state after ``reset``; index ``n`` the state after ``n`` steps). The
+    recording is saved at the end and rendered afterwards, outside the control loop."""
 
-    def __init__(self, path: str | Path) -> None:
-        self.path = Path(path)
-        self._writer: Any = None
-        self._every = 1
+    def __init__(self, recorder: EpisodeRecorder) -> None:
+        self.recorder = recorder
 
     def __call__(self, env: gym.Env, info: dict[str, Any], step_index: int) -> None:
         if step_index == 0:
-            self._every = max(1, int(round(1.0 / (VIDEO_FPS * env.unwrapped.dt))))
-            self._writer = open_video(self.path, VIDEO_FPS, env.render())
-        elif step_index % self._every == 0:
-            self._writer.append_data(env.render())
-
-    def close(self) -> None:
-        if self._writer is not None:
-            self._writer.close()
-            self._writer = None
+            self.recorder.on_reset(env, info)
+        else:
+            self.recorder.on_step(env, info, step_index - 1)
 
 
 def compare_episode(
@@ -53,18 +44,23 @@ def compare_episode(
     config: Any,
     seed: int,
     duration: float,
-    video_path: str | None = None,
-    video_size: tuple[int, int] = (480, 320),
+    recording_path: str | None = None,
+    fps: float | None = None,
     progress: Any = None,
 ) -> tuple[dict[str, Any], NDArray[np.float64]]:
-    """One rollout; its metrics and per-step control times. ``progress`` is None, a queue
-    (``.put``) or a callable that receives ``(task_index, simulated_s)`` tuples."""
-    kwargs = dict(env_kwargs)
+    """One rollout; its metrics and per-step control times. With ``recording_path`` the
+    episode is recorded at ``fps`` (default 30) for its video (rendered afterwards from the
+    record, :mod:`wip_gym.recording`). ``progress`` is None, a queue (``.put``) or a callable
+    that receives ``(task_index, simulated_s)`` tuples."""
     recorder = None
-    if video_path is not None:
-        width, height = video_size
-        kwargs.update(render_mode="rgb_array", width=width, height=height)
-        recorder = VideoRecorder(video_path)
+    if recording_path is not None:
+        recorder = EpisodeRecorder(
+            DEFAULT_FPS if fps is None else fps,
+            controller,
+            env_id,
+            dict(env_kwargs),
+            meta={"seed": seed},
+        )
     report: ProgressHook | None = None
     if progress is not None:
         send = progress.put if hasattr(progress, "put") else progress
@@ -72,11 +68,16 @@ def compare_episode(
         def report(simulated_s: float) -> None:
             send((task_index, simulated_s))
 
-    try:
-        episode = rollout(
-            env_id, kwargs, controller, config, seed, duration, on_step=recorder, progress=report
-        )
-    finally:
-        if recorder is not None:
-            recorder.close()
+    episode = rollout(
+        env_id,
+        dict(env_kwargs),
+        controller,
+        config,
+        seed,
+        duration,
+        on_step=None if recorder is None else RecordingHook(recorder),
+        progress=report,
+    )
+    if recorder is not None:
+        recorder.save(recording_path)
     return episode.metrics, episode.control_times

@@ -318,6 +318,7 @@ def run_controller(scenario: Scenario, controller: str, seed: int, width: int, h
         "render_mode": "rgb_array",
         "width": width,
         "height": height,
+        "camera_name": "track",  # a fixed MJCF camera: its matrices project the marks
     }
     if "Tray" in scenario.env_id:
         env_kwargs["terminate_on_cup_loss"] = False  # show what happens to the cup

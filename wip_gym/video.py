@@ -1,7 +1,7 @@
-"""Record an episode to mp4, offscreen (DESIGN 6).
+"""Record an episode and write it to mp4, offscreen (DESIGN 6).
 
-Frames are decimated to ``fps`` (a frame every ``round(1 / (fps dt))`` steps) and rendered at
-480 x 320 by default: software rendering makes every frame count.
+The episode is recorded at the video rate (``wip_gym.recording``) and rendered afterwards
+(``wip_gym.replay``), so rendering never runs inside the control loop.
 
     python -m wip_gym.video --env wip_gym/KrangTray-v0 --seconds 2 --out krang.mp4
 """
@@ -9,42 +9,21 @@ Frames are decimated to ``fps`` (a frame every ``round(1 / (fps dt))`` steps) an
 from __future__ import annotations
 
 import argparse
-import warnings
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
-import imageio.v2 as imageio
 import numpy as np
 
 import wip_gym  # noqa: F401  (registers the environments, sets MUJOCO_GL)
+from wip_gym.camera import COMPUTED_CAMERAS
+from wip_gym.recording import DEFAULT_FPS, EpisodeRecorder, frame_interval
+from wip_gym.replay import DEFAULT_SIZE, open_video, parse_size, render_video
 
 Policy = Callable[[dict[str, np.ndarray]], np.ndarray]
 
-
-def open_video(path: str | Path, fps: float, first_frame: np.ndarray) -> Any:
-    """An imageio mp4 writer (H.264) with its first frame written.
-
-    imageio-ffmpeg starts ffmpeg with ``subprocess`` (fork + exec), which JAX warns about once
-    JAX has started threads; the child execs ffmpeg at once, so the warning is silenced here.
-    """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    writer = imageio.get_writer(path, fps=fps, codec="libx264", quality=7, macro_block_size=16)
-    with warnings.catch_warnings():
-        warnings.filterwarnings(
-            "ignore", message=r"os\.fork\(\) was called", category=RuntimeWarning
-        )
-        writer.append_data(first_frame)
-    return writer
-
-
-def frame_interval(dt: float, fps: float) -> int:
-    """Steps between two video frames: ``round(1 / (fps dt))``, at least 1."""
-    if dt <= 0 or fps <= 0:
-        raise ValueError(f"dt and fps must be positive, got dt={dt}, fps={fps}")
-    return max(1, int(round(1.0 / (fps * dt))))
+__all__ = ["frame_interval", "open_video", "record_episode"]
 
 
 def record_episode(
@@ -54,33 +33,42 @@ def record_episode(
     *,
     seconds: float | None = None,
     seed: int | None = None,
-    fps: float = 30.0,
+    fps: float = DEFAULT_FPS,
+    size: tuple[int, int] | None = None,
+    camera: str = "follow",
+    overlay: bool = True,
+    label: str = "",
 ) -> dict[str, Any]:
-    """Run one episode of ``env`` (made with ``render_mode="rgb_array"``) under ``policy``
-    (zero torques if None) and write an mp4 at ``fps``. Stops at termination, truncation or
-    after ``seconds``. Returns the last ``info`` with ``frames`` and ``steps`` added."""
-    if env.render_mode != "rgb_array":
-        raise ValueError("record_episode needs an env made with render_mode='rgb_array'")
-    dt = env.unwrapped.dt
-    every = frame_interval(dt, fps)
+    """Run one episode of ``env`` under ``policy`` (zero torques if None), recording it at
+    ``fps``, then write it as an mp4 (``size`` default: the env's width x height) through
+    ``camera``. Stops at termination, truncation or after ``seconds``. The recording is saved
+    beside the video (``.npz``, for ``wip-bench render``). Returns the last ``info`` with
+    ``frames`` and ``steps`` added."""
+    base = env.unwrapped
+    dt = base.dt
     max_steps = None if seconds is None else int(round(seconds / dt))
+    recorder = EpisodeRecorder(fps=fps, label=label)
     obs, info = env.reset(seed=seed)
+    recorder.on_reset(env, info)
     if policy is not None and hasattr(policy, "reset"):
         policy.reset(obs, info)
     zero = np.zeros(env.action_space.shape)
-    frames = 0
     steps = 0
-    with open_video(path, fps, env.render()) as out:
-        frames += 1
-        while max_steps is None or steps < max_steps:
-            action = zero if policy is None else policy(obs)
-            obs, _, terminated, truncated, info = env.step(action)
-            steps += 1
-            if steps % every == 0:
-                out.append_data(env.render())
-                frames += 1
-            if terminated or truncated:
-                break
+    while max_steps is None or steps < max_steps:
+        action = zero if policy is None else policy(obs)
+        obs, _, terminated, truncated, info = env.step(action)
+        recorder.on_step(env, info, steps)
+        steps += 1
+        if terminated or truncated:
+            break
+    path = Path(path)
+    recording = recorder.recording()
+    recording.save(path.with_suffix(".npz"))
+    size = size or (
+        getattr(base, "width", DEFAULT_SIZE[0]),
+        getattr(base, "height", DEFAULT_SIZE[1]),
+    )
+    frames = render_video(recording, path, size=size, camera=camera, overlay=overlay)
     return {**info, "frames": frames, "steps": steps}
 
 
@@ -90,11 +78,22 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--out", default="out/episode.mp4")
     parser.add_argument("--seconds", type=float, default=3.0)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--width", type=int, default=480)
-    parser.add_argument("--height", type=int, default=320)
+    parser.add_argument("--size", default="480x320", metavar="WxH")
+    parser.add_argument("--fps", type=float, default=DEFAULT_FPS)
+    parser.add_argument("--camera", default="follow", help=f"{list(COMPUTED_CAMERAS)} or MJCF")
     args = parser.parse_args(argv)
-    env = gym.make(args.env, render_mode="rgb_array", width=args.width, height=args.height)
-    result = record_episode(env, args.out, seconds=args.seconds, seed=args.seed)
+    env = gym.make(args.env)
+    result = record_episode(
+        env,
+        args.out,
+        seconds=args.seconds,
+        seed=args.seed,
+        fps=args.fps,
+        size=parse_size(args.size),
+        camera=args.camera,
+        label="zero torques",
+    )
+    env.close()
     print(f"wrote {args.out}: {result['frames']} frames, {result['steps']} steps (zero torques)")
 
 

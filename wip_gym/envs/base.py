@@ -16,6 +16,9 @@ from gymnasium.envs.mujoco.mujoco_env import MujocoEnv
 from numpy.typing import NDArray
 
 from wip_gym.assets import mjcf_path
+from wip_gym.camera import COMPUTED_CAMERAS
+from wip_gym.overlay import OverlayValues, draw_overlay
+from wip_gym.renderer import FrameRenderer
 from wip_gym.robot_model import RobotModel
 from wip_gym.robots import robot_spec
 from wip_gym.scene import CUP_HALF_HEIGHT, TRAY_HALF_SIZE, SceneOptions, build_model, reset_qpos
@@ -132,6 +135,10 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         self._fall_angle = fall_angle
         self._weights = (progress_weight, ctrl_cost_weight, fall_penalty, cup_loss_penalty)
 
+        # render(): the camera (wip_gym.camera: "follow", "tray" or an MJCF camera) and overlay
+        self._render_camera = kwargs.pop("camera_name", None) or "follow"
+        self._render_overlay = bool(kwargs.pop("render_overlay", False))
+        self._frame_renderer: FrameRenderer | None = None
         MujocoEnv.__init__(
             self,
             str(mjcf_path(self._spec.scene_file)),
@@ -140,7 +147,9 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             default_camera_config=DEFAULT_CAMERA_CONFIG,
             width=width,
             height=height,
-            camera_name=kwargs.pop("camera_name", "track"),
+            # render() below draws rgb/depth through its own renderer; an MJCF camera's id is
+            # also Gymnasium's (mujoco_renderer.camera_id, e.g. for projecting points)
+            camera_name=None if self._render_camera in COMPUTED_CAMERAS else self._render_camera,
             **kwargs,
         )
         self.metadata = {
@@ -469,3 +478,49 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             position, quat = cup_frame or self._cup_in_tray_frame()
             obs["cup_pose"] = np.concatenate([position, quat])
         return obs
+
+    # ------------------------------------------------------------- rendering
+    # (wip_gym.camera frames the robot; wip_gym.overlay draws the task's numbers when asked)
+    @property
+    def payload_visible(self) -> bool:
+        """The payload is drawn only once it is in the hand (``payload_time``)."""
+        return self._payload_mass > 0 and self._payload_attached
+
+    def render_hidden_geoms(self) -> list[int]:
+        """Geoms left out of the picture now: a payload not yet in the hand."""
+        if self._payload_mass > 0 and not self._payload_attached:
+            body = self._payload_body
+            return [g for g in range(self.model.ngeom) if self.model.geom_bodyid[g] == body]
+        return []
+
+    def overlay_values(self) -> OverlayValues:
+        """The overlay's numbers for the current state."""
+        return OverlayValues(
+            time=float(self.data.time),
+            goal_distance=self._goal_distance(),
+            tray_tilt_deg=self._tray_tilt_deg() if self._tray else None,
+            friction_use=self._cup_friction_use() if self._tray else None,
+            cup_lost=self._cup_lost,
+        )
+
+    def render(self) -> Any:
+        """``rgb_array``/``depth_array``: a frame through ``camera_name`` (default ``follow``,
+        the robot framed from its side; ``tray``: the tray and cup close up), with the overlay
+        if the env was made with ``render_overlay=True``. ``human``: Gymnasium's viewer."""
+        if self.render_mode not in ("rgb_array", "depth_array"):
+            return super().render()
+        if self._frame_renderer is None:
+            self._frame_renderer = FrameRenderer(
+                self.model, self.width, self.height, camera=self._render_camera
+            )
+        depth = self.render_mode == "depth_array"
+        frame = self._frame_renderer.render(self.data, self.render_hidden_geoms(), depth=depth)
+        if self._render_overlay and not depth:
+            frame = draw_overlay(frame, self.overlay_values())
+        return frame
+
+    def close(self) -> None:
+        if self._frame_renderer is not None:
+            self._frame_renderer.close()
+            self._frame_renderer = None
+        super().close()
