@@ -18,10 +18,26 @@ from numpy.typing import NDArray
 from wip_gym.assets import mjcf_path
 from wip_gym.robot_model import RobotModel
 from wip_gym.robots import robot_spec
-from wip_gym.scene import CUP_HALF_HEIGHT, TRAY_HALF_SIZE, SceneOptions, build_model, reset_qpos
+from wip_gym.scene import (
+    CUP_HALF_HEIGHT,
+    CUP_RADIUS,
+    TRAY_HALF_SIZE,
+    SceneOptions,
+    build_model,
+    reset_qpos,
+    tray_support_geoms,
+)
 
 DEFAULT_CAMERA_CONFIG: dict[str, Any] = {}
 CupFrame = tuple[NDArray[np.float64], NDArray[np.float64]]
+
+#: a cup counts as upright while its axis is within this angle of the tray's normal (deg)
+CUP_UPRIGHT_DEG = 30.0
+#: a cup counts as on the plate while its lowest point is at most this far above the plate (m)
+CUP_PLATE_GAP = 0.005
+#: a free tray counts as on the hand while its origin is within this distance of its nominal
+#: place along the nominal normal (m), and over the hand (within the plate's half-size)
+TRAY_HAND_GAP = 0.01
 
 
 def _goal_array(goal: Any, planar: bool) -> NDArray[np.float64]:
@@ -57,6 +73,9 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         reset_noise_scale: float = 0.01,
         mass_randomization: float = 0.0,
         wheel_torque_limit: float = 150.0,
+        tray_attachment: str = "welded",
+        tray_rim: float = 0.0,
+        tray_friction: float = 0.3,
         terminate_on_cup_loss: bool = True,
         fall_angle: float = 0.8,
         progress_weight: float = 1.0,
@@ -83,6 +102,9 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
                 reset_noise_scale,
                 mass_randomization,
                 wheel_torque_limit,
+                tray_attachment,
+                tray_rim,
+                tray_friction,
                 terminate_on_cup_loss,
                 fall_angle,
                 progress_weight,
@@ -121,8 +143,41 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             cup_friction=cup_friction,
             payload_mass=payload_mass,
             wheel_torque_limit=wheel_torque_limit,
+            tray_attachment=tray_attachment,
+            tray_rim=float(tray_rim),
+            tray_friction=float(tray_friction),
         )
+        if not tray and (tray_attachment, tray_rim, tray_friction) != ("welded", 0.0, 0.3):
+            raise ValueError(
+                f"tray_attachment, tray_rim and tray_friction need a tray task, got "
+                f"{tray_attachment!r}, {tray_rim!r}, {tray_friction!r} on robot {robot!r}"
+            )
+        self._arguments: dict[str, Any] = {
+            "goal": tuple(float(v) for v in self._goal)
+            if not self._spec.planar
+            else float(self._goal[0]),
+            "cup_friction": float(cup_friction),
+            "payload_mass": payload_mass,
+            "payload_time": payload_time,
+            "push_force": push_force,
+            "push_time": push_time,
+            "push_duration": push_duration,
+            "reset_noise_scale": reset_noise_scale,
+            "mass_randomization": mass_randomization,
+            "wheel_torque_limit": wheel_torque_limit,
+            "tray_attachment": tray_attachment,
+            "tray_rim": float(tray_rim),
+            "tray_friction": float(tray_friction),
+            "terminate_on_cup_loss": terminate_on_cup_loss,
+            "fall_angle": fall_angle,
+            "progress_weight": progress_weight,
+            "ctrl_cost_weight": ctrl_cost_weight,
+            "fall_penalty": fall_penalty,
+            "cup_loss_penalty": cup_loss_penalty,
+            "frame_skip": int(frame_skip),
+        }
         self._tray = tray
+        self._free_tray = tray and tray_attachment == "free"
         self._payload_mass = payload_mass
         self._payload_time = payload_time
         self._push = (push_force, push_time, push_duration)
@@ -189,6 +244,20 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             self._tray_geom = m.geom("tray").id
             self._cup_friction = float(cup_friction)
             self._contact_force = np.zeros(6)
+            rest = m.site("tray_rest").id
+            self._tray_rest_site = rest
+            self._tray_mount_body = int(m.site_bodyid[rest])
+            self._tray_rest_pos = m.site_pos[rest].copy()
+            self._tray_rest_quat = m.site_quat[rest].copy()
+        if self._free_tray:
+            tray_joint = m.joint("tray").id
+            self._tray_qpos = m.jnt_qposadr[tray_joint]
+            self._support_geoms = [m.geom(n).id for n in tray_support_geoms(robot)]
+            # each support's distance to the plate with the tray at rest (the soft contacts'
+            # equilibrium): the reset places the tray so that none is closer than this
+            rest_qpos = m.qpos0.copy()
+            rest_qpos[: lay.nq] = reset_qpos(m, self.robot)
+            self._support_rest_distance = self._support_distances(rest_qpos)
         if payload_mass > 0:
             self._payload_body = m.body("payload").id
         self._action_low = self.action_space.low.astype(np.float64)
@@ -233,6 +302,28 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         """Tray-cup friction coefficient, or None without a cup."""
         return self._cup_friction if self._tray else None
 
+    @property
+    def tray_attachment(self) -> str | None:
+        """``welded`` or ``free``, None without a tray."""
+        return self._scene.tray_attachment if self._tray else None
+
+    @property
+    def tray_rim(self) -> float | None:
+        """Rim height of the tray (m), None without a tray."""
+        return self._scene.tray_rim if self._tray else None
+
+    @property
+    def tray_friction(self) -> float | None:
+        """Friction of the free tray's contacts with its supports (also reported when welded,
+        where it has no effect), None without a tray."""
+        return self._scene.tray_friction if self._tray else None
+
+    @property
+    def arguments(self) -> dict[str, Any]:
+        """Every env argument in effect (defaults included), by name, as ``gymnasium.make``
+        takes it (render arguments excluded)."""
+        return dict(self._arguments)
+
     # ----------------------------------------------------------------- reset
     def reset_model(self) -> dict[str, NDArray[np.float64]]:
         m, d, lay = self.model, self.data, self.robot.layout
@@ -266,6 +357,8 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         qpos[: lay.nq] = qpos_robot
         qvel[: lay.nv] = qvel_robot
         if self._tray:
+            if self._free_tray:
+                self._place_free_tray(qpos)
             d.qpos[:] = qpos
             mujoco.mj_kinematics(m, d)
             top = d.xpos[self._tray_body] + d.xmat[self._tray_body].reshape(3, 3) @ np.array(
@@ -285,8 +378,45 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         self._cup_lost = False
         return self._get_obs()
 
+    def _support_distances(self, qpos: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Signed distance of each support geom to the tray's plate for the state ``qpos``
+        (negative: penetration)."""
+        m, d = self.model, self.data
+        d.qpos[:] = qpos
+        mujoco.mj_kinematics(m, d)
+        return np.array(
+            [
+                mujoco.mj_geomDistance(m, d, self._tray_geom, g, 0.05, None)
+                for g in self._support_geoms
+            ]
+        )
+
+    def _place_free_tray(self, qpos: NDArray[np.float64]) -> None:
+        """Put the free tray (in ``qpos``) at its rest place on the hand of the robot pose in
+        ``qpos``, then along its normal so that the support closest to the plate is exactly at
+        its rest distance (the others a little farther: the reset noise moves the grippers
+        relative to each other)."""
+        m, d = self.model, self.data
+        d.qpos[:] = qpos
+        mujoco.mj_kinematics(m, d)
+        body = self._tray_mount_body
+        rot = d.xmat[body].reshape(3, 3)
+        position = d.xpos[body] + rot @ self._tray_rest_pos
+        quat = np.zeros(4)
+        mujoco.mju_mulQuat(quat, d.xquat[body], self._tray_rest_quat)
+        normal = np.zeros(9)
+        mujoco.mju_quat2Mat(normal, quat)
+        normal = normal[[2, 5, 8]]
+        a = self._tray_qpos
+        qpos[a + 3 : a + 7] = quat
+        for _ in range(3):  # a face-on-edge distance changes with the normal shift: iterate
+            qpos[a : a + 3] = position
+            shift = float(np.min(self._support_distances(qpos) - self._support_rest_distance))
+            position = position - shift * normal
+        qpos[a : a + 3] = position
+
     def _get_reset_info(self) -> dict[str, Any]:
-        return self._info(fallen=False, cup_on_tray=True)
+        return self._info(fallen=False, cup_frame=self._cup_in_tray_frame())
 
     # ------------------------------------------------------------------ step
     def step(
@@ -311,9 +441,9 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         # the cup's pose in the tray frame, made once for this state
         cup_frame = self._cup_in_tray_frame() if self._tray else None
         fallen = self._fallen()
-        cup_on_tray = self._cup_on_tray(cup_frame) if self._tray else True
-        newly_lost = self._tray and not cup_on_tray and not self._cup_lost
-        self._cup_lost = self._cup_lost or not cup_on_tray
+        kept = self._cup_kept(cup_frame) if cup_frame is not None else True
+        newly_lost = self._tray and not kept and not self._cup_lost
+        self._cup_lost = self._cup_lost or not kept
         distance = self._goal_distance()
         progress_w, ctrl_w, fall_pen, cup_pen = self._weights
         scaled = action / self._action_scale
@@ -326,8 +456,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         self._prev_distance = distance
         reward = float(sum(rewards.values()))
         terminated = bool(fallen or (self._tray and self._terminate_on_cup_loss and self._cup_lost))
-        info = self._info(fallen=fallen, cup_on_tray=cup_on_tray, cup_frame=cup_frame,
-                          distance=distance)  # fmt: skip
+        info = self._info(fallen=fallen, cup_frame=cup_frame, distance=distance)
         info.update(rewards)
         if self.render_mode == "human":
             self.render()
@@ -392,15 +521,52 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         mujoco.mju_mulQuat(rel, tray_quat, cup_quat)
         return position, rel
 
-    def _cup_on_tray(self, cup_frame: CupFrame | None = None) -> bool:
-        """The cup's centre is above the tray's plate (within its outline) and near it."""
-        p, _ = cup_frame or self._cup_in_tray_frame()
+    @staticmethod
+    def _cup_state(cup_frame: CupFrame) -> tuple[float, bool, bool]:
+        """``(tilt_deg, upright, on_plate)`` of the cup from its pose in the tray frame.
+
+        Tilt: the angle between the cup's axis and the tray's normal. On the plate: the cup's
+        centre is over the plate (within its outline) and above it, and the cup's lowest point
+        is at most ``CUP_PLATE_GAP`` above the plate's top (resting, or within a few mm)."""
+        p, q = cup_frame
+        w, x, y, _ = q.tolist()
+        cos_tilt = min(1.0, max(-1.0, 1.0 - 2.0 * (x * x + y * y)))  # R[2, 2] of the quaternion
+        tilt = math.degrees(math.acos(cos_tilt))
+        sin_tilt = math.sqrt(max(0.0, 1.0 - cos_tilt * cos_tilt))
         top = 2 * TRAY_HALF_SIZE[2]
-        return bool(
-            abs(p[0]) <= TRAY_HALF_SIZE[0]
-            and abs(p[1]) <= TRAY_HALF_SIZE[1]
-            and top < p[2] < top + 2.5 * CUP_HALF_HEIGHT
+        px, py, pz = p.tolist()
+        lowest = pz - CUP_HALF_HEIGHT * abs(cos_tilt) - CUP_RADIUS * sin_tilt
+        on_plate = (
+            abs(px) <= TRAY_HALF_SIZE[0]
+            and abs(py) <= TRAY_HALF_SIZE[1]
+            and pz > top
+            and lowest - top <= CUP_PLATE_GAP
         )
+        return tilt, tilt <= CUP_UPRIGHT_DEG, on_plate
+
+    def _cup_kept(self, cup_frame: CupFrame) -> bool:
+        """The cup is on the tray (on the plate and upright) and, for a free tray, the tray is
+        on the hand."""
+        _, upright, on_plate = self._cup_state(cup_frame)
+        return upright and on_plate and (not self._free_tray or self._tray_on_hand()[1])
+
+    def _tray_on_hand(self) -> tuple[NDArray[np.float64], bool]:
+        """``(offset, on_hand)``: the tray's displacement from its nominal place on the hand, in
+        that place's frame (the ``tray_rest`` site: zero when welded), and whether it is still
+        on the hand (within ``TRAY_HAND_GAP`` along the normal and within the plate's
+        half-size across it)."""
+        if not self._free_tray:
+            return np.zeros(3), True
+        d = self.data
+        rest = self._tray_rest_site
+        offset = d.site_xmat[rest].reshape(3, 3).T @ (d.xpos[self._tray_body] - d.site_xpos[rest])
+        ox, oy, oz = offset.tolist()
+        on_hand = (
+            abs(oz) <= TRAY_HAND_GAP
+            and abs(ox) <= TRAY_HALF_SIZE[0]
+            and abs(oy) <= TRAY_HALF_SIZE[1]
+        )
+        return offset, on_hand
 
     def _cup_friction_use(self) -> float:
         """Tangential over mu times normal contact force, summed over the tray-cup contacts
@@ -431,9 +597,10 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         z = self.data.xmat[self._tray_body].reshape(3, 3)[:, 2]
         return float(np.degrees(np.arccos(np.clip(z[2], -1.0, 1.0))))
 
-    def _info(self, *, fallen: bool, cup_on_tray: bool, cup_frame: CupFrame | None = None,
+    def _info(self, *, fallen: bool, cup_frame: CupFrame | None = None,
               distance: float | None = None) -> dict[str, Any]:  # fmt: skip
-        """The step's info; ``cup_frame`` and ``distance`` when the caller has them."""
+        """The step's info; ``cup_frame`` (tray tasks) and ``distance`` when the caller has
+        them."""
         robot = self.robot
         axle = robot.axle_position
         info: dict[str, Any] = {
@@ -451,11 +618,18 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         if self._ee_site >= 0:
             info["ee_error"] = float(np.linalg.norm(self._ee_in_axle_frame() - self._ee_reference))
         if self._tray:
-            offset, _ = cup_frame or self._cup_in_tray_frame()
+            cup_frame = cup_frame or self._cup_in_tray_frame()
+            tilt, upright, on_plate = self._cup_state(cup_frame)
+            tray_offset, tray_on_hand = self._tray_on_hand()
             info["tray_tilt_deg"] = self._tray_tilt_deg()
-            info["cup_offset"] = offset
-            info["cup_on_tray"] = bool(cup_on_tray)
+            info["cup_offset"] = cup_frame[0]
+            info["cup_tilt_deg"] = tilt
+            info["cup_upright"] = upright
+            info["cup_on_plate"] = on_plate
+            info["cup_on_tray"] = on_plate and upright
             info["cup_friction_use"] = self._cup_friction_use()
+            info["tray_offset"] = tray_offset
+            info["tray_on_hand"] = tray_on_hand
         return info
 
     def _get_obs(self, cup_frame: CupFrame | None = None) -> dict[str, NDArray[np.float64]]:
