@@ -225,7 +225,10 @@ def _add_support_pairs(spec: mujoco.MjSpec, options: SceneOptions) -> None:
         )
 
 
-def _add_cup(spec: mujoco.MjSpec, friction: float, rim: float) -> None:
+def add_cup(spec: mujoco.MjSpec, friction: float, rim: float) -> None:
+    """A free cup (body and joint ``cup``) and its contact pairs of friction ``friction`` with
+    the tray's plate (pair ``tray_cup``) and rim walls (``rim`` > 0). The spec must hold the
+    tray's geoms and the ``cup`` material."""
     cup = spec.worldbody.add_body(name="cup", pos=[0.0, 0.0, 1.0])
     cup.add_freejoint(name="cup")
     cup.add_geom(
@@ -391,7 +394,7 @@ def build_spec(options: SceneOptions) -> mujoco.MjSpec:
             tray = spec.body("tray")
             _add_rest_site(spec, np.array(tray.pos), np.array(tray.quat))
     if options.cup:
-        _add_cup(spec, options.cup_friction, options.tray_rim)
+        add_cup(spec, options.cup_friction, options.tray_rim)
     return spec
 
 

@@ -51,6 +51,51 @@ def _goal_array(goal: Any, planar: bool) -> NDArray[np.float64]:
     return arr
 
 
+def friction_use(
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    geom_mask: NDArray[np.bool_],
+    plate: int,
+    mu: float,
+) -> float:
+    """Friction use of a body on a plate: the norm of the net tangential force over ``mu`` times
+    the net normal force, summed over the contacts between the geom ``plate`` and the geoms
+    marked in ``geom_mask`` (1: the body slides); 0 without contact.
+
+    The forces are summed as vectors before the ratio: the ratio is how much of the friction
+    the net push along the plate uses (a resting cup on a still plate tilted by alpha uses
+    ``tan(alpha) / mu``). Contacts of other geoms (a rim) do not count: a rim's push on the
+    cup is a normal force of the rim, not friction of the plate.
+    """
+    n = data.ncon
+    if n == 0:
+        return 0.0
+    contact = data.contact
+    pairs = contact.geom[:n]
+    mine = ((pairs[:, 0] == plate) & geom_mask[pairs[:, 1]]) | (
+        (pairs[:, 1] == plate) & geom_mask[pairs[:, 0]]
+    )
+    index = np.flatnonzero(mine)
+    index = index[contact.efc_address[index] >= 0]
+    if index.size == 0:
+        return 0.0
+    if model.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC:
+        # elliptic cones keep the contact-frame force (normal, tangent 1, tangent 2) in efc_force
+        forces = data.efc_force[contact.efc_address[index][:, None] + np.arange(3)]
+    else:
+        forces = np.empty((index.size, 3))
+        wrench = np.zeros(6)
+        for k, i in enumerate(index.tolist()):
+            mujoco.mj_contactForce(model, data, i, wrench)
+            forces[k] = wrench[:3]
+    normal = float(forces[:, 0].sum())
+    if normal <= 0.0:
+        return 0.0
+    frames = contact.frame[index]  # rows: normal, tangent 1, tangent 2
+    tangential = forces[:, 1] @ frames[:, 3:6] + forces[:, 2] @ frames[:, 6:9]
+    return float(np.linalg.norm(tangential)) / (mu * normal)
+
+
 class WIPEnv(MujocoEnv, utils.EzPickle):
     """A WIP robot on flat ground driving to a goal, optionally carrying a cup on a tray.
 
@@ -241,9 +286,9 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             self._cup_qpos = m.jnt_qposadr[m.joint("cup").id]
             self._cup_dof = m.jnt_dofadr[m.joint("cup").id]
             self._cup_geom = m.geom("cup").id
+            self._cup_geom_mask = m.geom_bodyid == self._cup_body
             self._tray_geom = m.geom("tray").id
             self._cup_friction = float(cup_friction)
-            self._contact_force = np.zeros(6)
             rest = m.site("tray_rest").id
             self._tray_rest_site = rest
             self._tray_mount_body = int(m.site_bodyid[rest])
@@ -416,7 +461,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         qpos[a : a + 3] = position
 
     def _get_reset_info(self) -> dict[str, Any]:
-        return self._info(fallen=False, cup_frame=self._cup_in_tray_frame())
+        return self._info(fallen=False, cup_frame=self._cup_in_tray_frame() if self._tray else None)
 
     # ------------------------------------------------------------------ step
     def step(
@@ -569,29 +614,10 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         return offset, on_hand
 
     def _cup_friction_use(self) -> float:
-        """Tangential over mu times normal contact force, summed over the tray-cup contacts
-        (1 means the cup slides); 0 with no contact."""
-        d, m = self.data, self.model
-        if d.ncon == 0:
-            return 0.0
-        contact = d.contact
-        pairs = contact.geom[: d.ncon]
-        cup_tray = ((pairs == self._cup_geom) | (pairs == self._tray_geom)).all(axis=1)
-        frames = contact.frame
-        frame = self._contact_force
-        normal = tx = ty = tz = 0.0
-        for i in np.flatnonzero(cup_tray).tolist():
-            mujoco.mj_contactForce(m, d, i, frame)
-            f_n, f_1, f_2 = frame[:3].tolist()
-            # rows of the contact frame: normal, tangent 1, tangent 2
-            _, _, _, a0, a1, a2, b0, b1, b2 = frames[i].tolist()
-            normal += f_n
-            tx += f_1 * a0 + f_2 * b0
-            ty += f_1 * a1 + f_2 * b1
-            tz += f_1 * a2 + f_2 * b2
-        if normal <= 0.0:
-            return 0.0
-        return math.sqrt(tx * tx + ty * ty + tz * tz) / (self._cup_friction * normal)
+        """The cup's friction use on the plate (see :func:`friction_use`)."""
+        return friction_use(
+            self.model, self.data, self._cup_geom_mask, self._tray_geom, self._cup_friction
+        )
 
     def _tray_tilt_deg(self) -> float:
         z = self.data.xmat[self._tray_body].reshape(3, 3)[:, 2]
