@@ -12,6 +12,7 @@ import wip_gym  # noqa: F401
 from controllers.policy import controller_model
 from wip_gym.scene import (
     AUTHORS_TRAY_RIM,
+    CUP_FEET,
     TRAY_MASS,
     SceneOptions,
     build_model,
@@ -84,8 +85,10 @@ def test_tray_mass_rim_and_pairs(robot: str, attachment: str) -> None:
         frozenset((m.geom(m.pair_geom1[p]).name, m.geom(m.pair_geom2[p]).name))
         for p in range(m.npair)
     }
-    assert frozenset(("tray", "cup")) in pairs
-    assert all(frozenset((m.geom(g).name, "cup")) in pairs for g in rims)
+    feet = [m.geom(g).name for g in range(m.ngeom) if m.geom(g).name.startswith("cup_foot")]
+    assert len(feet) == CUP_FEET
+    for tray_geom in ["tray", *(m.geom(g).name for g in rims)]:
+        assert all(frozenset((tray_geom, foot)) in pairs for foot in feet)
     supports = {frozenset(("tray", s)) for s in tray_support_geoms(robot)}
     assert supports <= pairs if attachment == "free" else not supports & pairs
     free_joint = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "tray")
@@ -109,8 +112,9 @@ def test_tray_and_cup_start_exactly_in_contact(env_id: str, attachment: str, see
     env.reset(seed=seed)
     base = env.unwrapped
     m, d = base.model, base.data
-    cup = mujoco.mj_geomDistance(m, d, m.geom("tray").id, m.geom("cup").id, 0.05, None)
-    assert cup == pytest.approx(-1e-6, abs=1e-8)
+    for geom in ("cup", "cup_foot0", "cup_foot2"):
+        cup = mujoco.mj_geomDistance(m, d, m.geom("tray").id, m.geom(geom).id, 0.05, None)
+        assert cup == pytest.approx(-1e-6, abs=1e-8), geom
     if attachment == "free":
         distances = base._support_distances(d.qpos.copy()) - base._support_rest_distance
         assert distances.min() == pytest.approx(0.0, abs=1e-7)

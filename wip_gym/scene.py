@@ -49,11 +49,19 @@ FINGER_CENTRES = {
     "left_gripper": ((-0.06, 0.0, 0.172), (0.06, 0.0, 0.172)),
     "right_gripper": ((-0.05, 0.0, 0.172), (0.07, 0.0, 0.172)),
 }
+#: the constraint solver's tolerance in models with a cup. At MuJoCo's default (1e-8) the
+#: Newton solver stops at about one iteration per step with the cup's 0.5 N contact forces
+#: unconverged beside the robot's kN wheel forces: a cup on a still tray then jitters (a path
+#: of 12 to 16 mm per second, a net creep of 1 to 1.5 mm/s, measured with the robot held
+#: still). At 1e-12 that is gone (under 0.001 mm/s) at the same iteration count and step cost.
+CUP_SOLVER_TOLERANCE = 1e-12
 #: time the free tray is let settle on its supports (robot held still) when the model is built
 TRAY_SETTLE_TIME = 0.5
 CUP_RADIUS = 0.031
 CUP_HALF_HEIGHT = 0.04
 CUP_MASS = 0.05
+CUP_FEET = 4  # spheres the cup stands on (see add_cup)
+CUP_FOOT_RADIUS = 0.001
 PAYLOAD_RADIUS = 0.04  # a 8 cm sphere in the hand, for its inertia and its picture
 
 
@@ -227,8 +235,17 @@ def _add_support_pairs(spec: mujoco.MjSpec, options: SceneOptions) -> None:
 
 def add_cup(spec: mujoco.MjSpec, friction: float, rim: float) -> None:
     """A free cup (body and joint ``cup``) and its contact pairs of friction ``friction`` with
-    the tray's plate (pair ``tray_cup``) and rim walls (``rim`` > 0). The spec must hold the
-    tray's geoms and the ``cup`` material."""
+    the tray's plate and rim walls (``rim`` > 0). The spec must hold the tray's geoms and the
+    ``cup`` material.
+
+    The cylinder ``cup`` carries the mass and the picture and meets the floor (plane-cylinder,
+    a primitive pair). On the tray the cup stands on ``CUP_FEET`` small spheres inside its base
+    rim (geoms ``cup_foot<k>``), tangent to the base: sphere-box is a primitive pair, where
+    the cylinder on the plate's box is MuJoCo's general convex collision (4 points with
+    multiccd). Same statics and sliding (Coulomb on a plate), same footprint; the support
+    polygon is the square inscribed in the foot circle, so the cup could tip at an acceleration
+    of ``0.53 g`` across a diagonal (the cylinder at ``0.75 g``): with ``cup_friction`` below
+    0.53 it slides before either can tip, as the cylinder does (tests/test_cup_metrics.py)."""
     cup = spec.worldbody.add_body(name="cup", pos=[0.0, 0.0, 1.0])
     cup.add_freejoint(name="cup")
     cup.add_geom(
@@ -240,14 +257,33 @@ def add_cup(spec: mujoco.MjSpec, friction: float, rim: float) -> None:
         conaffinity=1,
         material="cup",
     )
-    for tray_geom in _tray_geom_names(rim):
-        spec.add_pair(
-            name="tray_cup" if tray_geom == "tray" else f"{tray_geom}_cup",
-            geomname1=tray_geom,
-            geomname2="cup",
-            condim=3,
-            friction=[friction, friction, 0.005, 0.0001, 0.0001],
+    feet = [f"cup_foot{k}" for k in range(CUP_FEET)]
+    centre = CUP_RADIUS - CUP_FOOT_RADIUS
+    for k, name in enumerate(feet):
+        angle = 2.0 * np.pi * k / CUP_FEET
+        cup.add_geom(
+            name=name,
+            type=mujoco.mjtGeom.mjGEOM_SPHERE,
+            size=[CUP_FOOT_RADIUS, 0.0, 0.0],
+            pos=[
+                centre * np.cos(angle),
+                centre * np.sin(angle),
+                -(CUP_HALF_HEIGHT - CUP_FOOT_RADIUS),
+            ],
+            mass=0.0,
+            contype=0,  # the tray's pairs only
+            conaffinity=0,
+            material="cup",
         )
+    for tray_geom in _tray_geom_names(rim):
+        for foot in feet:
+            spec.add_pair(
+                name=f"{tray_geom}_{foot}",
+                geomname1=tray_geom,
+                geomname2=foot,
+                condim=3,
+                friction=[friction, friction, 0.005, 0.0001, 0.0001],
+            )
 
 
 def _add_payload(spec: mujoco.MjSpec, mass: float) -> None:
@@ -395,6 +431,7 @@ def build_spec(options: SceneOptions) -> mujoco.MjSpec:
             _add_rest_site(spec, np.array(tray.pos), np.array(tray.quat))
     if options.cup:
         add_cup(spec, options.cup_friction, options.tray_rim)
+        spec.option.tolerance = CUP_SOLVER_TOLERANCE
     return spec
 
 

@@ -61,9 +61,11 @@ _COMMON = """
     | `tray_offset` | (3,) | the tray's origin relative to its rest place on the hand (the `tray_rest` site), in that place's frame (m); zeros when welded. The sum of its per-step changes is the tray's slip path |
     | `tray_on_hand` | bool | free tray: within 1 cm of its rest place along the normal and within the plate's half-size across it; always True when welded |
 
-    The soft contact's creep floor: a cup on a still level plate moves 0.36 mm (path length) in
-    4.8 s (`tests/test_cup_metrics.py` bounds it at 1 mm in 5 s), so a slip path below about
-    0.1 mm per second of episode is no slip.
+    The soft contact's creep floor (robot held still, `tests/test_cup_metrics.py`): a cup on a
+    still level tray moves about 0.001 mm in 5 s (path of `cup_offset`); under a tangential
+    load soft friction creeps about 0.08 to 0.09 mm/s per unit of `cup_friction_use` (0.065 mm
+    in 5 s at 0.17, 0.47 mm at 0.89), and the free Krang tray on its 2.9 deg rest 0.14 mm in
+    5 s. So a slip path under about 0.1 mm per second of episode is creep, not a slip.
 
     ## Starting State
 
