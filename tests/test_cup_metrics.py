@@ -97,12 +97,12 @@ def test_friction_use_on_a_still_tilted_plate_is_tan_alpha_over_mu(
     alpha = math.radians(alpha_deg)
     assert alpha < math.atan(mu)  # below slipping
     m, d, _ = _still_plate(task_model, mu, alpha)
-    mask = m.geom_bodyid == m.body("cup").id
+    cup = set(np.flatnonzero(m.geom_bodyid == m.body("cup").id).tolist())
     uses = []
     for step in range(SETTLE_STEPS + MEASURE_STEPS):
         mujoco.mj_step(m, d)
         if step >= SETTLE_STEPS:
-            uses.append(friction_use(m, d, mask, m.geom("tray").id, mu))
+            uses.append(friction_use(m, d, cup, m.geom("tray").id, mu))
     expected = math.tan(alpha) / mu
     assert min(uses) > 0.97 * expected and max(uses) < 1.03 * expected, (min(uses), expected)
 
@@ -232,8 +232,7 @@ def test_creep_floor_on_a_still_tray(env_id: str, attachment: str) -> None:
     assert cup_path < bound, f"cup crept {cup_path * 1e3:.4f} mm in {CREEP_TIME} s"
     if attachment == "free":  # the tray on its 2.9 deg rest, by its own friction use
         m, d = held.base.model, held.base.data
-        supports = np.zeros(m.ngeom, dtype=bool)
-        supports[[m.geom(n).id for n in tray_support_geoms("krang")]] = True
+        supports = {m.geom(n).id for n in tray_support_geoms("krang")}
         use = friction_use(m, d, supports, m.geom("tray").id, held.base.tray_friction)
         assert use > 0.1
     bound = CREEP_FLOOR + TRAY_CREEP_PER_USE * use * CREEP_TIME

@@ -7,6 +7,7 @@ class docstrings there hold the tables of spaces, rewards and arguments.
 from __future__ import annotations
 
 import math
+from collections.abc import Collection
 from typing import Any
 
 import mujoco
@@ -54,13 +55,13 @@ def _goal_array(goal: Any, planar: bool) -> NDArray[np.float64]:
 def friction_use(
     model: mujoco.MjModel,
     data: mujoco.MjData,
-    geom_mask: NDArray[np.bool_],
+    geoms: Collection[int],
     plate: int,
     mu: float,
 ) -> float:
     """Friction use of a body on a plate: the norm of the net tangential force over ``mu`` times
     the net normal force, summed over the contacts between the geom ``plate`` and the geoms
-    marked in ``geom_mask`` (1: the body slides); 0 without contact.
+    ``geoms`` (ids; 1: the body slides); 0 without contact.
 
     The forces are summed as vectors before the ratio: the ratio is how much of the friction
     the net push along the plate uses (a resting cup on a still plate tilted by alpha uses
@@ -71,29 +72,38 @@ def friction_use(
     if n == 0:
         return 0.0
     contact = data.contact
-    pairs = contact.geom[:n]
-    mine = ((pairs[:, 0] == plate) & geom_mask[pairs[:, 1]]) | (
-        (pairs[:, 1] == plate) & geom_mask[pairs[:, 0]]
-    )
-    index = np.flatnonzero(mine)
-    index = index[contact.efc_address[index] >= 0]
-    if index.size == 0:
+    pairs = contact.geom[:n].tolist()
+    rows = [
+        i
+        for i, (g1, g2) in enumerate(pairs)
+        if (g1 == plate and g2 in geoms) or (g2 == plate and g1 in geoms)
+    ]
+    if not rows:
         return 0.0
-    if model.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC:
-        # elliptic cones keep the contact-frame force (normal, tangent 1, tangent 2) in efc_force
-        forces = data.efc_force[contact.efc_address[index][:, None] + np.arange(3)]
-    else:
-        forces = np.empty((index.size, 3))
-        wrench = np.zeros(6)
-        for k, i in enumerate(index.tolist()):
+    elliptic = model.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
+    address = contact.efc_address
+    frames = contact.frame
+    force = data.efc_force
+    wrench = np.zeros(6)
+    normal = tx = ty = tz = 0.0
+    for i in rows:
+        a = int(address[i])
+        if a < 0:  # excluded from the constraints
+            continue
+        if elliptic:  # the contact-frame force (normal, tangent 1, tangent 2) is in efc_force
+            f_n, f_1, f_2 = force[a : a + 3].tolist()
+        else:
             mujoco.mj_contactForce(model, data, i, wrench)
-            forces[k] = wrench[:3]
-    normal = float(forces[:, 0].sum())
+            f_n, f_1, f_2 = wrench[:3].tolist()
+        # rows of the contact frame: normal, tangent 1, tangent 2
+        _, _, _, a0, a1, a2, b0, b1, b2 = frames[i].tolist()
+        normal += f_n
+        tx += f_1 * a0 + f_2 * b0
+        ty += f_1 * a1 + f_2 * b1
+        tz += f_1 * a2 + f_2 * b2
     if normal <= 0.0:
         return 0.0
-    frames = contact.frame[index]  # rows: normal, tangent 1, tangent 2
-    tangential = forces[:, 1] @ frames[:, 3:6] + forces[:, 2] @ frames[:, 6:9]
-    return float(np.linalg.norm(tangential)) / (mu * normal)
+    return math.sqrt(tx * tx + ty * ty + tz * tz) / (mu * normal)
 
 
 class WIPEnv(MujocoEnv, utils.EzPickle):
@@ -249,6 +259,9 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         }
         self.robot = RobotModel(self.model)
         lay = self.robot.layout
+        self._layout = lay
+        self._wheel_velocity = np.zeros((2, 6))
+        self._cos_psi, self._sin_psi = 1.0, 0.0
         self._nq, self._nv = lay.nq, lay.nv
         obs = {
             "qpos": spaces.Box(-np.inf, np.inf, (lay.nq,), np.float64),
@@ -277,8 +290,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
                 and (m.geom_contype[g] or m.geom_conaffinity[g])
             ]
         )
-        self._body_geom_mask = np.zeros(m.ngeom, dtype=bool)
-        self._body_geom_mask[self._body_geoms] = True
+        self._body_geom_set = frozenset(self._body_geoms.tolist())
         self._ee_site = m.site("ee").id if self._spec.tray_capable else -1
         if tray:
             self._tray_body = m.body("tray").id
@@ -286,7 +298,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             self._cup_qpos = m.jnt_qposadr[m.joint("cup").id]
             self._cup_dof = m.jnt_dofadr[m.joint("cup").id]
             self._cup_geom = m.geom("cup").id
-            self._cup_geom_mask = m.geom_bodyid == self._cup_body
+            self._cup_geoms = frozenset(np.flatnonzero(m.geom_bodyid == self._cup_body).tolist())
             self._tray_geom = m.geom("tray").id
             self._cup_friction = float(cup_friction)
             rest = m.site("tray_rest").id
@@ -417,7 +429,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         self.set_state(qpos, qvel)
         m.site_pos[self._goal_site, :2] = self._goal
         d.xfrc_applied[:] = 0.0
-        self.robot.update(d.qpos[: lay.nq], d.qvel[: lay.nv], dynamics=False)
+        self._measure()
         self._prev_distance = self._goal_distance()
         self._ee_reference = self._ee_in_axle_frame()
         self._cup_lost = False
@@ -461,20 +473,23 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         qpos[a : a + 3] = position
 
     def _get_reset_info(self) -> dict[str, Any]:
-        return self._info(fallen=False, cup_frame=self._cup_in_tray_frame() if self._tray else None)
+        info = self._info(fallen=False)
+        if self._tray:
+            frame = self._cup_in_tray_frame()
+            self._tray_info(info, frame, self._cup_state(frame), self._tray_on_hand())
+        return info
 
     # ------------------------------------------------------------------ step
     def step(
         self, action: NDArray[np.floating]
     ) -> tuple[dict[str, NDArray[np.float64]], float, bool, bool, dict[str, Any]]:
         action = self._check_action(action)
-        m, d, lay = self.model, self.data, self.robot.layout
+        m, d = self.model, self.data
         t = d.time
         force, start, duration = self._push
         d.xfrc_applied[self._push_body, :] = 0.0
         if force != 0.0 and start <= t < start + duration:
-            heading = self.robot.heading_rotation[:, 0]
-            d.xfrc_applied[self._push_body, :3] = force * heading
+            d.xfrc_applied[self._push_body, :3] = (force * self._cos_psi, force * self._sin_psi, 0)
         if not self._payload_attached and t >= self._payload_time:
             m.body_mass[self._payload_body] = self._payload_mass
             m.body_inertia[self._payload_body] = self._nominal_inertia[self._payload_body]
@@ -482,11 +497,15 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             mujoco.mj_setConst(m, mujoco.MjData(m))
             self._payload_attached = True
         self.do_simulation(action, self.frame_skip)
-        self.robot.update(d.qpos[: lay.nq], d.qvel[: lay.nv], dynamics=False)
-        # the cup's pose in the tray frame, made once for this state
+        self._measure()
+        # the cup's pose in the tray frame and its state, made once for this state
         cup_frame = self._cup_in_tray_frame() if self._tray else None
         fallen = self._fallen()
-        kept = self._cup_kept(cup_frame) if cup_frame is not None else True
+        kept = True
+        if cup_frame is not None:
+            cup_state = self._cup_state(cup_frame)
+            tray_state = self._tray_on_hand()
+            kept = cup_state[1] and cup_state[2] and tray_state[1]
         newly_lost = self._tray and not kept and not self._cup_lost
         self._cup_lost = self._cup_lost or not kept
         distance = self._goal_distance()
@@ -501,7 +520,9 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         self._prev_distance = distance
         reward = float(sum(rewards.values()))
         terminated = bool(fallen or (self._tray and self._terminate_on_cup_loss and self._cup_lost))
-        info = self._info(fallen=fallen, cup_frame=cup_frame, distance=distance)
+        info = self._info(fallen=fallen, distance=distance)
+        if cup_frame is not None:
+            self._tray_info(info, cup_frame, cup_state, tray_state)
         info.update(rewards)
         if self.render_mode == "human":
             self.render()
@@ -529,30 +550,87 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         return a
 
     # ------------------------------------------------------------- measures
+    def _measure(self) -> None:
+        """The robot's state measures for the current ``qpos``/``qvel``, from MuJoCo's own
+        kinematics and subtree quantities on the env's data (``mj_step`` leaves its kinematics
+        at the state before the step): heading ``psi``, ``psid``, ``x``, ``xd`` (the minimal
+        coordinates of ``RobotModel``), the axle position, and ``theta``, ``thetad`` of the body
+        CoM (wheels excluded) about the axle in the heading frame (``RobotModel.theta``)."""
+        m, d, lay = self.model, self.data, self._layout
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)
+        mujoco.mj_comVel(m, d)
+        mujoco.mj_subtreeVel(m, d)
+        base = lay.base_body
+        qpos, qvel = d.qpos, d.qvel
+        r = lay.wheel_radius
+        wl, wr = lay.wheel_bodies
+        axle = d.xpos[base]
+        if lay.planar:
+            o, v = lay.root_qpos, lay.root_dof
+            c, s, psi, psid = 1.0, 0.0, 0.0, 0.0
+            x, xd = float(qpos[o]), float(qvel[v])
+            vox, voy, voz = xd, 0.0, float(qvel[v + 1])
+        else:
+            R00, R01, R02, R10, R11, R12, R20, R21, R22 = d.xmat[base].tolist()
+            psi = math.atan2(-R01, R11)
+            c, s = math.cos(psi), math.sin(psi)
+            q1 = math.atan2(c * R02 + s * R12, R22)
+            v = lay.root_dof
+            vox, voy, voz, w0, w1, w2 = qvel[v : v + 6].tolist()
+            omega_x = R00 * w0 + R01 * w1 + R02 * w2
+            omega_y = R10 * w0 + R11 * w1 + R12 * w2
+            psid = R20 * w0 + R21 * w1 + R22 * w2
+            q1d = -s * omega_x + c * omega_y
+            ql, qr = lay.wheel_qpos
+            dl, dr = lay.wheel_dof
+            x = r * 0.5 * (qpos[ql] + qpos[qr]) + r * q1
+            xd = r * 0.5 * (qvel[dl] + qvel[dr]) + r * q1d
+        # the body's CoM and its velocity: the robot's subtree less the wheels
+        mass = m.body_subtreemass[base]
+        ml, mr = m.body_mass[wl], m.body_mass[wr]
+        velocity = self._wheel_velocity
+        mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_BODY, wl, velocity[0], 0)
+        mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_BODY, wr, velocity[1], 0)
+        body = mass - ml - mr
+        com = (mass * d.subtree_com[base] - ml * d.xipos[wl] - mr * d.xipos[wr]) / body - axle
+        vcom = (mass * d.subtree_linvel[base] - ml * velocity[0, 3:] - mr * velocity[1, 3:]) / body
+        dx, dy, dz = com.tolist()
+        dvx, dvy, dvz = vcom.tolist()
+        X, Y, Z = c * dx + s * dy, -s * dx + c * dy, dz
+        Xd = c * (dvx - vox) + s * (dvy - voy) + psid * Y
+        Zd = dvz - voz
+        distance_sq = X * X + Z * Z
+        self._theta = math.atan2(X, Z)
+        self._thetad = (Z * Xd - X * Zd) / distance_sq if distance_sq > 1e-18 else 0.0
+        self._x, self._xd, self._psi, self._psid = float(x), float(xd), psi, psid
+        self._cos_psi, self._sin_psi = c, s
+        self._axle = axle.copy()
+
     def _goal_distance(self) -> float:
-        axle = self.robot.axle_position
+        axle = self._axle
         if self._spec.planar:
-            return float(abs(self._goal[0] - axle[0]))
-        return float(np.hypot(*(self._goal - axle[:2])))
+            return abs(float(self._goal[0]) - float(axle[0]))
+        return math.hypot(float(self._goal[0] - axle[0]), float(self._goal[1] - axle[1]))
 
     def _ee_in_axle_frame(self) -> NDArray[np.float64]:
         if self._ee_site < 0:
             return np.zeros(3)
-        d = self.data
-        return self.robot.heading_rotation.T @ (
-            d.site_xpos[self._ee_site] - self.robot.axle_position
-        )
+        dx, dy, dz = (self.data.site_xpos[self._ee_site] - self._axle).tolist()
+        c, s = self._cos_psi, self._sin_psi
+        return np.array([c * dx + s * dy, -s * dx + c * dy, dz])
 
     def _fallen(self) -> bool:
-        if abs(self.robot.theta) > self._fall_angle:
+        if abs(self._theta) > self._fall_angle:
             return True
         d = self.data
         if d.ncon == 0:
             return False
-        pairs = d.contact.geom[: d.ncon]
-        with_floor = (pairs == self._floor).any(axis=1)
-        with_body = self._body_geom_mask[pairs].any(axis=1)
-        return bool((with_floor & with_body).any())
+        floor, body = self._floor, self._body_geom_set
+        return any(
+            (g1 == floor and g2 in body) or (g2 == floor and g1 in body)
+            for g1, g2 in d.contact.geom[: d.ncon].tolist()
+        )
 
     def _cup_in_tray_frame(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The cup's position and orientation (quaternion) in the tray frame."""
@@ -589,12 +667,6 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         )
         return tilt, tilt <= CUP_UPRIGHT_DEG, on_plate
 
-    def _cup_kept(self, cup_frame: CupFrame) -> bool:
-        """The cup is on the tray (on the plate and upright) and, for a free tray, the tray is
-        on the hand."""
-        _, upright, on_plate = self._cup_state(cup_frame)
-        return upright and on_plate and (not self._free_tray or self._tray_on_hand()[1])
-
     def _tray_on_hand(self) -> tuple[NDArray[np.float64], bool]:
         """``(offset, on_hand)``: the tray's displacement from its nominal place on the hand, in
         that place's frame (the ``tray_rest`` site: zero when welded), and whether it is still
@@ -616,47 +688,52 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
     def _cup_friction_use(self) -> float:
         """The cup's friction use on the plate (see :func:`friction_use`)."""
         return friction_use(
-            self.model, self.data, self._cup_geom_mask, self._tray_geom, self._cup_friction
+            self.model, self.data, self._cup_geoms, self._tray_geom, self._cup_friction
         )
 
     def _tray_tilt_deg(self) -> float:
-        z = self.data.xmat[self._tray_body].reshape(3, 3)[:, 2]
-        return float(np.degrees(np.arccos(np.clip(z[2], -1.0, 1.0))))
+        z = float(self.data.xmat[self._tray_body, 8])  # the normal's world z
+        return math.degrees(math.acos(min(1.0, max(-1.0, z))))
 
-    def _info(self, *, fallen: bool, cup_frame: CupFrame | None = None,
-              distance: float | None = None) -> dict[str, Any]:  # fmt: skip
-        """The step's info; ``cup_frame`` (tray tasks) and ``distance`` when the caller has
-        them."""
-        robot = self.robot
-        axle = robot.axle_position
+    def _info(self, *, fallen: bool, distance: float | None = None) -> dict[str, Any]:
+        """The robot's info for the state ``_measure`` made (``distance`` when the caller has
+        it); a tray task's entries are added by ``_tray_info``."""
         info: dict[str, Any] = {
-            "x": float(robot.q[0]),
-            "xd": float(robot.nu[0]),
-            "theta": robot.theta,
-            "thetad": robot.thetad,
-            "axle_position": axle,
+            "x": self._x,
+            "xd": self._xd,
+            "theta": self._theta,
+            "thetad": self._thetad,
+            "axle_position": self._axle,
             "goal_distance": self._goal_distance() if distance is None else distance,
             "fallen": bool(fallen),
         }
         if not self._spec.planar:
-            info["psi"] = robot.psi
-            info["psid"] = float(robot.nu[1])
+            info["psi"] = self._psi
+            info["psid"] = self._psid
         if self._ee_site >= 0:
-            info["ee_error"] = float(np.linalg.norm(self._ee_in_axle_frame() - self._ee_reference))
-        if self._tray:
-            cup_frame = cup_frame or self._cup_in_tray_frame()
-            tilt, upright, on_plate = self._cup_state(cup_frame)
-            tray_offset, tray_on_hand = self._tray_on_hand()
-            info["tray_tilt_deg"] = self._tray_tilt_deg()
-            info["cup_offset"] = cup_frame[0]
-            info["cup_tilt_deg"] = tilt
-            info["cup_upright"] = upright
-            info["cup_on_plate"] = on_plate
-            info["cup_on_tray"] = on_plate and upright
-            info["cup_friction_use"] = self._cup_friction_use()
-            info["tray_offset"] = tray_offset
-            info["tray_on_hand"] = tray_on_hand
+            ex, ey, ez = (self._ee_in_axle_frame() - self._ee_reference).tolist()
+            info["ee_error"] = math.sqrt(ex * ex + ey * ey + ez * ez)
         return info
+
+    def _tray_info(
+        self,
+        info: dict[str, Any],
+        cup_frame: CupFrame,
+        cup_state: tuple[float, bool, bool],
+        tray_state: tuple[NDArray[np.float64], bool],
+    ) -> None:
+        """The tray task's info entries, from the state's cup frame, cup and tray states."""
+        tilt, upright, on_plate = cup_state
+        tray_offset, tray_on_hand = tray_state
+        info["tray_tilt_deg"] = self._tray_tilt_deg()
+        info["cup_offset"] = cup_frame[0]
+        info["cup_tilt_deg"] = tilt
+        info["cup_upright"] = upright
+        info["cup_on_plate"] = on_plate
+        info["cup_on_tray"] = on_plate and upright
+        info["cup_friction_use"] = self._cup_friction_use()
+        info["tray_offset"] = tray_offset
+        info["tray_on_hand"] = tray_on_hand
 
     def _get_obs(self, cup_frame: CupFrame | None = None) -> dict[str, NDArray[np.float64]]:
         d = self.data
