@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import pickle
+
 import gymnasium as gym
 import mujoco
 import numpy as np
@@ -176,3 +178,17 @@ def test_nominal_model_welds_the_free_tray(env_id: str) -> None:
     assert nominal.nq == welded.nq and nominal.nbody == welded.nbody
     np.testing.assert_array_equal(nominal.body_mass, welded.body_mass)
     np.testing.assert_array_equal(nominal.body_quat, welded.body_quat)
+
+
+@pytest.mark.parametrize("env_id", TRAY_IDS)
+def test_pickle_and_vector_env_keep_the_tray_options(env_id: str) -> None:
+    kwargs = {"tray_attachment": "free", "tray_rim": AUTHORS_TRAY_RIM, "tray_friction": 0.4}
+    env = gym.make(env_id, **kwargs)
+    again = pickle.loads(pickle.dumps(env.unwrapped))
+    assert again.arguments == env.unwrapped.arguments
+    vec = gym.make_vec(env_id, num_envs=2, vectorization_mode="sync", **kwargs)
+    _, infos = vec.reset(seed=0)
+    assert infos["tray_on_hand"].all()
+    _, _, _, _, infos = vec.step(np.zeros(vec.action_space.shape))
+    assert infos["tray_offset"].shape == (2, 3)
+    vec.close()
