@@ -260,7 +260,6 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         self.robot = RobotModel(self.model)
         lay = self.robot.layout
         self._layout = lay
-        self._wheel_velocity = np.zeros((2, 6))
         self._cos_psi, self._sin_psi = 1.0, 0.0
         self._nq, self._nv = lay.nq, lay.nv
         obs = {
@@ -528,6 +527,13 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             self.render()
         return self._get_obs(cup_frame), reward, terminated, False, info
 
+    def do_simulation(self, ctrl: NDArray[np.float64], n_frames: int) -> None:
+        """``n_frames`` MuJoCo steps with the (validated) torques ``ctrl``. Unlike Gymnasium's,
+        it does not run ``mj_rnePostConstraint`` after them: ``data.cfrc_int``/``cfrc_ext``
+        are not computed (no observation, reward or info uses them); call it to read them."""
+        self.data.ctrl[:] = ctrl
+        mujoco.mj_step(self.model, self.data, nstep=n_frames)
+
     def _check_action(self, action: Any) -> NDArray[np.float64]:
         a = np.asarray(action, dtype=np.float64)
         if a.shape != self.action_space.shape:
@@ -535,11 +541,13 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
                 f"action must have shape {self.action_space.shape} (one torque per actuator: "
                 f"{[self.model.actuator(i).name for i in range(self.model.nu)]}), got {a.shape}"
             )
+        low, high = self._action_band
+        if ((a >= low) & (a <= high)).all():  # also false for NaN
+            return a
         if not np.isfinite(a).all():
             raise ValueError(
                 f"action contains NaN or inf at indices {np.flatnonzero(~np.isfinite(a))}"
             )
-        low, high = self._action_band
         outside = (a < low) | (a > high)
         if outside.any():
             bad = {
@@ -586,20 +594,35 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             dl, dr = lay.wheel_dof
             x = r * 0.5 * (qpos[ql] + qpos[qr]) + r * q1
             xd = r * 0.5 * (qvel[dl] + qvel[dr]) + r * q1d
-        # the body's CoM and its velocity: the robot's subtree less the wheels
-        mass = m.body_subtreemass[base]
-        ml, mr = m.body_mass[wl], m.body_mass[wr]
-        velocity = self._wheel_velocity
-        mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_BODY, wl, velocity[0], 0)
-        mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_BODY, wr, velocity[1], 0)
+        # the body's CoM and its velocity: the robot's subtree less the wheels, whose centres
+        # (their CoMs) sit on the axle: planar they move with the base origin, in 3-D also with
+        # the base's rotation (omega x r)
+        mass = float(m.body_subtreemass[base])
+        ml, mr = float(m.body_mass[wl]), float(m.body_mass[wr])
         body = mass - ml - mr
-        com = (mass * d.subtree_com[base] - ml * d.xipos[wl] - mr * d.xipos[wr]) / body - axle
-        vcom = (mass * d.subtree_linvel[base] - ml * velocity[0, 3:] - mr * velocity[1, 3:]) / body
-        dx, dy, dz = com.tolist()
-        dvx, dvy, dvz = vcom.tolist()
+        ax, ay, az = axle.tolist()
+        cx, cy, cz = d.subtree_com[base].tolist()
+        lx, ly, lz = d.xipos[wl].tolist()
+        rx, ry, rz = d.xipos[wr].tolist()
+        vx, vy, vz = d.subtree_linvel[base].tolist()
+        dx = (mass * cx - ml * lx - mr * rx) / body - ax
+        dy = (mass * cy - ml * ly - mr * ry) / body - ay
+        dz = (mass * cz - ml * lz - mr * rz) / body - az
+        # sum over the wheels of m_w (v_o + omega x (p_w - o)) = (ml + mr) v_o + omega x s_w
+        sx = ml * (lx - ax) + mr * (rx - ax)
+        sy = ml * (ly - ay) + mr * (ry - ay)
+        sz = ml * (lz - az) + mr * (rz - az)
+        if lay.planar:
+            wx_, wy_, wz_ = 0.0, float(qvel[lay.root_dof + 2]), 0.0
+        else:
+            wx_, wy_, wz_ = omega_x, omega_y, psid
+        wheels = ml + mr
+        dvx = (mass * vx - wheels * vox - (wy_ * sz - wz_ * sy)) / body - vox
+        dvy = (mass * vy - wheels * voy - (wz_ * sx - wx_ * sz)) / body - voy
+        dvz = (mass * vz - wheels * voz - (wx_ * sy - wy_ * sx)) / body - voz
         X, Y, Z = c * dx + s * dy, -s * dx + c * dy, dz
-        Xd = c * (dvx - vox) + s * (dvy - voy) + psid * Y
-        Zd = dvz - voz
+        Xd = c * dvx + s * dvy + psid * Y
+        Zd = dvz
         distance_sq = X * X + Z * Z
         self._theta = math.atan2(X, Z)
         self._thetad = (Z * Xd - X * Zd) / distance_sq if distance_sq > 1e-18 else 0.0
@@ -635,13 +658,13 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
     def _cup_in_tray_frame(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The cup's position and orientation (quaternion) in the tray frame."""
         d = self.data
-        R = d.xmat[self._tray_body].reshape(3, 3)
-        position = R.T @ (d.xpos[self._cup_body] - d.xpos[self._tray_body])
-        tray_quat, cup_quat, rel = np.zeros(4), np.zeros(4), np.zeros(4)
-        mujoco.mju_mat2Quat(tray_quat, d.xmat[self._tray_body])
-        mujoco.mju_negQuat(tray_quat, tray_quat)
-        mujoco.mju_mat2Quat(cup_quat, d.xmat[self._cup_body])
-        mujoco.mju_mulQuat(rel, tray_quat, cup_quat)
+        tray, cup = self._tray_body, self._cup_body
+        position = d.xmat[tray].reshape(3, 3).T @ (d.xpos[cup] - d.xpos[tray])
+        inverse, rel = np.zeros(4), np.zeros(4)
+        mujoco.mju_negQuat(inverse, d.xquat[tray])
+        mujoco.mju_mulQuat(rel, inverse, d.xquat[cup])
+        if rel[0] < 0.0:  # the sign convention of mju_mat2Quat near identity: w >= 0
+            rel = -rel
         return position, rel
 
     @staticmethod
@@ -738,8 +761,8 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
     def _get_obs(self, cup_frame: CupFrame | None = None) -> dict[str, NDArray[np.float64]]:
         d = self.data
         obs = {
-            "qpos": d.qpos[: self._nq].astype(np.float64, copy=True),
-            "qvel": d.qvel[: self._nv].astype(np.float64, copy=True),
+            "qpos": d.qpos[: self._nq].copy(),
+            "qvel": d.qvel[: self._nv].copy(),
             "goal": self._goal.copy(),
         }
         if self._tray:
