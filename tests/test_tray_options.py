@@ -106,20 +106,40 @@ def test_tray_friction_is_the_support_pairs_value() -> None:
 
 @pytest.mark.parametrize("env_id", TRAY_IDS)
 @pytest.mark.parametrize("attachment", ["welded", "free"])
-@pytest.mark.parametrize("seed", [0, 1])
+@pytest.mark.parametrize("seed", [0, 1, 2])
 def test_tray_and_cup_start_exactly_in_contact(env_id: str, attachment: str, seed: int) -> None:
     """From the noisy reset: the cup 1 micron into the plate (a contact exactly at 0 is not
-    active yet); a free tray at its rest distance from the closest support, none closer."""
+    active yet); a free tray resting on its supports (touching them, and still: with the robot
+    held still it moves less than 0.05 mm in the first 50 ms)."""
     env = gym.make(env_id, tray_attachment=attachment, tray_rim=AUTHORS_TRAY_RIM)
-    env.reset(seed=seed)
+    _, info = env.reset(seed=seed)
     base = env.unwrapped
     m, d = base.model, base.data
     for geom in ("cup", "cup_foot0", "cup_foot2"):
         cup = mujoco.mj_geomDistance(m, d, m.geom("tray").id, m.geom(geom).id, 0.05, None)
         assert cup == pytest.approx(-1e-6, abs=1e-8), geom
-    if attachment == "free":
-        distances = base._support_distances(d.qpos.copy()) - base._support_rest_distance
-        assert distances.min() == pytest.approx(0.0, abs=1e-7)
+    if attachment == "welded":
+        return
+    robot = env.unwrapped.scene_options.robot
+    distances = [
+        mujoco.mj_geomDistance(m, d, m.geom("tray").id, m.geom(name).id, 0.05, None)
+        for name in tray_support_geoms(robot)
+    ]
+    assert -1e-3 < min(distances) < 0.0  # resting: in the soft contact, not gapped
+    lay = base.robot.layout
+    m.dof_armature[: lay.nv] = 1e6  # the robot held still (a test harness)
+    held = d.qpos[: lay.nq].copy()
+    d.qvel[:] = 0.0  # the tray and cup were given the hand's (noise) velocity: hand held still
+    start, path = info["tray_offset"], 0.0
+    for _ in range(50):
+        d.qpos[: lay.nq] = held
+        d.qvel[: lay.nv] = 0.0
+        mujoco.mj_forward(m, d)
+        d.qfrc_applied[: lay.nv] = d.qfrc_bias[: lay.nv]
+        info = env.step(np.zeros(env.action_space.shape))[4]
+        path += float(np.linalg.norm(info["tray_offset"] - start))
+        start = info["tray_offset"]
+    assert path < 5e-5, f"the tray moved {path * 1e3:.3f} mm"
 
 
 @pytest.mark.parametrize("env_id", TRAY_IDS)
@@ -132,7 +152,7 @@ def test_free_tray_at_rest_stays_on_the_hand(env_id: str) -> None:
     m, d = base.model, base.data
     lay = base.robot.layout
     held = d.qpos[: lay.nq].copy()
-    assert info["tray_on_hand"] and np.abs(info["tray_offset"]).max() < 1e-6
+    assert info["tray_on_hand"] and np.abs(info["tray_offset"]).max() < 1e-5  # settled again
     for _ in range(round(REST_TIME / base.dt)):
         d.qpos[: lay.nq] = held
         d.qvel[: lay.nv] = 0.0

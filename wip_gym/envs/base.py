@@ -23,10 +23,12 @@ from wip_gym.scene import (
     CUP_HALF_HEIGHT,
     CUP_RADIUS,
     TRAY_HALF_SIZE,
+    TRAY_RESET_MAX_SPEED,
+    TRAY_RESET_SETTLE_TIME,
     SceneOptions,
+    TraySettler,
     build_model,
     reset_qpos,
-    tray_support_geoms,
 )
 
 DEFAULT_CAMERA_CONFIG: dict[str, Any] = {}
@@ -308,12 +310,8 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         if self._free_tray:
             tray_joint = m.joint("tray").id
             self._tray_qpos = m.jnt_qposadr[tray_joint]
-            self._support_geoms = [m.geom(n).id for n in tray_support_geoms(robot)]
-            # each support's distance to the plate with the tray at rest (the soft contacts'
-            # equilibrium): the reset places the tray so that none is closer than this
-            rest_qpos = m.qpos0.copy()
-            rest_qpos[: lay.nq] = reset_qpos(m, self.robot)
-            self._support_rest_distance = self._support_distances(rest_qpos)
+            self._tray_dof = m.jnt_dofadr[tray_joint]
+            self._tray_settler = TraySettler(m, self._scene)
         if payload_mass > 0:
             self._payload_body = m.body("payload").id
         self._action_low = self.action_space.low.astype(np.float64)
@@ -425,6 +423,8 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             mujoco.mju_mat2Quat(quat, d.xmat[self._tray_body])
             qpos[self._cup_qpos : self._cup_qpos + 3] = top
             qpos[self._cup_qpos + 3 : self._cup_qpos + 7] = quat
+            if self._free_tray:
+                self._move_with_hand(qpos, qvel)
         self.set_state(qpos, qvel)
         m.site_pos[self._goal_site, :2] = self._goal
         d.xfrc_applied[:] = 0.0
@@ -434,42 +434,43 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         self._cup_lost = False
         return self._get_obs()
 
-    def _support_distances(self, qpos: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Signed distance of each support geom to the tray's plate for the state ``qpos``
-        (negative: penetration)."""
+    def _move_with_hand(self, qpos: NDArray[np.float64], qvel: NDArray[np.float64]) -> None:
+        """Give the free tray and the cup (in ``qvel``) the velocity they would have welded to
+        the hand at the reset state, so that the reset's velocity noise does not start them
+        sliding on the hand (a welded tray moves with it by construction)."""
         m, d = self.model, self.data
         d.qpos[:] = qpos
+        d.qvel[:] = qvel
         mujoco.mj_kinematics(m, d)
-        return np.array(
-            [
-                mujoco.mj_geomDistance(m, d, self._tray_geom, g, 0.05, None)
-                for g in self._support_geoms
-            ]
-        )
+        mujoco.mj_comPos(m, d)
+        mujoco.mj_comVel(m, d)
+        body = self._tray_mount_body
+        velocity = np.zeros(6)  # (angular, linear) at the body's origin, world frame
+        mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_BODY, body, velocity, 0)
+        omega, linear = velocity[:3], velocity[3:]
+        for moved, dof in ((self._tray_body, self._tray_dof), (self._cup_body, self._cup_dof)):
+            arm = d.xpos[moved] - d.xpos[body]
+            qvel[dof : dof + 3] = linear + np.cross(omega, arm)
+            qvel[dof + 3 : dof + 6] = d.xmat[moved].reshape(3, 3).T @ omega
 
     def _place_free_tray(self, qpos: NDArray[np.float64]) -> None:
-        """Put the free tray (in ``qpos``) at its rest place on the hand of the robot pose in
-        ``qpos``, then along its normal so that the support closest to the plate is exactly at
-        its rest distance (the others a little farther: the reset noise moves the grippers
-        relative to each other)."""
+        """Put the free tray (in ``qpos``) at rest on the supports of the robot pose in
+        ``qpos``: from its rest place on the hand (the ``tray_rest`` site, found when the model
+        was built) it settles for ``TRAY_RESET_SETTLE_TIME`` with the robot still (the reset
+        noise moves Krang's grippers relative to each other by a few mm)."""
         m, d = self.model, self.data
         d.qpos[:] = qpos
         mujoco.mj_kinematics(m, d)
         body = self._tray_mount_body
-        rot = d.xmat[body].reshape(3, 3)
-        position = d.xpos[body] + rot @ self._tray_rest_pos
+        position = d.xpos[body] + d.xmat[body].reshape(3, 3) @ self._tray_rest_pos
         quat = np.zeros(4)
         mujoco.mju_mulQuat(quat, d.xquat[body], self._tray_rest_quat)
-        normal = np.zeros(9)
-        mujoco.mju_quat2Mat(normal, quat)
-        normal = normal[[2, 5, 8]]
+        position, quat = self._tray_settler.settle(
+            d, position, quat, TRAY_RESET_SETTLE_TIME, TRAY_RESET_MAX_SPEED
+        )
         a = self._tray_qpos
-        qpos[a + 3 : a + 7] = quat
-        for _ in range(3):  # a face-on-edge distance changes with the normal shift: iterate
-            qpos[a : a + 3] = position
-            shift = float(np.min(self._support_distances(qpos) - self._support_rest_distance))
-            position = position - shift * normal
         qpos[a : a + 3] = position
+        qpos[a + 3 : a + 7] = quat
 
     def _get_reset_info(self) -> dict[str, Any]:
         info = self._info(fallen=False)

@@ -73,10 +73,11 @@ _COMMON = """
     body's CoM is exactly above it (a welded tray is level there); then uniform noise of
     `reset_noise_scale` (rad, rad/s) on the base pitch, body joints and their rates, applied in
     minimal coordinates so the wheels stay rolling on the floor. Without control it falls.
-    A free tray is put at its rest place on the hand (found when the model is built by letting
-    it settle on its supports with the robot still), moved along its normal so that the closest
-    support is at its rest distance (the reset noise moves Krang's grippers relative to each
-    other by a few mm). The cup starts upright at the plate's centre, exactly touching it.
+    A free tray starts at rest on its supports: from its rest place on the hand (found when
+    the model is built) it is let settle for 0.5 s on the supports of the noisy pose, held
+    still in a small separate model (the reset noise moves Krang's grippers relative to each
+    other by a few mm; about 10 ms per reset), and it and the cup get the hand's velocity.
+    The cup starts upright at the plate's centre, exactly touching it (1 micron in).
     The free tray is not in `theta` (it is not part of the robot).
 
     ## Episode End
