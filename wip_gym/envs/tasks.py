@@ -46,7 +46,8 @@ _COMMON = """
 
     `x` (distance rolled along the heading: 3-D wheel odometry, planar the base slide), `xd`,
     `psi`, `psid` (3-D), `theta`, `thetad` (CoM pitch about the axle from vertical, positive
-    ahead), `axle_position`, `goal_distance`, `fallen`, `ee_error` (end-effector displacement
+    ahead; from MuJoCo's subtree CoM and velocity of the state after the step, so `thetad`
+    reads MuJoCo's velocities, wheel slip included), `axle_position`, `goal_distance`, `fallen`, `ee_error` (end-effector displacement
     from its reset position in the axle frame, m), and in tray tasks:
 
     | key | type | meaning |
