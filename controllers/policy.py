@@ -63,13 +63,19 @@ class TaskInfo:
 
 def controller_model(env: gym.Env, choice: ModelChoice) -> mujoco.MjModel:
     """The MuJoCo model a controller plans with: ``nominal`` (robot + tray, no cup, no payload,
-    no randomisation, the env's wheel torque limit) or ``oracle`` (the env's own model)."""
+    no randomisation, the env's wheel torque limit) or ``oracle`` (the env's own model).
+
+    A free tray (``tray_attachment="free"``) is welded at its nominal place in the nominal model
+    (level on the hand at the reset pose, as in a welded-tray env): the designer knows the
+    tray's mass, not its contact with the hand."""
     base = env.unwrapped
     if choice == "oracle":
         return base.model
     if choice != "nominal":
         raise ValueError(f"model must be 'nominal' or 'oracle', got {choice!r}")
-    options = dataclasses.replace(base.scene_options, cup=False, payload_mass=0.0)
+    options = dataclasses.replace(
+        base.scene_options, cup=False, payload_mass=0.0, tray_attachment="welded"
+    )
     return build_model(options)
 
 

@@ -23,10 +23,9 @@ import pytest
 
 from wip_gym.scene import (
     CUP_HALF_HEIGHT,
-    CUP_MASS,
-    CUP_RADIUS,
     TRAY_HALF_SIZE,
     SceneOptions,
+    add_cup,
     build_model,
     reset_qpos,
 )
@@ -180,18 +179,18 @@ def test_wheel_driven_at_constant_torque_barely_slips(
 def _tilted_tray_with_cup(
     reference: mujoco.MjModel, friction: float, tilt: float
 ) -> tuple[mujoco.MjModel, np.ndarray]:
-    """A still tray (no joint) tilted about world y by ``tilt`` and the free cup resting on it,
-    exactly touching (as the env's reset places it), their contact made only by the pair
-    ``tray_cup`` with the task model's solver parameters. Returns the model and the tray's
-    rotation (columns: its axes in world; +x points downhill)."""
+    """A still tray (no joint) tilted about world y by ``tilt`` and the task's free cup
+    (``wip_gym.scene.add_cup``: its geoms and its pairs with the plate) resting on it, exactly
+    touching (as the env's reset places it), with the task model's options. Returns the model
+    and the tray's rotation (columns: its axes in world; +x points downhill)."""
     quat = np.array([math.cos(tilt / 2), 0.0, math.sin(tilt / 2), 0.0])
     rotation = np.zeros(9)
     mujoco.mju_quat2Mat(rotation, quat)
     rotation = rotation.reshape(3, 3)
-    pair = reference.pair("tray_cup")
 
     spec = mujoco.MjSpec()
     _copy_options(spec, reference)
+    spec.add_material(name="cup")
     tray = spec.worldbody.add_body(name="tray", quat=quat)
     tray.add_geom(
         name="tray",
@@ -201,33 +200,11 @@ def _tilted_tray_with_cup(
         contype=0,
         conaffinity=0,
     )
-    cup = spec.worldbody.add_body(
-        name="cup",
-        pos=rotation @ np.array([0.0, 0.0, 2 * TRAY_HALF_SIZE[2] + CUP_HALF_HEIGHT]),
-        quat=quat,
-    )
-    cup.add_freejoint(name="cup")
-    cup.add_geom(
-        name="cup",
-        type=mujoco.mjtGeom.mjGEOM_CYLINDER,
-        size=[CUP_RADIUS, CUP_HALF_HEIGHT, 0.0],
-        mass=CUP_MASS,
-        contype=0,
-        conaffinity=0,
-    )
-    pair_friction = [friction, friction, *reference.pair_friction[pair.id, 2:]]
-    spec.add_pair(
-        name="tray_cup",
-        geomname1="tray",
-        geomname2="cup",
-        condim=int(pair.dim[0]),
-        friction=pair_friction,
-        solref=pair.solref,
-        solimp=pair.solimp,
-        solreffriction=reference.pair_solreffriction[pair.id],
-        margin=float(pair.margin[0]),
-        gap=float(pair.gap[0]),
-    )
+    add_cup(spec, friction, 0.0)
+    cup = spec.body("cup")
+    cup.pos = rotation @ np.array([0.0, 0.0, 2 * TRAY_HALF_SIZE[2] + CUP_HALF_HEIGHT])
+    cup.quat = quat
+    spec.geom("cup").contype = spec.geom("cup").conaffinity = 0  # no floor here
     return spec.compile(), rotation
 
 
@@ -256,15 +233,19 @@ def _cup_travel_on_tray(
 
 
 def test_tilted_tray_model_matches_the_task(krang_cup_model: mujoco.MjModel) -> None:
-    """The still tray + cup model copies the task's pair (solver parameters, condim), options
-    and sizes, and its geoms collide only through the pair."""
+    """The still tray + cup model has the task's pairs (solver parameters, condim), options
+    and sizes, and its geoms collide only through the pairs."""
     m, _ = _tilted_tray_with_cup(krang_cup_model, 0.3, 0.0)
-    ref_pair, pair = krang_cup_model.pair("tray_cup"), m.pair("tray_cup")
-    np.testing.assert_array_equal(pair.friction, ref_pair.friction)
-    np.testing.assert_array_equal(pair.solref, ref_pair.solref)
-    np.testing.assert_array_equal(pair.solimp, ref_pair.solimp)
-    assert pair.dim[0] == ref_pair.dim[0] == 3
-    for name in ("tray", "cup"):
+    assert m.npair == krang_cup_model.npair
+    for p in range(m.npair):
+        name = m.pair(p).name
+        ref_pair, pair = krang_cup_model.pair(name), m.pair(name)
+        np.testing.assert_array_equal(pair.friction, ref_pair.friction)
+        np.testing.assert_array_equal(pair.solref, ref_pair.solref)
+        np.testing.assert_array_equal(pair.solimp, ref_pair.solimp)
+        assert pair.dim[0] == ref_pair.dim[0] == 3
+    for g in range(m.ngeom):
+        name = m.geom(g).name
         np.testing.assert_array_equal(m.geom(name).size, krang_cup_model.geom(name).size)
         assert m.geom(name).contype[0] == m.geom(name).conaffinity[0] == 0
     assert m.body("cup").mass[0] == pytest.approx(krang_cup_model.body("cup").mass[0])
@@ -298,12 +279,16 @@ def test_tray_cup_friction_is_the_pair_value() -> None:
     the larger of the two, would give)."""
     mu = 0.42
     m = build_model(SceneOptions("krang", tray=True, cup=True, cup_friction=mu))
-    pair = m.pair("tray_cup")
-    tray_geom, cup_geom = m.geom("tray"), m.geom("cup")
-    assert pair.friction[0] == mu
-    assert {pair.geom1[0], pair.geom2[0]} == {tray_geom.id, cup_geom.id}
+    tray_geom = m.geom("tray")
+    cup_geoms = {g for g in range(m.ngeom) if m.geom_bodyid[g] == m.body("cup").id}
+    plate_pairs = [p for p in range(m.npair) if tray_geom.id in (m.pair_geom1[p], m.pair_geom2[p])]
+    assert plate_pairs
+    for p in plate_pairs:
+        assert m.pair_friction[p][0] == mu
+        assert {m.pair_geom1[p], m.pair_geom2[p]} - {tray_geom.id} <= cup_geoms
     assert tray_geom.contype[0] == tray_geom.conaffinity[0] == 0
-    assert tray_geom.friction[0] != mu and cup_geom.friction[0] != mu
+    assert tray_geom.friction[0] != mu
+    assert all(m.geom_friction[g][0] != mu for g in cup_geoms)
 
     # the robot's reset pose, held still by gravity compensation; the cup placed on the tray
     # as WIPEnv.reset_model does (exactly touching: no contact until it has dropped a little)
@@ -327,7 +312,9 @@ def test_tray_cup_friction_is_the_pair_value() -> None:
         d.qfrc_applied[:robot_dofs] = d.qfrc_bias[:robot_dofs]
         mujoco.mj_step(m, d)
         contacts = [
-            c for c in d.contact[: d.ncon] if {c.geom1, c.geom2} == {tray_geom.id, cup_geom.id}
+            c
+            for c in d.contact[: d.ncon]
+            if tray_geom.id in (c.geom1, c.geom2) and {c.geom1, c.geom2} & cup_geoms
         ]
         if contacts:
             break

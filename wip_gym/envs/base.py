@@ -7,6 +7,7 @@ class docstrings there hold the tables of spaces, rewards and arguments.
 from __future__ import annotations
 
 import math
+from collections.abc import Collection
 from typing import Any
 
 import mujoco
@@ -21,10 +22,28 @@ from wip_gym.overlay import OverlayValues, draw_overlay
 from wip_gym.renderer import FrameRenderer
 from wip_gym.robot_model import RobotModel
 from wip_gym.robots import robot_spec
-from wip_gym.scene import CUP_HALF_HEIGHT, TRAY_HALF_SIZE, SceneOptions, build_model, reset_qpos
+from wip_gym.scene import (
+    CUP_HALF_HEIGHT,
+    CUP_RADIUS,
+    TRAY_HALF_SIZE,
+    TRAY_RESET_MAX_SPEED,
+    TRAY_RESET_SETTLE_TIME,
+    SceneOptions,
+    TraySettler,
+    build_model,
+    reset_qpos,
+)
 
 DEFAULT_CAMERA_CONFIG: dict[str, Any] = {}
 CupFrame = tuple[NDArray[np.float64], NDArray[np.float64]]
+
+#: a cup counts as upright while its axis is within this angle of the tray's normal (deg)
+CUP_UPRIGHT_DEG = 30.0
+#: a cup counts as on the plate while its lowest point is at most this far above the plate (m)
+CUP_PLATE_GAP = 0.005
+#: a free tray counts as on the hand while its origin is within this distance of its nominal
+#: place along the nominal normal (m), and over the hand (within the plate's half-size)
+TRAY_HAND_GAP = 0.01
 
 
 def _goal_array(goal: Any, planar: bool) -> NDArray[np.float64]:
@@ -36,6 +55,60 @@ def _goal_array(goal: Any, planar: bool) -> NDArray[np.float64]:
     if planar and arr[1] != 0.0:
         raise ValueError(f"a planar robot's goal has y = 0, got {goal!r}")
     return arr
+
+
+def friction_use(
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    geoms: Collection[int],
+    plate: int,
+    mu: float,
+) -> float:
+    """Friction use of a body on a plate: the norm of the net tangential force over ``mu`` times
+    the net normal force, summed over the contacts between the geom ``plate`` and the geoms
+    ``geoms`` (ids; 1: the body slides); 0 without contact.
+
+    The forces are summed as vectors before the ratio: the ratio is how much of the friction
+    the net push along the plate uses (a resting cup on a still plate tilted by alpha uses
+    ``tan(alpha) / mu``). Contacts of other geoms (a rim) do not count: a rim's push on the
+    cup is a normal force of the rim, not friction of the plate.
+    """
+    n = data.ncon
+    if n == 0:
+        return 0.0
+    contact = data.contact
+    pairs = contact.geom[:n].tolist()
+    rows = [
+        i
+        for i, (g1, g2) in enumerate(pairs)
+        if (g1 == plate and g2 in geoms) or (g2 == plate and g1 in geoms)
+    ]
+    if not rows:
+        return 0.0
+    address = contact.efc_address[:n].tolist()
+    frames = contact.frame[:n].tolist()
+    elliptic = model.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
+    force = data.efc_force.tolist() if elliptic else []
+    wrench = np.zeros(6)
+    normal = tx = ty = tz = 0.0
+    for i in rows:
+        a = address[i]
+        if a < 0:  # excluded from the constraints
+            continue
+        if elliptic:  # the contact-frame force (normal, tangent 1, tangent 2) is in efc_force
+            f_n, f_1, f_2 = force[a], force[a + 1], force[a + 2]
+        else:
+            mujoco.mj_contactForce(model, data, i, wrench)
+            f_n, f_1, f_2 = wrench[:3].tolist()
+        # rows of the contact frame: normal, tangent 1, tangent 2
+        _, _, _, a0, a1, a2, b0, b1, b2 = frames[i]
+        normal += f_n
+        tx += f_1 * a0 + f_2 * b0
+        ty += f_1 * a1 + f_2 * b1
+        tz += f_1 * a2 + f_2 * b2
+    if normal <= 0.0:
+        return 0.0
+    return math.sqrt(tx * tx + ty * ty + tz * tz) / (mu * normal)
 
 
 class WIPEnv(MujocoEnv, utils.EzPickle):
@@ -60,6 +133,9 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         reset_noise_scale: float = 0.01,
         mass_randomization: float = 0.0,
         wheel_torque_limit: float = 150.0,
+        tray_attachment: str = "welded",
+        tray_rim: float = 0.0,
+        tray_friction: float = 0.3,
         terminate_on_cup_loss: bool = True,
         fall_angle: float = 0.8,
         progress_weight: float = 1.0,
@@ -86,6 +162,9 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
                 reset_noise_scale,
                 mass_randomization,
                 wheel_torque_limit,
+                tray_attachment,
+                tray_rim,
+                tray_friction,
                 terminate_on_cup_loss,
                 fall_angle,
                 progress_weight,
@@ -124,8 +203,41 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             cup_friction=cup_friction,
             payload_mass=payload_mass,
             wheel_torque_limit=wheel_torque_limit,
+            tray_attachment=tray_attachment,
+            tray_rim=float(tray_rim),
+            tray_friction=float(tray_friction),
         )
+        if not tray and (tray_attachment, tray_rim, tray_friction) != ("welded", 0.0, 0.3):
+            raise ValueError(
+                f"tray_attachment, tray_rim and tray_friction need a tray task, got "
+                f"{tray_attachment!r}, {tray_rim!r}, {tray_friction!r} on robot {robot!r}"
+            )
+        self._arguments: dict[str, Any] = {
+            "goal": tuple(float(v) for v in self._goal)
+            if not self._spec.planar
+            else float(self._goal[0]),
+            "cup_friction": float(cup_friction),
+            "payload_mass": payload_mass,
+            "payload_time": payload_time,
+            "push_force": push_force,
+            "push_time": push_time,
+            "push_duration": push_duration,
+            "reset_noise_scale": reset_noise_scale,
+            "mass_randomization": mass_randomization,
+            "wheel_torque_limit": wheel_torque_limit,
+            "tray_attachment": tray_attachment,
+            "tray_rim": float(tray_rim),
+            "tray_friction": float(tray_friction),
+            "terminate_on_cup_loss": terminate_on_cup_loss,
+            "fall_angle": fall_angle,
+            "progress_weight": progress_weight,
+            "ctrl_cost_weight": ctrl_cost_weight,
+            "fall_penalty": fall_penalty,
+            "cup_loss_penalty": cup_loss_penalty,
+            "frame_skip": int(frame_skip),
+        }
         self._tray = tray
+        self._free_tray = tray and tray_attachment == "free"
         self._payload_mass = payload_mass
         self._payload_time = payload_time
         self._push = (push_force, push_time, push_duration)
@@ -158,6 +270,8 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         }
         self.robot = RobotModel(self.model)
         lay = self.robot.layout
+        self._layout = lay
+        self._cos_psi, self._sin_psi = 1.0, 0.0
         self._nq, self._nv = lay.nq, lay.nv
         obs = {
             "qpos": spaces.Box(-np.inf, np.inf, (lay.nq,), np.float64),
@@ -186,8 +300,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
                 and (m.geom_contype[g] or m.geom_conaffinity[g])
             ]
         )
-        self._body_geom_mask = np.zeros(m.ngeom, dtype=bool)
-        self._body_geom_mask[self._body_geoms] = True
+        self._body_geom_set = frozenset(self._body_geoms.tolist())
         self._ee_site = m.site("ee").id if self._spec.tray_capable else -1
         if tray:
             self._tray_body = m.body("tray").id
@@ -195,9 +308,19 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             self._cup_qpos = m.jnt_qposadr[m.joint("cup").id]
             self._cup_dof = m.jnt_dofadr[m.joint("cup").id]
             self._cup_geom = m.geom("cup").id
+            self._cup_geoms = frozenset(np.flatnonzero(m.geom_bodyid == self._cup_body).tolist())
             self._tray_geom = m.geom("tray").id
             self._cup_friction = float(cup_friction)
-            self._contact_force = np.zeros(6)
+            rest = m.site("tray_rest").id
+            self._tray_rest_site = rest
+            self._tray_mount_body = int(m.site_bodyid[rest])
+            self._tray_rest_pos = m.site_pos[rest].copy()
+            self._tray_rest_quat = m.site_quat[rest].copy()
+        if self._free_tray:
+            tray_joint = m.joint("tray").id
+            self._tray_qpos = m.jnt_qposadr[tray_joint]
+            self._tray_dof = m.jnt_dofadr[tray_joint]
+            self._tray_settler = TraySettler(m, self._scene)
         if payload_mass > 0:
             self._payload_body = m.body("payload").id
         self._action_low = self.action_space.low.astype(np.float64)
@@ -242,6 +365,28 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         """Tray-cup friction coefficient, or None without a cup."""
         return self._cup_friction if self._tray else None
 
+    @property
+    def tray_attachment(self) -> str | None:
+        """``welded`` or ``free``, None without a tray."""
+        return self._scene.tray_attachment if self._tray else None
+
+    @property
+    def tray_rim(self) -> float | None:
+        """Rim height of the tray (m), None without a tray."""
+        return self._scene.tray_rim if self._tray else None
+
+    @property
+    def tray_friction(self) -> float | None:
+        """Friction of the free tray's contacts with its supports (also reported when welded,
+        where it has no effect), None without a tray."""
+        return self._scene.tray_friction if self._tray else None
+
+    @property
+    def arguments(self) -> dict[str, Any]:
+        """Every env argument in effect (defaults included), by name, as ``gymnasium.make``
+        takes it (render arguments excluded)."""
+        return dict(self._arguments)
+
     # ----------------------------------------------------------------- reset
     def reset_model(self) -> dict[str, NDArray[np.float64]]:
         m, d, lay = self.model, self.data, self.robot.layout
@@ -275,6 +420,8 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         qpos[: lay.nq] = qpos_robot
         qvel[: lay.nv] = qvel_robot
         if self._tray:
+            if self._free_tray:
+                self._place_free_tray(qpos)
             d.qpos[:] = qpos
             mujoco.mj_kinematics(m, d)
             top = d.xpos[self._tray_body] + d.xmat[self._tray_body].reshape(3, 3) @ np.array(
@@ -285,30 +432,73 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             mujoco.mju_mat2Quat(quat, d.xmat[self._tray_body])
             qpos[self._cup_qpos : self._cup_qpos + 3] = top
             qpos[self._cup_qpos + 3 : self._cup_qpos + 7] = quat
+            if self._free_tray:
+                self._move_with_hand(qpos, qvel)
         self.set_state(qpos, qvel)
         m.site_pos[self._goal_site, :2] = self._goal
         d.xfrc_applied[:] = 0.0
-        self.robot.update(d.qpos[: lay.nq], d.qvel[: lay.nv], dynamics=False)
+        self._measure()
         self._prev_distance = self._goal_distance()
         self._ee_reference = self._ee_in_axle_frame()
         self._cup_lost = False
         return self._get_obs()
 
+    def _move_with_hand(self, qpos: NDArray[np.float64], qvel: NDArray[np.float64]) -> None:
+        """Give the free tray and the cup (in ``qvel``) the velocity they would have welded to
+        the hand at the reset state, so that the reset's velocity noise does not start them
+        sliding on the hand (a welded tray moves with it by construction)."""
+        m, d = self.model, self.data
+        d.qpos[:] = qpos
+        d.qvel[:] = qvel
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)
+        mujoco.mj_comVel(m, d)
+        body = self._tray_mount_body
+        velocity = np.zeros(6)  # (angular, linear) at the body's origin, world frame
+        mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_BODY, body, velocity, 0)
+        omega, linear = velocity[:3], velocity[3:]
+        for moved, dof in ((self._tray_body, self._tray_dof), (self._cup_body, self._cup_dof)):
+            arm = d.xpos[moved] - d.xpos[body]
+            qvel[dof : dof + 3] = linear + np.cross(omega, arm)
+            qvel[dof + 3 : dof + 6] = d.xmat[moved].reshape(3, 3).T @ omega
+
+    def _place_free_tray(self, qpos: NDArray[np.float64]) -> None:
+        """Put the free tray (in ``qpos``) at rest on the supports of the robot pose in
+        ``qpos``: from its rest place on the hand (the ``tray_rest`` site, found when the model
+        was built) it settles for ``TRAY_RESET_SETTLE_TIME`` with the robot still (the reset
+        noise moves Krang's grippers relative to each other by a few mm)."""
+        m, d = self.model, self.data
+        d.qpos[:] = qpos
+        mujoco.mj_kinematics(m, d)
+        body = self._tray_mount_body
+        position = d.xpos[body] + d.xmat[body].reshape(3, 3) @ self._tray_rest_pos
+        quat = np.zeros(4)
+        mujoco.mju_mulQuat(quat, d.xquat[body], self._tray_rest_quat)
+        position, quat = self._tray_settler.settle(
+            d, position, quat, TRAY_RESET_SETTLE_TIME, TRAY_RESET_MAX_SPEED
+        )
+        a = self._tray_qpos
+        qpos[a : a + 3] = position
+        qpos[a + 3 : a + 7] = quat
+
     def _get_reset_info(self) -> dict[str, Any]:
-        return self._info(fallen=False, cup_on_tray=True)
+        info = self._info(fallen=False)
+        if self._tray:
+            frame = self._cup_in_tray_frame()
+            self._tray_info(info, frame, self._cup_state(frame), self._tray_on_hand())
+        return info
 
     # ------------------------------------------------------------------ step
     def step(
         self, action: NDArray[np.floating]
     ) -> tuple[dict[str, NDArray[np.float64]], float, bool, bool, dict[str, Any]]:
         action = self._check_action(action)
-        m, d, lay = self.model, self.data, self.robot.layout
+        m, d = self.model, self.data
         t = d.time
         force, start, duration = self._push
         d.xfrc_applied[self._push_body, :] = 0.0
         if force != 0.0 and start <= t < start + duration:
-            heading = self.robot.heading_rotation[:, 0]
-            d.xfrc_applied[self._push_body, :3] = force * heading
+            d.xfrc_applied[self._push_body, :3] = (force * self._cos_psi, force * self._sin_psi, 0)
         if not self._payload_attached and t >= self._payload_time:
             m.body_mass[self._payload_body] = self._payload_mass
             m.body_inertia[self._payload_body] = self._nominal_inertia[self._payload_body]
@@ -316,13 +506,17 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             mujoco.mj_setConst(m, mujoco.MjData(m))
             self._payload_attached = True
         self.do_simulation(action, self.frame_skip)
-        self.robot.update(d.qpos[: lay.nq], d.qvel[: lay.nv], dynamics=False)
-        # the cup's pose in the tray frame, made once for this state
+        self._measure()
+        # the cup's pose in the tray frame and its state, made once for this state
         cup_frame = self._cup_in_tray_frame() if self._tray else None
         fallen = self._fallen()
-        cup_on_tray = self._cup_on_tray(cup_frame) if self._tray else True
-        newly_lost = self._tray and not cup_on_tray and not self._cup_lost
-        self._cup_lost = self._cup_lost or not cup_on_tray
+        kept = True
+        if cup_frame is not None:
+            cup_state = self._cup_state(cup_frame)
+            tray_state = self._tray_on_hand()
+            kept = cup_state[1] and cup_state[2] and tray_state[1]
+        newly_lost = self._tray and not kept and not self._cup_lost
+        self._cup_lost = self._cup_lost or not kept
         distance = self._goal_distance()
         progress_w, ctrl_w, fall_pen, cup_pen = self._weights
         scaled = action / self._action_scale
@@ -335,12 +529,20 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         self._prev_distance = distance
         reward = float(sum(rewards.values()))
         terminated = bool(fallen or (self._tray and self._terminate_on_cup_loss and self._cup_lost))
-        info = self._info(fallen=fallen, cup_on_tray=cup_on_tray, cup_frame=cup_frame,
-                          distance=distance)  # fmt: skip
+        info = self._info(fallen=fallen, distance=distance)
+        if cup_frame is not None:
+            self._tray_info(info, cup_frame, cup_state, tray_state)
         info.update(rewards)
         if self.render_mode == "human":
             self.render()
         return self._get_obs(cup_frame), reward, terminated, False, info
+
+    def do_simulation(self, ctrl: NDArray[np.float64], n_frames: int) -> None:
+        """``n_frames`` MuJoCo steps with the (validated) torques ``ctrl``. Unlike Gymnasium's,
+        it does not run ``mj_rnePostConstraint`` after them: ``data.cfrc_int``/``cfrc_ext``
+        are not computed (no observation, reward or info uses them); call it to read them."""
+        self.data.ctrl[:] = ctrl
+        mujoco.mj_step(self.model, self.data, nstep=n_frames)
 
     def _check_action(self, action: Any) -> NDArray[np.float64]:
         a = np.asarray(action, dtype=np.float64)
@@ -349,11 +551,13 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
                 f"action must have shape {self.action_space.shape} (one torque per actuator: "
                 f"{[self.model.actuator(i).name for i in range(self.model.nu)]}), got {a.shape}"
             )
+        low, high = self._action_band
+        if ((a >= low) & (a <= high)).all():  # also false for NaN
+            return a
         if not np.isfinite(a).all():
             raise ValueError(
                 f"action contains NaN or inf at indices {np.flatnonzero(~np.isfinite(a))}"
             )
-        low, high = self._action_band
         outside = (a < low) | (a > high)
         if outside.any():
             bad = {
@@ -364,114 +568,211 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         return a
 
     # ------------------------------------------------------------- measures
+    def _measure(self) -> None:
+        """The robot's state measures for the current ``qpos``/``qvel``, from MuJoCo's own
+        kinematics and subtree quantities on the env's data (``mj_step`` leaves its kinematics
+        at the state before the step): heading ``psi``, ``psid``, ``x``, ``xd`` (the minimal
+        coordinates of ``RobotModel``), the axle position, and ``theta``, ``thetad`` of the body
+        CoM (wheels excluded) about the axle in the heading frame (``RobotModel.theta``)."""
+        m, d, lay = self.model, self.data, self._layout
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)
+        mujoco.mj_comVel(m, d)
+        mujoco.mj_subtreeVel(m, d)
+        base = lay.base_body
+        qpos, qvel = d.qpos, d.qvel
+        r = lay.wheel_radius
+        wl, wr = lay.wheel_bodies
+        axle = d.xpos[base]
+        if lay.planar:
+            o, v = lay.root_qpos, lay.root_dof
+            c, s, psi, psid = 1.0, 0.0, 0.0, 0.0
+            x, xd = float(qpos[o]), float(qvel[v])
+            vox, voy, voz = xd, 0.0, float(qvel[v + 1])
+        else:
+            R00, R01, R02, R10, R11, R12, R20, R21, R22 = d.xmat[base].tolist()
+            psi = math.atan2(-R01, R11)
+            c, s = math.cos(psi), math.sin(psi)
+            q1 = math.atan2(c * R02 + s * R12, R22)
+            v = lay.root_dof
+            vox, voy, voz, w0, w1, w2 = qvel[v : v + 6].tolist()
+            omega_x = R00 * w0 + R01 * w1 + R02 * w2
+            omega_y = R10 * w0 + R11 * w1 + R12 * w2
+            psid = R20 * w0 + R21 * w1 + R22 * w2
+            q1d = -s * omega_x + c * omega_y
+            ql, qr = lay.wheel_qpos
+            dl, dr = lay.wheel_dof
+            x = r * 0.5 * (qpos[ql] + qpos[qr]) + r * q1
+            xd = r * 0.5 * (qvel[dl] + qvel[dr]) + r * q1d
+        # the body's CoM and its velocity: the robot's subtree less the wheels, whose centres
+        # (their CoMs) sit on the axle: planar they move with the base origin, in 3-D also with
+        # the base's rotation (omega x r)
+        mass = float(m.body_subtreemass[base])
+        ml, mr = float(m.body_mass[wl]), float(m.body_mass[wr])
+        body = mass - ml - mr
+        ax, ay, az = axle.tolist()
+        cx, cy, cz = d.subtree_com[base].tolist()
+        lx, ly, lz = d.xipos[wl].tolist()
+        rx, ry, rz = d.xipos[wr].tolist()
+        vx, vy, vz = d.subtree_linvel[base].tolist()
+        dx = (mass * cx - ml * lx - mr * rx) / body - ax
+        dy = (mass * cy - ml * ly - mr * ry) / body - ay
+        dz = (mass * cz - ml * lz - mr * rz) / body - az
+        # sum over the wheels of m_w (v_o + omega x (p_w - o)) = (ml + mr) v_o + omega x s_w
+        sx = ml * (lx - ax) + mr * (rx - ax)
+        sy = ml * (ly - ay) + mr * (ry - ay)
+        sz = ml * (lz - az) + mr * (rz - az)
+        if lay.planar:
+            wx_, wy_, wz_ = 0.0, float(qvel[lay.root_dof + 2]), 0.0
+        else:
+            wx_, wy_, wz_ = omega_x, omega_y, psid
+        wheels = ml + mr
+        dvx = (mass * vx - wheels * vox - (wy_ * sz - wz_ * sy)) / body - vox
+        dvy = (mass * vy - wheels * voy - (wz_ * sx - wx_ * sz)) / body - voy
+        dvz = (mass * vz - wheels * voz - (wx_ * sy - wy_ * sx)) / body - voz
+        X, Y, Z = c * dx + s * dy, -s * dx + c * dy, dz
+        Xd = c * dvx + s * dvy + psid * Y
+        Zd = dvz
+        distance_sq = X * X + Z * Z
+        self._theta = math.atan2(X, Z)
+        self._thetad = (Z * Xd - X * Zd) / distance_sq if distance_sq > 1e-18 else 0.0
+        self._x, self._xd, self._psi, self._psid = float(x), float(xd), psi, psid
+        self._cos_psi, self._sin_psi = c, s
+        self._axle = axle.copy()
+
     def _goal_distance(self) -> float:
-        axle = self.robot.axle_position
+        axle = self._axle
         if self._spec.planar:
-            return float(abs(self._goal[0] - axle[0]))
-        return float(np.hypot(*(self._goal - axle[:2])))
+            return abs(float(self._goal[0]) - float(axle[0]))
+        return math.hypot(float(self._goal[0] - axle[0]), float(self._goal[1] - axle[1]))
 
     def _ee_in_axle_frame(self) -> NDArray[np.float64]:
         if self._ee_site < 0:
             return np.zeros(3)
-        d = self.data
-        return self.robot.heading_rotation.T @ (
-            d.site_xpos[self._ee_site] - self.robot.axle_position
-        )
+        dx, dy, dz = (self.data.site_xpos[self._ee_site] - self._axle).tolist()
+        c, s = self._cos_psi, self._sin_psi
+        return np.array([c * dx + s * dy, -s * dx + c * dy, dz])
 
     def _fallen(self) -> bool:
-        if abs(self.robot.theta) > self._fall_angle:
+        if abs(self._theta) > self._fall_angle:
             return True
         d = self.data
         if d.ncon == 0:
             return False
-        pairs = d.contact.geom[: d.ncon]
-        with_floor = (pairs == self._floor).any(axis=1)
-        with_body = self._body_geom_mask[pairs].any(axis=1)
-        return bool((with_floor & with_body).any())
+        floor, body = self._floor, self._body_geom_set
+        return any(
+            (g1 == floor and g2 in body) or (g2 == floor and g1 in body)
+            for g1, g2 in d.contact.geom[: d.ncon].tolist()
+        )
 
     def _cup_in_tray_frame(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The cup's position and orientation (quaternion) in the tray frame."""
         d = self.data
-        R = d.xmat[self._tray_body].reshape(3, 3)
-        position = R.T @ (d.xpos[self._cup_body] - d.xpos[self._tray_body])
-        tray_quat, cup_quat, rel = np.zeros(4), np.zeros(4), np.zeros(4)
-        mujoco.mju_mat2Quat(tray_quat, d.xmat[self._tray_body])
-        mujoco.mju_negQuat(tray_quat, tray_quat)
-        mujoco.mju_mat2Quat(cup_quat, d.xmat[self._cup_body])
-        mujoco.mju_mulQuat(rel, tray_quat, cup_quat)
+        tray, cup = self._tray_body, self._cup_body
+        position = d.xmat[tray].reshape(3, 3).T @ (d.xpos[cup] - d.xpos[tray])
+        inverse, rel = np.zeros(4), np.zeros(4)
+        mujoco.mju_negQuat(inverse, d.xquat[tray])
+        mujoco.mju_mulQuat(rel, inverse, d.xquat[cup])
+        if rel[0] < 0.0:  # the sign convention of mju_mat2Quat near identity: w >= 0
+            rel = -rel
         return position, rel
 
-    def _cup_on_tray(self, cup_frame: CupFrame | None = None) -> bool:
-        """The cup's centre is above the tray's plate (within its outline) and near it."""
-        p, _ = cup_frame or self._cup_in_tray_frame()
+    @staticmethod
+    def _cup_state(cup_frame: CupFrame) -> tuple[float, bool, bool]:
+        """``(tilt_deg, upright, on_plate)`` of the cup from its pose in the tray frame.
+
+        Tilt: the angle between the cup's axis and the tray's normal. On the plate: the cup's
+        centre is over the plate (within its outline) and above it, and the cup's lowest point
+        is at most ``CUP_PLATE_GAP`` above the plate's top (resting, or within a few mm)."""
+        p, q = cup_frame
+        w, x, y, _ = q.tolist()
+        cos_tilt = min(1.0, max(-1.0, 1.0 - 2.0 * (x * x + y * y)))  # R[2, 2] of the quaternion
+        tilt = math.degrees(math.acos(cos_tilt))
+        sin_tilt = math.sqrt(max(0.0, 1.0 - cos_tilt * cos_tilt))
         top = 2 * TRAY_HALF_SIZE[2]
-        return bool(
-            abs(p[0]) <= TRAY_HALF_SIZE[0]
-            and abs(p[1]) <= TRAY_HALF_SIZE[1]
-            and top < p[2] < top + 2.5 * CUP_HALF_HEIGHT
+        px, py, pz = p.tolist()
+        lowest = pz - CUP_HALF_HEIGHT * abs(cos_tilt) - CUP_RADIUS * sin_tilt
+        on_plate = (
+            abs(px) <= TRAY_HALF_SIZE[0]
+            and abs(py) <= TRAY_HALF_SIZE[1]
+            and pz > top
+            and lowest - top <= CUP_PLATE_GAP
         )
+        return tilt, tilt <= CUP_UPRIGHT_DEG, on_plate
+
+    def _tray_on_hand(self) -> tuple[NDArray[np.float64], bool]:
+        """``(offset, on_hand)``: the tray's displacement from its nominal place on the hand, in
+        that place's frame (the ``tray_rest`` site: zero when welded), and whether it is still
+        on the hand (within ``TRAY_HAND_GAP`` along the normal and within the plate's
+        half-size across it)."""
+        if not self._free_tray:
+            return np.zeros(3), True
+        d = self.data
+        rest = self._tray_rest_site
+        offset = d.site_xmat[rest].reshape(3, 3).T @ (d.xpos[self._tray_body] - d.site_xpos[rest])
+        ox, oy, oz = offset.tolist()
+        on_hand = (
+            abs(oz) <= TRAY_HAND_GAP
+            and abs(ox) <= TRAY_HALF_SIZE[0]
+            and abs(oy) <= TRAY_HALF_SIZE[1]
+        )
+        return offset, on_hand
 
     def _cup_friction_use(self) -> float:
-        """Tangential over mu times normal contact force, summed over the tray-cup contacts
-        (1 means the cup slides); 0 with no contact."""
-        d, m = self.data, self.model
-        if d.ncon == 0:
-            return 0.0
-        contact = d.contact
-        pairs = contact.geom[: d.ncon]
-        cup_tray = ((pairs == self._cup_geom) | (pairs == self._tray_geom)).all(axis=1)
-        frames = contact.frame
-        frame = self._contact_force
-        normal = tx = ty = tz = 0.0
-        for i in np.flatnonzero(cup_tray).tolist():
-            mujoco.mj_contactForce(m, d, i, frame)
-            f_n, f_1, f_2 = frame[:3].tolist()
-            # rows of the contact frame: normal, tangent 1, tangent 2
-            _, _, _, a0, a1, a2, b0, b1, b2 = frames[i].tolist()
-            normal += f_n
-            tx += f_1 * a0 + f_2 * b0
-            ty += f_1 * a1 + f_2 * b1
-            tz += f_1 * a2 + f_2 * b2
-        if normal <= 0.0:
-            return 0.0
-        return math.sqrt(tx * tx + ty * ty + tz * tz) / (self._cup_friction * normal)
+        """The cup's friction use on the plate (see :func:`friction_use`)."""
+        return friction_use(
+            self.model, self.data, self._cup_geoms, self._tray_geom, self._cup_friction
+        )
 
     def _tray_tilt_deg(self) -> float:
-        z = self.data.xmat[self._tray_body].reshape(3, 3)[:, 2]
-        return float(np.degrees(np.arccos(np.clip(z[2], -1.0, 1.0))))
+        z = float(self.data.xmat[self._tray_body, 8])  # the normal's world z
+        return math.degrees(math.acos(min(1.0, max(-1.0, z))))
 
-    def _info(self, *, fallen: bool, cup_on_tray: bool, cup_frame: CupFrame | None = None,
-              distance: float | None = None) -> dict[str, Any]:  # fmt: skip
-        """The step's info; ``cup_frame`` and ``distance`` when the caller has them."""
-        robot = self.robot
-        axle = robot.axle_position
+    def _info(self, *, fallen: bool, distance: float | None = None) -> dict[str, Any]:
+        """The robot's info for the state ``_measure`` made (``distance`` when the caller has
+        it); a tray task's entries are added by ``_tray_info``."""
         info: dict[str, Any] = {
-            "x": float(robot.q[0]),
-            "xd": float(robot.nu[0]),
-            "theta": robot.theta,
-            "thetad": robot.thetad,
-            "axle_position": axle,
+            "x": self._x,
+            "xd": self._xd,
+            "theta": self._theta,
+            "thetad": self._thetad,
+            "axle_position": self._axle,
             "goal_distance": self._goal_distance() if distance is None else distance,
             "fallen": bool(fallen),
         }
         if not self._spec.planar:
-            info["psi"] = robot.psi
-            info["psid"] = float(robot.nu[1])
+            info["psi"] = self._psi
+            info["psid"] = self._psid
         if self._ee_site >= 0:
-            info["ee_error"] = float(np.linalg.norm(self._ee_in_axle_frame() - self._ee_reference))
-        if self._tray:
-            offset, _ = cup_frame or self._cup_in_tray_frame()
-            info["tray_tilt_deg"] = self._tray_tilt_deg()
-            info["cup_offset"] = offset
-            info["cup_on_tray"] = bool(cup_on_tray)
-            info["cup_friction_use"] = self._cup_friction_use()
+            ex, ey, ez = (self._ee_in_axle_frame() - self._ee_reference).tolist()
+            info["ee_error"] = math.sqrt(ex * ex + ey * ey + ez * ez)
         return info
+
+    def _tray_info(
+        self,
+        info: dict[str, Any],
+        cup_frame: CupFrame,
+        cup_state: tuple[float, bool, bool],
+        tray_state: tuple[NDArray[np.float64], bool],
+    ) -> None:
+        """The tray task's info entries, from the state's cup frame, cup and tray states."""
+        tilt, upright, on_plate = cup_state
+        tray_offset, tray_on_hand = tray_state
+        info["tray_tilt_deg"] = self._tray_tilt_deg()
+        info["cup_offset"] = cup_frame[0]
+        info["cup_tilt_deg"] = tilt
+        info["cup_upright"] = upright
+        info["cup_on_plate"] = on_plate
+        info["cup_on_tray"] = on_plate and upright
+        info["cup_friction_use"] = self._cup_friction_use()
+        info["tray_offset"] = tray_offset
+        info["tray_on_hand"] = tray_on_hand
 
     def _get_obs(self, cup_frame: CupFrame | None = None) -> dict[str, NDArray[np.float64]]:
         d = self.data
         obs = {
-            "qpos": d.qpos[: self._nq].astype(np.float64, copy=True),
-            "qvel": d.qvel[: self._nv].astype(np.float64, copy=True),
+            "qpos": d.qpos[: self._nq].copy(),
+            "qvel": d.qvel[: self._nv].copy(),
             "goal": self._goal.copy(),
         }
         if self._tray:

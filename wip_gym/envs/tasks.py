@@ -46,30 +46,58 @@ _COMMON = """
 
     `x` (distance rolled along the heading: 3-D wheel odometry, planar the base slide), `xd`,
     `psi`, `psid` (3-D), `theta`, `thetad` (CoM pitch about the axle from vertical, positive
-    ahead), `axle_position`, `goal_distance`, `fallen`, `ee_error` (end-effector displacement
-    from its reset position in the axle frame, m), and in tray tasks `tray_tilt_deg` (angle
-    between the tray's normal and world z), `cup_offset` (cup position in the tray frame),
-    `cup_on_tray`, `cup_friction_use` (tangential / (mu normal) tray-cup force: 1 = slipping).
+    ahead; from MuJoCo's subtree CoM and velocity of the state after the step, so `thetad`
+    reads MuJoCo's velocities, wheel slip included), `axle_position`, `goal_distance`, `fallen`, `ee_error` (end-effector displacement
+    from its reset position in the axle frame, m), and in tray tasks:
+
+    | key | type | meaning |
+    |---|---|---|
+    | `tray_tilt_deg` | float | angle between the tray's normal and world z (deg) |
+    | `cup_offset` | (3,) | cup centre in the tray frame (m; origin on the plate's underside); the sum of its per-step changes is the cup's slip path over the tray |
+    | `cup_tilt_deg` | float | angle between the cup's axis and the tray's normal (deg) |
+    | `cup_upright` | bool | `cup_tilt_deg <= 30` |
+    | `cup_on_plate` | bool | the cup's centre is over the plate (within its 0.30 x 0.20 m outline) and above it, and its lowest point at most 5 mm above the plate's top (resting, or within a few mm) |
+    | `cup_on_tray` | bool | `cup_on_plate and cup_upright`: the cup is kept at this step |
+    | `cup_friction_use` | float | norm of the net tangential force over `cup_friction` times the net normal force, over the contacts of the cup with the **plate** (vectors summed, then the ratio): 1 = slipping, `tan(alpha) / mu` on a still plate tilted by alpha, 0 with no contact. Rim contacts are not counted (their push is a normal force of the rim, not friction of the plate) |
+    | `tray_offset` | (3,) | the tray's origin relative to its rest place on the hand (the `tray_rest` site), in that place's frame (m); zeros when welded. The sum of its per-step changes is the tray's slip path |
+    | `tray_on_hand` | bool | free tray: within 1 cm of its rest place along the normal and within the plate's half-size across it; always True when welded |
+
+    The soft contact's creep floor (robot held still, `tests/test_cup_metrics.py`): a cup on a
+    still level tray moves about 0.001 mm in 5 s (path of `cup_offset`); under a tangential
+    load soft friction creeps about 0.08 to 0.09 mm/s per unit of `cup_friction_use` (0.065 mm
+    in 5 s at 0.17, 0.47 mm at 0.89), and the free Krang tray on its 2.9 deg rest 0.14 mm in
+    5 s. So a slip path under about 0.1 mm per second of episode is creep, not a slip.
 
     ## Starting State
 
     The `home` pose at the origin, heading along +x, the base pitched about the axle so the
-    body's CoM is exactly above it (the tray is level there); then uniform noise of
+    body's CoM is exactly above it (a welded tray is level there); then uniform noise of
     `reset_noise_scale` (rad, rad/s) on the base pitch, body joints and their rates, applied in
     minimal coordinates so the wheels stay rolling on the floor. Without control it falls.
+    A free tray starts at rest on its supports: from its rest place on the hand (found when
+    the model is built) it is let settle for 0.5 s on the supports of the noisy pose, held
+    still in a small separate model (the reset noise moves Krang's grippers relative to each
+    other by a few mm; about 10 ms per reset), and it and the cup get the hand's velocity.
+    The cup starts upright at the plate's centre, exactly touching it (1 micron in).
+    The free tray is not in `theta` (it is not part of the robot).
 
     ## Episode End
 
     Terminated when the robot has fallen (a body link touches the floor or |theta| exceeds
-    `fall_angle`) and, in tray tasks with `terminate_on_cup_loss`, when the cup leaves the
-    tray. Truncated after 25 s (`max_episode_steps` = 25000 at the 1 ms step).
+    `fall_angle`) and, in tray tasks with `terminate_on_cup_loss`, when the cup is lost: not
+    `cup_on_tray` (off the plate, or tilted beyond 30 deg) or, with a free tray, not
+    `tray_on_hand` (`reward_cup_loss` is paid on that step). Truncated after 25 s
+    (`max_episode_steps` = 25000 at the 1 ms step).
 
     ## Arguments (`gymnasium.make(id, **kwargs)`)
 
     | argument | default | meaning |
     |---|---|---|
     | `goal` | 2.0 | goal x, or `(X, Y)` in 3-D |
-    | `cup_friction` | 0.3 | tray-cup friction (explicit contact pair; DESIGN 5) |
+    | `cup_friction` | 0.3 | tray-cup friction (explicit contact pairs, plate and rim; DESIGN 5) |
+    | `tray_attachment` | `"welded"` | tray tasks: `"welded"` to the hand, or `"free"`: a free body resting on the hand (see the task's description) |
+    | `tray_rim` | 0.0 | tray tasks: rim height in m on the plate's edge (5 mm thick walls), 0 for none; the authors' tray: 0.005 (docs/AUTHORS_CONFIG.md §5.3) |
+    | `tray_friction` | 0.3 | tray tasks: friction of the free tray's contact pairs with its supports (the authors' 0.3) |
     | `payload_mass` | 0.0 | kg welded to the hand (`ee` site) |
     | `payload_time` | 0.0 | s at which the payload appears (0: from the start) |
     | `push_force` | 0.0 | N along the heading at the torso's CoM (sign = direction) |
@@ -118,8 +146,12 @@ class PlanarEnv(WIPEnv):
 class PlanarTrayEnv(WIPEnv):
     """## Description
 
-    `planar7` carrying a tray (fixed to the hand, level at reset) with a free cup on it:
-    drive to a goal x without spilling (the paper's Fig. 3 task).
+    `planar7` carrying a tray with a free cup on it: drive to a goal x without spilling (the
+    paper's Fig. 3 task). The tray is welded to the hand, level at reset, or free
+    (`tray_attachment="free"`): resting level on the tip face of the hand's box (0.08 x 0.12 m).
+
+    Controllers' nominal model (`controllers.policy.controller_model`): a free tray is welded
+    there at its nominal place (the designer knows its mass, not its contact).
     """
 
     __doc__ = (__doc__ or "") + _COMMON
@@ -147,8 +179,24 @@ class KrangEnv(WIPEnv):
 class KrangTrayEnv(WIPEnv):
     """## Description
 
-    Golem Krang carrying a tray (fixed to the left gripper, midway between the grippers as in
-    the authors' demo, level at reset) with a free cup on it: drive to `(X, Y)` without spilling.
+    Golem Krang carrying a tray midway between the grippers as in the authors' demo
+    (docs/AUTHORS_CONFIG.md §5.3) with a free cup on it: drive to `(X, Y)` without spilling.
+    The tray is welded to the left gripper, level at reset, or free (`tray_attachment="free"`).
+
+    The free tray's support: the authors' tray is a free body on the grippers at their initial
+    arm pose (docs/AUTHORS_CONFIG.md §1.6, which is our `home` keyframe), and what reaches under
+    it there are the gripper **finger plates** of their URDF (`l/rgPlate1,2`), not the gripper
+    boxes (0.08 x 0.112 x 0.2025 m, which end 6 to 11 cm short of the plate's side edges). We
+    add the four finger plates to the free-tray model as massless 21 x 74 x 90 mm boxes (their
+    mesh bounds, at the URDF's places): their tips reach 3 cm under each side edge of the
+    plate. The arm pose is unchanged (so the welded default is unchanged). On them the tray
+    rests **2.9 deg from level** (the grippers are pitched there; the welded tray is made level
+    instead), so a cup at rest on a free tray already uses about `tan(2.9 deg) / mu` = 0.17 of
+    its friction (mu 0.3): the authors' setup has that tilt too, by the same geometry.
+
+    Controllers' nominal model (`controllers.policy.controller_model`): a free tray is welded
+    there at its nominal place, level on the left gripper (the designer knows its mass, not its
+    contact).
     """
 
     __doc__ = (__doc__ or "") + _COMMON
