@@ -191,8 +191,6 @@ def scenario_record(spec: RunSpec, args: argparse.Namespace, seeds: list[int]) -
         controllers=list(spec.configs),
         preset=spec.preset,
     )
-    if "cup_pose" in env.observation_space.spaces:  # a tray task
-        record.setdefault("tray_attachment", "welded")  # shim: the only attachment before free
     if spec.skipped:
         record["preset_skipped"] = list(spec.skipped)
     env.close()

@@ -336,7 +336,10 @@ def run_controller(scenario: Scenario, controller: str, seed: int, width: int, h
             values.append(float(info[key]))
         qpos.append(base.data.qpos.copy())
         qvel.append(base.data.qvel.copy())
-        axle = base.robot.axle_position
+        robot, lay = base.robot, base.robot.layout
+        # the env's step no longer updates its RobotModel (it reads MuJoCo's own kinematics)
+        robot.update(base.data.qpos[: lay.nq], base.data.qvel[: lay.nv], dynamics=False)
+        axle = robot.axle_position
         axle_world.append(axle)
         com_world.append(axle + base.robot.heading_rotation @ base.robot.com)
 

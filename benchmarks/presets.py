@@ -9,7 +9,6 @@ no acceleration cap, the unified controller's task weights) come from ``Config.p
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Mapping
 from typing import Any
 
@@ -28,7 +27,7 @@ def env_arguments(
     preset: str | None, env_id: str, settings: Mapping[str, Any]
 ) -> tuple[dict[str, Any], list[str]]:
     """The preset's env arguments for ``env_id`` (``settings``: its ``env.<argument>`` keys)
-    and the names of those this env does not accept (skipped with a warning)."""
+    and an empty list (kept for callers; every preset argument must exist)."""
     if preset is None:
         return {}, []
     if preset not in PRESET_NAMES:
@@ -38,11 +37,7 @@ def env_arguments(
     wanted: dict[str, Any] = {"goal": PAPER_GOAL_M if is_planar(env_id) else (PAPER_GOAL_M, 0.0)}
     if "env.cup_friction" in settings and "Tray" in env_id:
         wanted.update(PAPER_TRAY)
-    accepted = {k: v for k, v in wanted.items() if f"env.{k}" in settings}
-    skipped = [k for k in wanted if k not in accepted]
-    if skipped:
-        warnings.warn(
-            f"{env_id} does not take {skipped} yet: --preset {preset} runs without them",
-            stacklevel=2,
-        )
-    return accepted, skipped
+    unknown = [k for k in wanted if f"env.{k}" not in settings]
+    if unknown:
+        raise ValueError(f"--preset {preset}: {env_id} has no arguments {unknown}")
+    return wanted, []

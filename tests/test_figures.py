@@ -59,7 +59,12 @@ def test_each_png_is_valid_and_not_blank(short_run: tuple[Path, str], name: str)
     assert pixels.ndim == 3 and height >= 300 and width >= 600
     rgb = pixels[..., :3]
     assert rgb.std() > 0.05  # drawn axes and lines, not one flat colour
-    assert (rgb.std(axis=2) > 0.05).mean() > 0.01  # some coloured pixels: lines, renders
+    if name == "comparison.png":  # line plots: each controller's colour is drawn
+        for colour in ((31, 119, 180), (214, 39, 40)):  # matplotlib's tab:blue, tab:red
+            near = np.abs(rgb * 255.0 - np.array(colour)).max(axis=2) < 30
+            assert near.sum() > 2000, colour
+    else:  # renders: a good share of coloured pixels
+        assert (rgb.std(axis=2) > 0.05).mean() > 0.01
 
 
 def test_paths_are_printed(short_run: tuple[Path, str]) -> None:

@@ -1,8 +1,5 @@
 """Every registered controller drives both tray envs through the one rollout, in both tray
 attachments, for a short episode: it does not fall, keeps the cup, and every metric is finite.
-
-The free tray needs the env's ``tray_attachment`` argument; until the env has it those cases
-skip (with the reason), and the metrics use the env's new info keys only when present.
 """
 
 from __future__ import annotations
@@ -12,7 +9,7 @@ import math
 import pytest
 
 from benchmarks.controller_shim import controller_names
-from benchmarks.overrides import env_settings, resolve_run
+from benchmarks.overrides import resolve_run
 from benchmarks.rollout import rollout, run_configured_episode
 
 DURATION_S = 1.0
@@ -25,11 +22,7 @@ ENVS = ("wip_gym/PlanarTray-v0", "wip_gym/KrangTray-v0")
 def test_every_controller_carries_the_cup_on_both_tray_envs(
     controller: str, env_id: str, attachment: str
 ) -> None:
-    overrides: dict[str, object] = {}
-    if "env.tray_attachment" in env_settings(env_id):
-        overrides["env.tray_attachment"] = attachment
-    elif attachment == "free":
-        pytest.skip(f"{env_id} has no tray_attachment argument yet")
+    overrides: dict[str, object] = {"env.tray_attachment": attachment}
     spec = resolve_run(env_id, [controller], overrides=overrides)
     episode = rollout(env_id, spec.env_kwargs, controller, spec.configs[controller], 0, DURATION_S)
     m = episode.metrics
@@ -40,8 +33,8 @@ def test_every_controller_carries_the_cup_on_both_tray_envs(
         "tray_slip_distance_m", "max_tray_tilt_deg", "time_at_actuator_limit_s",
     ):  # fmt: skip
         assert math.isfinite(m[key]) and m[key] >= 0.0, key
-    if attachment == "welded":  # (a free tray's cup may slip while the tray settles)
-        assert m["max_cup_friction_use"] < 1.0
+    assert m["max_cup_friction_use"] < 1.0 and m["slipping_time_s"] == 0.0
+    if attachment == "welded":
         assert m["tray_slip_distance_m"] == 0.0
     assert all(math.isfinite(v) for v in m["counters"].values())
 
