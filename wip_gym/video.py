@@ -10,9 +10,8 @@ from __future__ import annotations
 
 import argparse
 import warnings
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import imageio.v2 as imageio
@@ -20,7 +19,8 @@ import numpy as np
 
 import wip_gym  # noqa: F401  (registers the environments, sets MUJOCO_GL)
 
-Policy = Callable[[dict[str, np.ndarray]], np.ndarray]
+if TYPE_CHECKING:  # the one protocol; wip_gym does not import controllers at run time
+    from controllers.policy import Policy
 
 
 def open_video(path: str | Path, fps: float, first_frame: np.ndarray) -> Any:
