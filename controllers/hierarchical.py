@@ -6,7 +6,9 @@ every control step (1 ms): the task QP on the isolated manipulator dynamics (eq.
 ``controllers.task_qp``) with the tasks of the paper's results section: ``theta`` (toward the
 MPC's predicted ``theta``, ``thetad``, interpolated inside the 10 ms, with its ``thdd`` as
 feed-forward), the end effector's position and orientation in the axle frame at their reset
-values, posture regularisation, and in 3-D the heading from the MPC. Torques reach the wheels
+values, posture regularisation, and in 3-D the heading from the MPC (a heading task toward its
+predicted ``psi``, or, as the paper does, its ``tau_0`` applied: ``spin_source``; the preset
+``HierarchicalConfig.paper()`` is the authors' configuration). Torques reach the wheels
 through the tested ``(tau_0, tau_1) -> (tau_L, tau_R)`` map. The whole body, wheels included,
 balances and drives while the hand holds its task.
 
