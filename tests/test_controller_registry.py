@@ -15,6 +15,7 @@ import wip_gym  # noqa: F401
 from controllers import HierarchicalConfig, HierarchicalController, PlanConfig, PolicyBase
 from controllers.decoupled import DecoupledConfig, DecoupledLQRConfig
 from controllers.decoupled_mpc import DecoupledMPCConfig
+from controllers.hierarchical import authors_joint_weights
 from controllers.planning import plan_to_goal
 from controllers.policy import ClipCounter, ModelChoice, Policy, make_robot
 from controllers.registry import (
@@ -26,6 +27,7 @@ from controllers.registry import (
 )
 from controllers.wipm import params_from_lambda
 from controllers.wipm_problem import wipm_state
+from wip_gym.wheel_torques import wheel_to_generalized
 
 NAMES = ["decoupled", "decoupled-lqr", "decoupled-mpc", "unified", "unified-waiter"]
 BASE_COUNTERS = {"clipped_steps", "max_clip_excess", "actuator_limit_steps"}
@@ -282,5 +284,27 @@ def test_paper_preset_turns_with_the_mpcs_tau_0() -> None:
         obs, _, terminated, _, info = env.step(policy(obs))
         assert not terminated, info
     assert info["psi"] > 0.15  # toward the bearing atan2(1, 2) = 0.46
-    tau_0 = policy.diagnostics["tau_0"]
-    assert np.abs(tau_0).max() > 0
+    # the applied wheel torques carry exactly the MPC's tau_0 (no step was clipped)
+    diagnostics, lay = policy.diagnostics, policy.robot.layout
+    assert policy.counters["clipped_steps"] == 0
+    wl, wr = lay.wheel_actuators
+    torque = diagnostics["torque"]
+    tau_0, _ = wheel_to_generalized(
+        torque[:, wl], torque[:, wr], lay.wheel_radius, lay.wheel_separation
+    )
+    np.testing.assert_allclose(tau_0, diagnostics["tau_0"], rtol=0.0, atol=1e-9)
+    assert np.abs(diagnostics["tau_0"]).max() > 1.0
+
+
+def test_authors_joint_weights_follow_the_joint_names() -> None:
+    env = gym.make("wip_gym/KrangTray-v0")
+    robot = make_robot(env, "nominal")
+    posture, speed = authors_joint_weights(robot)
+    arm_posture = [10.0, 10.0, 10.0, 10.0, 5.0, 5.0, 5.0]
+    # waist, torso, left arm j1..j7, right arm j1..j7
+    np.testing.assert_array_equal(posture, [0.0, 1.0, *arm_posture, *arm_posture])
+    np.testing.assert_array_equal(speed, [10.0, 10.0, *[1.0] * 14])
+    planar = make_robot(gym.make("wip_gym/PlanarTray-v0"), "nominal")
+    posture, speed = authors_joint_weights(planar)  # spine, torso, shoulder, elbow, wrist
+    np.testing.assert_array_equal(posture, [0.0, 1.0, 10.0, 10.0, 5.0])
+    np.testing.assert_array_equal(speed, [10.0, 10.0, 1.0, 1.0, 1.0])
