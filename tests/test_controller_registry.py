@@ -3,7 +3,11 @@ clip and counters, and every registered controller on the tray envs (short episo
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -308,3 +312,23 @@ def test_authors_joint_weights_follow_the_joint_names() -> None:
     posture, speed = authors_joint_weights(planar)  # spine, torso, shoulder, elbow, wrist
     np.testing.assert_array_equal(posture, [0.0, 1.0, 10.0, 10.0, 5.0])
     np.testing.assert_array_equal(speed, [10.0, 10.0, 1.0, 1.0, 1.0])
+
+
+def test_controllers_exports_the_policies_without_starting_jax() -> None:
+    """``import controllers`` and the registry leave JAX alone; the paper's controller is
+    importable from the package (a fresh process: this one has JAX already)."""
+    code = (
+        "import sys\n"
+        "import controllers\n"
+        "from controllers import Policy, controller_names, make_policy\n"
+        "assert 'jax' not in sys.modules, 'jax imported'\n"
+        "from controllers import HierarchicalConfig, HierarchicalController\n"
+        "assert HierarchicalController.config_class is HierarchicalConfig\n"
+        "assert set(controllers.__all__) <= set(dir(controllers))\n"
+    )
+    root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": str(root)}
+    result = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300
+    )
+    assert result.returncode == 0, result.stderr
