@@ -9,10 +9,15 @@ joint PD with gravity compensation (``controllers.posture``), blind to balance.
   current to wheel torque (1.2711 N m/A per wheel): 352.6 N m/rad and 78.7 N m s/rad on
   ``theta``, 9.47 N m and 23.2 N m s per radian of wheel angle on ``x`` (37.9 N m/m and
   92.7 N m s/m at R = 0.25), and -10 A (12.7 N m s) per wheel radian per second on the spin
-  rate. BAL_LO has no heading-position gain; for goals off the x axis we add one (our
-  addition, not Krang's): the gain that makes the heading loop critically damped with the
-  published spin-rate gain on the WIPM linearised at reset, i.e. the smallest change that
-  makes the heading follow the plan without adding an overshoot to the published rate loop.
+  rate. BAL_LO has no heading-position gain (its spin-position gain K4 is 0); for goals off
+  the x axis we add one (our addition, not Krang's): ``heading_gain_amps``, 2.5 A (3.2 N m)
+  per wheel radian of spin, the smallest that tracks the plan's heading. Measured on
+  KrangTray-v0, goal (2, 1.5), seed 0, 10 s: at the plan's arrival (8.98 s) the heading error
+  is 2.8 deg with 0.5 N m, 1.3 deg with 1.5 N m (not tracking, by a 1 deg criterion), 0.44
+  deg with 3.2 N m (this gain) and 0.2 deg with 13 N m. A stiffer heading does not bring the
+  robot nearer its goal: ``x`` lags the plan (no lean is planned for it), so a heading that
+  keeps the plan's timing turns too early on the path; the robot ended 4.3 cm from the goal
+  with 3.2 N m and 28 cm with 13 N m.
 * :class:`DecoupledLQRController` (registry ``decoupled-lqr``): our stronger variant. An LQR
   on the WIPM (paper section "Simplified Model") with the wheel torques as inputs, i.e. its
   ``x`` and ``theta`` rows before the torque is eliminated (ERRATA 1) and, in 3-D, its spin
@@ -89,8 +94,8 @@ class DecoupledConfig:
             added to the left wheel and subtracted from the right.
         torque_per_amp: wheel torque per motor amp, 1.2711 N m/A (the AMC/BLY343D drive with
             its 15:1 gearbox).
-        heading_gain: our addition, N m per wheel radian of heading-spin error; None (default):
-            critically damped with the published spin-rate gain (module docstring).
+        heading_gain_amps: our addition, A per wheel radian of spin error (3-D), entering as
+            ``-heading_gain_amps`` in BAL_LO's spin-position slot (module docstring).
         plan: the offline plan whose ``x``, ``xd`` (and ``psi``, ``psid``) are tracked.
         posture_frequency_hz, posture_damping_ratio: the joint PD holding the upper body.
     """
@@ -98,7 +103,7 @@ class DecoupledConfig:
     model: ModelChoice = "nominal"
     gains_amps: tuple[float, float, float, float, float, float] = BAL_LO_AMPS
     torque_per_amp: float = KRANG_TORQUE_PER_AMP
-    heading_gain: float | None = None
+    heading_gain_amps: float = 2.5
     plan: PlanConfig = field(default_factory=PlanConfig)
     posture_frequency_hz: float = 5.0
     posture_damping_ratio: float = 1.0
@@ -108,8 +113,8 @@ class DecoupledConfig:
             raise ValueError(f"gains_amps must be 6 finite numbers, got {self.gains_amps!r}")
         if not self.torque_per_amp > 0:
             raise ValueError(f"torque_per_amp must be positive, got {self.torque_per_amp!r}")
-        if self.heading_gain is not None and not self.heading_gain >= 0:
-            raise ValueError(f"heading_gain must be >= 0 or None, got {self.heading_gain!r}")
+        if not self.heading_gain_amps >= 0:
+            raise ValueError(f"heading_gain_amps must be >= 0, got {self.heading_gain_amps!r}")
 
     @classmethod
     def paper(cls) -> DecoupledConfig:
@@ -144,30 +149,8 @@ class DecoupledController(PolicyBase):
         lay = robot.layout
         self._spin_per_heading = lay.wheel_separation / (2.0 * lay.wheel_radius)
         if not lay.planar:
-            self._heading_gain = (
-                cfg.heading_gain
-                if cfg.heading_gain is not None
-                else self.critical_heading_gain(params)
-            )
+            self._heading_gain = cfg.torque_per_amp * cfg.heading_gain_amps
         self.plan = _plan(robot, params, self.task, cfg.plan)
-
-    def critical_heading_gain(self, params: WIPMParams) -> float:
-        """Per-wheel heading gain (N m per wheel radian of spin) that makes ``I psidd + c psid
-        + k psi = 0`` critically damped, ``c`` from the published spin-rate gain and the
-        wheel damping, ``I`` and the input gain from the WIPM linearised at rest."""
-        A, B = (
-            np.asarray(a)
-            for a in linearize(spatial_torque_dynamics, np.zeros(8), np.zeros(2), params)
-        )
-        b = float(B[4, 1])  # psidd per N m of tau_R (and -b per N m of tau_L)
-        k_rate = -self.config.wheel_gains[5]
-        n = self._spin_per_heading
-        # tau_R - tau_L = -2 k e_spin, e_spin = n e_psi: psidd = -2 b n^2 (k_rate psid + k psi)
-        damping = 2.0 * b * n * n * k_rate - float(A[4, 4])
-        if damping <= 0 or b <= 0:
-            raise ValueError("the spin-rate gain does not damp the heading of this model")
-        stiffness = damping**2 / 4.0
-        return stiffness / (2.0 * b * n * n)
 
     @property
     def heading_gain(self) -> float:

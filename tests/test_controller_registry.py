@@ -332,3 +332,19 @@ def test_controllers_exports_the_policies_without_starting_jax() -> None:
         [sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300
     )
     assert result.returncode == 0, result.stderr
+
+
+def test_decoupled_turns_toward_an_off_axis_goal() -> None:
+    """Krang 2014 with our heading gain follows the plan's turn (3-D, goal to the left)."""
+    env = gym.make("wip_gym/KrangTray-v0", goal=(2.0, 1.5))
+    obs, info = env.reset(seed=0)
+    policy = make_policy("decoupled", env)
+    policy.reset(obs, info)
+    start = info["goal_distance"]
+    for _ in range(3000):
+        obs, _, terminated, _, info = env.step(policy(obs))
+        assert not terminated, info
+    diagnostics = policy.diagnostics
+    assert np.abs(diagnostics["psi"] - diagnostics["psi_ref"]).max() < 0.25
+    assert info["psi"] > 0.3  # the plan turns to the bearing atan2(1.5, 2) = 0.64
+    assert info["goal_distance"] < 0.5 * start
