@@ -34,7 +34,6 @@ import gymnasium as gym
 import numpy as np
 from tqdm import tqdm
 
-from benchmarks import controller_shim
 from benchmarks.episode import compare_episode
 from benchmarks.overrides import (
     RunSpec,
@@ -55,6 +54,7 @@ from benchmarks.scenario import (
 )
 from benchmarks.seeding import episode_seed
 from benchmarks.statistics import describe, rate
+from controllers import registry
 
 DEFAULT_ENV = "wip_gym/PlanarTray-v0"
 RATES = ("success", "goal_reached", "cup_kept", "tray_kept", "fell")
@@ -81,8 +81,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--env", default=DEFAULT_ENV, help="env id (wip_gym/NAME or NAME)")
     parser.add_argument(
         "--controllers",
-        default=",".join(controller_shim.controller_names()),
-        help=f"comma-separated, from {controller_shim.controller_names()}",
+        default=",".join(registry.controller_names()),
+        help=f"comma-separated, from {registry.controller_names()}",
     )
     parser.add_argument("--episodes", type=int, default=1)
     parser.add_argument("--seed", type=int, default=0)

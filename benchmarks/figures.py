@@ -35,11 +35,11 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
-from benchmarks.controller_shim import controller_names
 from benchmarks.overrides import resolve_run
 from benchmarks.rollout import rollout
 from benchmarks.scenario import Scenario, check_task_flags, parse_controllers, resolve_env_id
 from controllers.planning import Plan
+from controllers.registry import controller_names
 from controllers.wipm_problem import PLANAR_STATE, SPATIAL_STATE
 from wip_gym.scene import TRAY_HALF_SIZE
 

@@ -41,7 +41,8 @@ from typing import Any
 
 import gymnasium as gym
 
-from benchmarks import controller_shim, presets
+from benchmarks import presets
+from controllers import registry
 
 FIXED_ENV_ARGUMENTS = ("robot", "tray")  # set by the task class
 RENDER_ENV_ARGUMENTS = ("render_mode", "width", "height")  # how to draw, not what happens
@@ -414,7 +415,7 @@ def resolve_run(
     ``OverrideError`` naming the first bad key."""
     names = list(controllers)
     preset_env, skipped = presets.env_arguments(preset, env_id, env_settings(env_id))
-    configs = {name: controller_shim.default_config(name, preset=preset) for name in names}
+    configs = {name: registry.default_config(name, preset=preset) for name in names}
     env_kwargs: dict[str, Any] = dict(preset_env)
     settings = env_settings(env_id)
     for name, value in (env_flags or {}).items():
@@ -422,7 +423,7 @@ def resolve_run(
     for field_name, value in (controller_flags or {}).items():
         for name in names:
             configs[name] = replace_path(configs[name], [field_name], value, f"{name}.{field_name}")
-    others = controller_shim.controller_names() if ignore_other_controllers else ()
+    others = registry.controller_names() if ignore_other_controllers else ()
     parsed = dict(overrides or {})
     for key, value in parsed.items():
         _apply(key, value, env_id, env_kwargs, configs, others)

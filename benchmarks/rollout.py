@@ -25,10 +25,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 import wip_gym  # noqa: F401  (registers the envs in a spawned worker)
-from benchmarks import controller_shim
 from benchmarks.metrics import EpisodeMetrics
 from benchmarks.overrides import config_dict, parse_value, resolve_run
 from benchmarks.scenario import resolve_env_id
+from controllers import registry
 
 PROGRESS_INTERVAL_S = 0.1  # simulated seconds between progress callbacks
 
@@ -74,7 +74,7 @@ def rollout(
     try:
         setup_start = time.perf_counter()
         observation, info = env.reset(seed=seed)
-        policy = controller_shim.make_policy(controller, env, config)
+        policy = registry.make_policy(controller, env, config)
         policy.reset(observation, info)
         setup_s = time.perf_counter() - setup_start
         dt = float(env.unwrapped.dt)
@@ -102,7 +102,7 @@ def rollout(
         control_times = metrics.control_times
         result: dict[str, Any] = {"controller": controller, "seed": int(seed)}
         result.update(metrics.result())
-        result["counters"] = controller_shim.policy_counters(policy)
+        result["counters"] = {str(k): float(v) for k, v in policy.counters.items()}
         result.update(
             control_time_ms_mean=float(control_times.mean() * 1e3),
             control_time_ms_p99=float(np.percentile(control_times, 99) * 1e3),

@@ -25,7 +25,7 @@ def resolve_env_id(name: str) -> str:
 
 def parse_controllers(text: str) -> list[str]:
     """Comma-separated registry names; ``ValueError`` naming the valid ones."""
-    from benchmarks.controller_shim import controller_names
+    from controllers.registry import controller_names
 
     names = [n.strip() for n in text.split(",") if n.strip()]
     unknown = [n for n in names if n not in controller_names()]

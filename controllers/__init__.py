@@ -1,6 +1,77 @@
-"""Controllers of wip-gym as policies: ``Controller.for_env(env)``, ``reset``, ``__call__``."""
+"""Controllers of wip-gym as policies: ``Controller.for_env(env)``, ``reset``, ``__call__``.
 
-from controllers.decoupled import DecoupledConfig, DecoupledController
-from controllers.policy import Policy, TaskInfo
+    from controllers import HierarchicalController, make_policy
 
-__all__ = ["DecoupledConfig", "DecoupledController", "Policy", "TaskInfo"]
+The names below are imported on first use (PEP 562), so ``import controllers`` alone neither
+imports JAX nor applies its settings (``controllers.jax_setup``); the controllers that compile
+JAX code do, when first used.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from controllers.decoupled import (
+        DecoupledConfig,
+        DecoupledController,
+        DecoupledLQRConfig,
+        DecoupledLQRController,
+    )
+    from controllers.decoupled_mpc import DecoupledMPCConfig, DecoupledMPCController
+    from controllers.hierarchical import HierarchicalConfig, HierarchicalController
+    from controllers.planning import PlanConfig
+    from controllers.policy import Policy, PolicyBase, TaskInfo
+    from controllers.registry import controller_names, default_config, make_policy, register
+
+_EXPORTS = {
+    "DecoupledConfig": "controllers.decoupled",
+    "DecoupledController": "controllers.decoupled",
+    "DecoupledLQRConfig": "controllers.decoupled",
+    "DecoupledLQRController": "controllers.decoupled",
+    "DecoupledMPCConfig": "controllers.decoupled_mpc",
+    "DecoupledMPCController": "controllers.decoupled_mpc",
+    "HierarchicalConfig": "controllers.hierarchical",
+    "HierarchicalController": "controllers.hierarchical",
+    "PlanConfig": "controllers.planning",
+    "Policy": "controllers.policy",
+    "PolicyBase": "controllers.policy",
+    "TaskInfo": "controllers.policy",
+    "controller_names": "controllers.registry",
+    "default_config": "controllers.registry",
+    "make_policy": "controllers.registry",
+    "register": "controllers.registry",
+}
+
+__all__ = [
+    "DecoupledConfig",
+    "DecoupledController",
+    "DecoupledLQRConfig",
+    "DecoupledLQRController",
+    "DecoupledMPCConfig",
+    "DecoupledMPCController",
+    "HierarchicalConfig",
+    "HierarchicalController",
+    "PlanConfig",
+    "Policy",
+    "PolicyBase",
+    "TaskInfo",
+    "controller_names",
+    "default_config",
+    "make_policy",
+    "register",
+]
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'controllers' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_EXPORTS])

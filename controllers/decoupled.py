@@ -1,14 +1,30 @@
-"""The "traditional" Krang controller the paper compares against (reference/krang_facts.md 5.2).
+"""The "traditional" decoupled Krang controllers the paper compares against: the wheels
+balance the whole robot as one inverted pendulum, the upper body is held at its posture by
+joint PD with gravity compensation (``controllers.posture``), blind to balance.
 
-The wheels balance the whole robot as one inverted pendulum by LQR state feedback on
-``theta, thetad, x, xd`` (and ``psi, psid`` in 3-D) plus an integral of the position error, so
-a CoM the nominal model gets slightly wrong still ends at the goal. The model is the WIPM
-(paper section "Simplified Model") with the wheel torques as inputs, i.e. its ``x`` and
-``theta`` rows before the torque is eliminated (ERRATA 1) and, in 3-D, its spin row,
-linearised at balance by ``jax.jacfwd`` and discretised (zero-order hold) at the control step.
-The upper body is held at its initial posture by joint PD with gravity compensation, blind to
-balance. Krang's own gains were hand-tuned currents (BAL_LO: 277.4, 61.889, 7.4484, 18.235 A);
-ours come from the LQR solve, with weights below.
+* :class:`DecoupledController` (registry ``decoupled``): Krang 2014 as published
+  (docs/AUTHORS_CONFIG.md §5.2). It balances about ``theta_ref = 0``, ``thetad_ref = 0`` and
+  tracks the offline plan's ``x`` and ``xd`` (Krang's joystick references, replaced by the plan
+  every compared controller follows), with the hand-tuned BAL_LO gains converted from motor
+  current to wheel torque (1.2711 N m/A per wheel): 352.6 N m/rad and 78.7 N m s/rad on
+  ``theta``, 9.47 N m and 23.2 N m s per radian of wheel angle on ``x`` (37.9 N m/m and
+  92.7 N m s/m at R = 0.25), and -10 A (12.7 N m s) per wheel radian per second on the spin
+  rate. BAL_LO has no heading-position gain (its spin-position gain K4 is 0); for goals off
+  the x axis we add one (our addition, not Krang's): ``heading_gain_amps``, 2.5 A (3.2 N m)
+  per wheel radian of spin, the smallest that tracks the plan's heading. Measured on
+  KrangTray-v0, goal (2, 1.5), seed 0, 10 s: at the plan's arrival (8.98 s) the heading error
+  is 2.8 deg with 0.5 N m, 1.3 deg with 1.5 N m (not tracking, by a 1 deg criterion), 0.44
+  deg with 3.2 N m (this gain) and 0.2 deg with 13 N m. A stiffer heading does not bring the
+  robot nearer its goal: ``x`` lags the plan (no lean is planned for it), so a heading that
+  keeps the plan's timing turns too early on the path; the robot ended 4.3 cm from the goal
+  with 3.2 N m and 28 cm with 13 N m.
+* :class:`DecoupledLQRController` (registry ``decoupled-lqr``): our stronger variant. An LQR
+  on the WIPM (paper section "Simplified Model") with the wheel torques as inputs, i.e. its
+  ``x`` and ``theta`` rows before the torque is eliminated (ERRATA 1) and, in 3-D, its spin
+  row, linearised at balance by ``jax.jacfwd`` and discretised (zero-order hold) at the control
+  step, tracks the plan's *lean* ``theta`` as well as ``x`` (and ``psi``), with an integral of
+  the position error. Its gains are 2 to 9 times stiffer than Krang's, and tracking the
+  planned lean lets it accelerate as the plan does: it is not the original.
 """
 
 from __future__ import annotations
@@ -18,16 +34,16 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
-import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
 from controllers.lqr import dlqr, zero_order_hold
 from controllers.planning import Plan, PlanConfig, plan_to_goal
-from controllers.policy import DiagnosticsRecorder, ModelChoice, TaskInfo, make_robot, task_info
+from controllers.policy import ModelChoice, PolicyBase, TaskInfo, plan_counters
 from controllers.posture import PostureHold
 from controllers.reference import GoalReference
 from controllers.wipm import (
+    WIPMParams,
     linearize,
     params_from_lambda,
     planar_torque_dynamics,
@@ -38,22 +54,188 @@ from wip_gym.robot_model import RobotModel
 
 Array = NDArray[np.float64]
 
+# Krang's BAL_LO mode (docs/AUTHORS_CONFIG.md §5.2): amps per (rad, rad/s) of theta_com, per
+# (rad, rad/s) of wheel angle, per (rad, rad/s) of spin (in wheel radians)
+BAL_LO_AMPS = (277.4, 61.889, 7.4484, 18.235, 0.0, -10.0)
+# wheel torque per amp of one wheel's motor: 12 oz-in/A x 0.00706155 N m/oz-in x 15:1 gear
+KRANG_TORQUE_PER_AMP = 1.2711
 
+
+def _check_body(robot: RobotModel) -> None:
+    lam = robot.wipm_parameters()
+    if lam.com_distance < 1e-3:
+        raise ValueError(
+            f"LQR problem ill-posed: the body CoM is {lam.com_distance:.2e} m from the axle "
+            "(no pendulum left to balance at this posture)"
+        )
+
+
+def _plan(robot: RobotModel, params: WIPMParams, task: TaskInfo, config: PlanConfig) -> Plan:
+    return plan_to_goal(
+        wipm_state(robot),
+        params,
+        task.goal,
+        planar=robot.layout.planar,
+        cup_friction=task.cup_friction,
+        config=config,
+    )
+
+
+# ------------------------------------------------------------------ Krang 2014 as published
 @dataclass(frozen=True)
 class DecoupledConfig:
-    """Weights and gains of the decoupled controller.
+    """Krang 2014's balance controller (docs/AUTHORS_CONFIG.md §5.2).
+
+    Attributes:
+        model: ``nominal`` (robot + tray as designed) or ``oracle`` (the env's exact model).
+        gains_amps: the BAL_LO currents ``(K_theta, K_thetad, K_x, K_xd, K_spin, K_spin_rate)``
+            in A per rad (or rad/s) of ``theta_com``, of wheel angle ``x / R`` and of spin in
+            wheel radians ``(sep / 2R) psi``; the spin term enters as ``-(K4 e4 + K5 e5)``,
+            added to the left wheel and subtracted from the right.
+        torque_per_amp: wheel torque per motor amp, 1.2711 N m/A (the AMC/BLY343D drive with
+            its 15:1 gearbox).
+        heading_gain_amps: our addition, A per wheel radian of spin error (3-D), entering as
+            ``-heading_gain_amps`` in BAL_LO's spin-position slot (module docstring).
+        plan: the offline plan whose ``x``, ``xd`` (and ``psi``, ``psid``) are tracked.
+        posture_frequency_hz, posture_damping_ratio: the joint PD holding the upper body.
+    """
+
+    model: ModelChoice = "nominal"
+    gains_amps: tuple[float, float, float, float, float, float] = BAL_LO_AMPS
+    torque_per_amp: float = KRANG_TORQUE_PER_AMP
+    heading_gain_amps: float = 2.5
+    plan: PlanConfig = field(default_factory=PlanConfig)
+    posture_frequency_hz: float = 5.0
+    posture_damping_ratio: float = 1.0
+
+    def __post_init__(self) -> None:
+        if len(self.gains_amps) != 6 or not np.all(np.isfinite(self.gains_amps)):
+            raise ValueError(f"gains_amps must be 6 finite numbers, got {self.gains_amps!r}")
+        if not self.torque_per_amp > 0:
+            raise ValueError(f"torque_per_amp must be positive, got {self.torque_per_amp!r}")
+        if not self.heading_gain_amps >= 0:
+            raise ValueError(f"heading_gain_amps must be >= 0, got {self.heading_gain_amps!r}")
+
+    @classmethod
+    def paper(cls) -> DecoupledConfig:
+        """The published gains, following the authors' plan (``PlanConfig.paper()``)."""
+        return cls(plan=PlanConfig.paper())
+
+    @property
+    def wheel_gains(self) -> Array:
+        """Per-wheel torque gains (N m per rad or rad/s of the state in Krang's units)."""
+        return self.torque_per_amp * np.asarray(self.gains_amps, dtype=float)
+
+
+class DecoupledController(PolicyBase):
+    """Krang 2014: BAL_LO state feedback about ``theta = 0`` on the plan's ``x``, ``xd``."""
+
+    config_class = DecoupledConfig
+    registry_name = "decoupled"
+
+    def __init__(self, robot: RobotModel, task: TaskInfo, config: DecoupledConfig) -> None:
+        super().__init__(robot, task, config)
+        self._posture = PostureHold(config.posture_frequency_hz, config.posture_damping_ratio)
+        self.plan: Plan | None = None
+        self._heading_gain = 0.0
+
+    def reset(self, observation: dict[str, Array], info: dict[str, Any]) -> None:
+        robot, cfg = self.robot, self.config
+        robot.update(observation["qpos"], observation["qvel"])
+        self.begin_episode()
+        _check_body(robot)
+        params = params_from_lambda(robot.wipm_parameters())
+        self._posture.reset(robot)
+        lay = robot.layout
+        self._spin_per_heading = lay.wheel_separation / (2.0 * lay.wheel_radius)
+        if not lay.planar:
+            self._heading_gain = cfg.torque_per_amp * cfg.heading_gain_amps
+        self.plan = _plan(robot, params, self.task, cfg.plan)
+
+    @property
+    def heading_gain(self) -> float:
+        """The heading gain in use (N m per wheel radian of spin; 0 planar)."""
+        return self._heading_gain
+
+    def __call__(self, observation: dict[str, Array]) -> Array:
+        start = time.perf_counter()
+        robot, lay = self.robot, self.robot.layout
+        robot.update(observation["qpos"], observation["qvel"])
+        if self.plan is None:
+            raise RuntimeError("reset() first")
+        t = self._step * self.task.control_dt
+        ref = self.plan.sample(t)
+        q, nu = robot.q, robot.nu
+        k = self.config.wheel_gains
+        R = lay.wheel_radius
+        # theta_ref = 0, thetad_ref = 0 (Krang 2014); x in wheel radians
+        common = (
+            k[0] * robot.theta
+            + k[1] * robot.thetad
+            + k[2] * (q[0] - ref["x"]) / R
+            + k[3] * (nu[0] - ref["xd"]) / R
+        )
+        spin = 0.0
+        if not lay.planar:
+            n = self._spin_per_heading
+            spin_error = n * (q[1] - ref["psi"])
+            spin_rate_error = n * (nu[1] - ref["psid"])
+            # Krang: u_spin = -(K4 e4 + K5 e5), plus our heading term, left +, right -
+            spin = -(k[4] * spin_error + k[5] * spin_rate_error) + self._heading_gain * spin_error
+        action = self.assemble((common + spin, common - spin), self._posture.torques(robot))
+        applied = self.finish(action)
+        self._step += 1
+        self._recorder.record(
+            t=t,
+            x=q[0],
+            x_ref=ref["x"],
+            xd=nu[0],
+            xd_ref=ref["xd"],
+            theta=robot.theta,
+            thetad=robot.thetad,
+            theta_ref=0.0,
+            thetad_ref=0.0,
+            psi=robot.psi,
+            psi_ref=ref.get("psi", 0.0),
+            torque=applied,
+            clip_excess=self._clip.last_excess,
+            joint_deviation=self._posture.last_deviation,
+            compute_time=time.perf_counter() - start,
+        )
+        return applied
+
+    def controller_counters(self) -> dict[str, float]:
+        counters = {"max_joint_deviation_rad": self._posture.max_deviation}
+        if self.plan is not None:
+            counters.update(plan_counters(self.plan))
+        return counters
+
+    @property
+    def diagnostics(self) -> dict[str, Array]:
+        """Per-step ``t, x, x_ref, xd, xd_ref, theta, thetad, theta_ref, thetad_ref`` (both 0),
+        ``psi, psi_ref, torque`` (applied), ``clip_excess`` (N m by which the action exceeded
+        its bounds), ``joint_deviation`` (largest body-joint deviation from the held posture,
+        rad), ``compute_time``."""
+        return self._recorder.as_arrays()
+
+
+# ----------------------------------------------------------------------- our stronger LQR
+@dataclass(frozen=True)
+class DecoupledLQRConfig:
+    """Weights and gains of ``decoupled-lqr`` (stronger than Krang's: module docstring).
 
     Attributes:
         model: ``nominal`` (robot + tray as designed) or ``oracle`` (the env's exact model).
         q_theta, q_thetad, q_x, q_xd, q_x_integral: LQR state weights (rad, rad/s, m, m/s, m s).
-            The 2014 hardware LQR (krang_facts 5.2) weighted diag(300, 96000, 30000, 90000) on
-            wheel radians with R = 500 on amps; ours are in SI units on the WIPM's state.
+            The 2014 hardware LQR (docs/AUTHORS_CONFIG.md §5.2) weighted diag(300, 96000,
+            30000, 90000) on wheel radians with R = 500 on amps; ours are in SI units on the
+            WIPM's state.
         q_psi, q_psid: heading weights (3-D).
         r_torque: weight on each wheel torque (N m)^-2.
         reference: ``plan`` (default): track the offline DDP plan of the WIPM (the one every
             compared controller follows, so only the execution differs), states ``theta``,
-            ``x``, ``psi`` and their rates; ``minimum_jerk``: Krang 2014's style, ``theta_ref =
-            0`` and a smooth position profile (turn to face the goal, then drive).
+            ``x``, ``psi`` and their rates; ``minimum_jerk``: ``theta_ref = 0`` and a smooth
+            position profile (turn to face the goal, then drive).
         plan: the offline plan's settings (``reference = "plan"``).
         max_acceleration: peak acceleration of the minimum-jerk reference (m/s^2).
         max_spin_acceleration: peak heading acceleration of that reference (rad/s^2).
@@ -77,42 +259,38 @@ class DecoupledConfig:
     posture_frequency_hz: float = 5.0
     posture_damping_ratio: float = 1.0
 
+    def __post_init__(self) -> None:
+        if self.reference not in ("plan", "minimum_jerk"):
+            raise ValueError(f"reference must be 'plan' or 'minimum_jerk', got {self.reference!r}")
 
-class DecoupledController:
-    """LQR wheel balance + joint-PD upper body (see the module docstring)."""
+    @classmethod
+    def paper(cls) -> DecoupledLQRConfig:
+        """Our LQR following the authors' plan (``PlanConfig.paper()``)."""
+        return cls(plan=PlanConfig.paper())
 
-    name = "decoupled"
 
-    def __init__(self, robot: RobotModel, task: TaskInfo, config: DecoupledConfig) -> None:
-        self.robot = robot
-        self.task = task
-        self.config = config
-        self._recorder = DiagnosticsRecorder()
+class DecoupledLQRController(PolicyBase):
+    """LQR wheel balance on the plan's lean + joint-PD upper body (module docstring)."""
+
+    config_class = DecoupledLQRConfig
+    registry_name = "decoupled-lqr"
+
+    def __init__(self, robot: RobotModel, task: TaskInfo, config: DecoupledLQRConfig) -> None:
+        super().__init__(robot, task, config)
         self._planar = robot.layout.planar
         self._K = np.zeros((0, 0))
         self._reference: Callable[[float], dict[str, float]] | None = None
         self._posture = PostureHold(config.posture_frequency_hz, config.posture_damping_ratio)
-        self._step = 0
-
-    @classmethod
-    def for_env(cls, env: gym.Env, config: DecoupledConfig | None = None) -> DecoupledController:
-        config = config or DecoupledConfig()
-        return cls(make_robot(env, config.model), task_info(env, config.model), config)
+        self.plan: Plan | None = None
 
     # ----------------------------------------------------------------- reset
     def reset(self, observation: dict[str, Array], info: dict[str, Any]) -> None:
         robot, cfg = self.robot, self.config
         robot.update(observation["qpos"], observation["qvel"])
-        self._recorder.clear()
-        self._step = 0
+        self.begin_episode()
         self._integral = 0.0
-        lam = robot.wipm_parameters()
-        if lam.com_distance < 1e-3:
-            raise ValueError(
-                f"LQR problem ill-posed: the body CoM is {lam.com_distance:.2e} m from the axle "
-                "(no pendulum left to balance at this posture)"
-            )
-        params = params_from_lambda(lam)
+        _check_body(robot)
+        params = params_from_lambda(robot.wipm_parameters())
         if self._planar:
             s0, u0 = np.zeros(4), np.zeros(1)
             A, B = (
@@ -136,28 +314,21 @@ class DecoupledController:
         A_aug[:n, :n] = A
         A_aug[n, x_index] = 1.0  # d/dt of the integral of the position error
         B_aug = np.vstack([B, np.zeros((1, m))])
+        self._continuous = (A_aug, B_aug)
         Ad, Bd = zero_order_hold(A_aug, B_aug, self.task.control_dt)
         Q = np.diag([*weights, cfg.q_x_integral])
         R = cfg.r_torque * np.eye(m)
-        self._K, _ = dlqr(Ad, Bd, Q, R)
+        self._K, self._P = dlqr(Ad, Bd, Q, R)
+        self._discrete = (Ad, Bd, Q, R)
         self._closed_loop = Ad - Bd @ self._K
         self._x_index = x_index
         self._posture.reset(robot)
 
         axle = robot.axle_position
         if cfg.reference == "plan":
-            self.plan: Plan | None = plan_to_goal(
-                wipm_state(robot),
-                params,
-                self.task.goal,
-                planar=self._planar,
-                cup_friction=self.task.cup_friction,
-                config=cfg.plan,
-            )
+            self.plan = _plan(robot, params, self.task, cfg.plan)
             self._reference = self.plan.sample
             return
-        if cfg.reference != "minimum_jerk":
-            raise ValueError(f"reference must be 'plan' or 'minimum_jerk', got {cfg.reference!r}")
         self.plan = None
         self._reference = GoalReference.to_goal(
             axle[:2],
@@ -175,6 +346,16 @@ class DecoupledController:
         return self._K
 
     @property
+    def riccati(self) -> tuple[Array, Array, Array, Array, Array]:
+        """``(Ad, Bd, Q, R, P)``: the discrete model, the weights and the Riccati solution."""
+        return (*self._discrete, self._P)
+
+    @property
+    def continuous_model(self) -> tuple[Array, Array]:
+        """``(A, B)`` of the augmented continuous-time linearisation."""
+        return self._continuous
+
+    @property
     def closed_loop_matrix(self) -> Array:
         """``Ad - Bd K`` of the augmented discrete model (eigenvalues inside the unit circle)."""
         return self._closed_loop
@@ -190,7 +371,7 @@ class DecoupledController:
     # ------------------------------------------------------------------ step
     def __call__(self, observation: dict[str, Array]) -> Array:
         start = time.perf_counter()
-        robot, lay = self.robot, self.robot.layout
+        robot = self.robot
         robot.update(observation["qpos"], observation["qvel"])
         t = self._step * self.task.control_dt
         ref = self.reference(t)
@@ -213,15 +394,8 @@ class DecoupledController:
             )
         u = -self._K @ np.append(error, self._integral)
         self._integral += x_error * self.task.control_dt
-        action = np.zeros(robot.model.nu)
-        wl, wr = lay.wheel_actuators
-        if self._planar:
-            action[wl] = action[wr] = 0.5 * u[0]
-        else:
-            action[wl], action[wr] = u
-        action[list(lay.joint_actuators)] = self._posture.torques(robot)
-        clipped = np.clip(action, self.task.torque_low, self.task.torque_high)
-        saturated = bool(np.any(clipped != action))
+        wheels = (0.5 * u[0], 0.5 * u[0]) if self._planar else (u[0], u[1])
+        applied = self.finish(self.assemble(wheels, self._posture.torques(robot)))
         self._step += 1
         self._recorder.record(
             t=t,
@@ -234,16 +408,22 @@ class DecoupledController:
             psi=robot.psi,
             psi_ref=ref.get("psi", 0.0),
             theta_ref=ref.get("theta", 0.0),
-            torque=clipped,
-            saturated=saturated,
+            torque=applied,
+            clip_excess=self._clip.last_excess,
+            joint_deviation=self._posture.last_deviation,
             compute_time=time.perf_counter() - start,
         )
-        return clipped
+        return applied
+
+    def controller_counters(self) -> dict[str, float]:
+        counters = {"max_joint_deviation_rad": self._posture.max_deviation}
+        if self.plan is not None:
+            counters.update(plan_counters(self.plan))
+        return counters
 
     @property
     def diagnostics(self) -> dict[str, Array]:
-        """Per-step ``t, x, x_ref, xd, xd_ref, theta, theta_ref, thetad, psi, psi_ref, torque,
-        saturated,
-        compute_time`` (torques after saturation; ``saturated`` marks steps where the
-        controller limited a torque to the actuator's range itself)."""
+        """Per-step ``t, x, x_ref, xd, xd_ref, theta, theta_ref, thetad, psi, psi_ref``,
+        ``torque`` (applied), ``clip_excess`` (N m by which the action exceeded its bounds),
+        ``joint_deviation`` (rad), ``compute_time``."""
         return self._recorder.as_arrays()

@@ -6,7 +6,9 @@ every control step (1 ms): the task QP on the isolated manipulator dynamics (eq.
 ``controllers.task_qp``) with the tasks of the paper's results section: ``theta`` (toward the
 MPC's predicted ``theta``, ``thetad``, interpolated inside the 10 ms, with its ``thdd`` as
 feed-forward), the end effector's position and orientation in the axle frame at their reset
-values, posture regularisation, and in 3-D the heading from the MPC. Torques reach the wheels
+values, posture regularisation, and in 3-D the heading from the MPC (a heading task toward its
+predicted ``psi``, or, as the paper does, its ``tau_0`` applied: ``spin_source``; the preset
+``HierarchicalConfig.paper()`` is the authors' configuration). Torques reach the wheels
 through the tested ``(tau_0, tau_1) -> (tau_L, tau_R)`` map. The whole body, wheels included,
 balances and drives while the hand holds its task.
 
@@ -24,7 +26,6 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
-import gymnasium as gym
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
@@ -32,7 +33,8 @@ from numpy.typing import NDArray
 from controllers.disturbance_tasks import DisturbanceRejectingTask, ObserverSettings
 from controllers.high_level import HighLevel, HighLevelConfig
 from controllers.isolated_dynamics import isolated_dynamics
-from controllers.policy import DiagnosticsRecorder, ModelChoice, TaskInfo, make_robot, task_info
+from controllers.planning import PlanConfig
+from controllers.policy import ModelChoice, PolicyBase, TaskInfo, plan_counters
 from controllers.task_qp import QPSettings, TaskQP
 from controllers.tasks import (
     FrameOrientationTask,
@@ -45,6 +47,7 @@ from controllers.tasks import (
 )
 from controllers.wipm_problem import wipm_state
 from wip_gym.robot_model import RobotModel
+from wip_gym.wheel_torques import generalized_to_wheel_matrix
 
 Array = NDArray[np.float64]
 GRAVITY = 9.81
@@ -65,10 +68,22 @@ class HierarchicalConfig:
         theta_weight, theta_kp, theta_kv: theta task (authors' COMAngleControl: w 10, Kp 50,
             Kv 100). We weight it 100: balance comes first.
         spin_weight, spin_kp, spin_kv: heading task (3-D).
-        ee_position_weight, ee_kp, ee_kv: end-effector position (authors: W up to 10, Kp 750,
-            Kv 250).
+        spin_source: how the heading is driven in 3-D: ``heading_task`` (ours: a QP task toward
+            the MPC's predicted ``psi``) or ``mpc_tau_0`` (the paper: the QP's own ``tau_0``
+            is replaced by the MPC's ``tau_0``, the generalised force on ``psi`` of the WIPM,
+            i.e. ``tau_R - tau_L = (2R/sep) tau_0``: the DDP model's convention with
+            ``B = sep/(2R)``, docs/AUTHORS_CONFIG.md §4.5 and §2.4; the QP's torque limits do
+            not see that replacement, the final clip counts what exceeds them).
+        ee_position_weight, ee_kp, ee_kv: end-effector position (authors: W = diag(0, 1, 10)
+            over (forward, lateral, up) in the axle frame, Kp 750, Kv 250); a number weights
+            all three axes, a triple each axis.
         ee_orientation_weight, orientation_kp, orientation_kv: (authors: 10, 150, 50).
         posture_weight, posture_kp, posture_kv: (authors: weights 0..10 per joint, Kp 10, Kv 20).
+            ``posture_weight`` ``"authors"``: their per-joint weights (docs/AUTHORS_CONFIG.md
+            §4.3: torso 1, waist 0, arm joints 1-4 10, 5-7 5), matched to our joints by name.
+        speed_regularization_kv: the authors' speed regularisation (``-KvSpeedReg qd``,
+            KvSpeedReg 10, weights base pitch 1, waist 10, torso 10, arms 1); None (default):
+            off.
         hand_observer_bandwidth: ``w`` (rad/s) of the estimate of the unmodelled acceleration
             of the end-effector tasks (``controllers.disturbance_tasks``; not in the paper,
             whose nominal inverse dynamics let an unmodelled payload tip the tray); None turns
@@ -94,20 +109,101 @@ class HierarchicalConfig:
     spin_weight: float = 10.0
     spin_kp: float = 50.0
     spin_kv: float = 20.0
-    ee_position_weight: float = 10.0
+    spin_source: Literal["heading_task", "mpc_tau_0"] = "heading_task"
+    ee_position_weight: float | tuple[float, float, float] = 10.0
     ee_kp: float = 750.0
     ee_kv: float = 250.0
     ee_orientation_weight: float = 10.0
     orientation_kp: float = 150.0
     orientation_kv: float = 50.0
-    posture_weight: float = 1.0
+    posture_weight: float | Literal["authors"] = 1.0
     posture_kp: float = 10.0
     posture_kv: float = 20.0
+    speed_regularization_kv: float | None = None
     hand_observer_bandwidth: float | None = 50.0
     hand_observer_position_bound: float = 100.0
     hand_observer_orientation_bound: float = 100.0
     high_level: HighLevelConfig = field(default_factory=HighLevelConfig)
     qp: QPSettings = field(default_factory=QPSettings)
+
+    def __post_init__(self) -> None:
+        if self.tray_mode not in ("level", "specific_force"):
+            raise ValueError(f"tray_mode must be level or specific_force, got {self.tray_mode!r}")
+        if self.spin_source not in ("heading_task", "mpc_tau_0"):
+            raise ValueError(
+                f"spin_source must be heading_task or mpc_tau_0, got {self.spin_source!r}"
+            )
+        if isinstance(self.posture_weight, str) and self.posture_weight != "authors":
+            raise ValueError(
+                f"posture_weight must be a number or 'authors', got {self.posture_weight!r}"
+            )
+        weights = np.asarray(self.ee_position_weight, dtype=float)
+        if weights.shape not in ((), (3,)) or not np.all(weights >= 0):
+            raise ValueError(
+                f"ee_position_weight must be a number or 3 numbers >= 0, got "
+                f"{self.ee_position_weight!r}"
+            )
+
+    @classmethod
+    def paper(cls, tray_mode: Literal["level", "specific_force"] = "level") -> HierarchicalConfig:
+        """The authors' low level (docs/AUTHORS_CONFIG.md §4.3, §4.5) on the paper's plan:
+        position task diag(0, 1, 10) over (forward, lateral, up) in the axle frame, theta task
+        weight 10 (Kp 50, Kv 100), orientation 10 (Kp 150, Kv 50), their posture (KpPose 10,
+        KvPose 20, per-joint weights) and speed regularisation (KvSpeedReg 10), no hand
+        observer, in 3-D the MPC's ``tau_0`` applied instead of our heading task, and the
+        plan of ``PlanConfig.paper()``. Our MPC and QP settings are kept."""
+        return cls(
+            tray_mode=tray_mode,
+            theta_weight=10.0,
+            theta_kp=50.0,
+            theta_kv=100.0,
+            spin_source="mpc_tau_0",
+            ee_position_weight=(0.0, 1.0, 10.0),
+            ee_kp=750.0,
+            ee_kv=250.0,
+            ee_orientation_weight=10.0,
+            orientation_kp=150.0,
+            orientation_kv=50.0,
+            posture_weight="authors",
+            posture_kp=10.0,
+            posture_kv=20.0,
+            speed_regularization_kv=10.0,
+            hand_observer_bandwidth=None,
+            high_level=HighLevelConfig(plan=PlanConfig.paper()),
+        )
+
+
+# The authors' regularisation weights (docs/AUTHORS_CONFIG.md §4.3), by the kind of joint:
+# (posture weight, speed-regularisation weight). Arm joints by their index along the arm (1-7).
+AUTHORS_JOINT_WEIGHTS = {"base": (0.0, 1.0), "waist": (0.0, 10.0), "torso": (1.0, 10.0),
+                         "kinect": (0.0, 1.0), 1: (10.0, 1.0), 2: (10.0, 1.0), 3: (10.0, 1.0),
+                         4: (10.0, 1.0), 5: (5.0, 1.0), 6: (5.0, 1.0), 7: (5.0, 1.0)}  # fmt: skip
+# our joint names -> the authors' kind: Krang's own names; the planar arm's shoulder, elbow and
+# wrist pitch are Krang's bending joints 2, 4, 6
+_JOINT_KIND = {"waist": "waist", "spine": "waist", "torso": "torso", "kinect": "kinect",
+               "shoulder": 2, "elbow": 4, "wrist": 6}  # fmt: skip
+
+
+def authors_joint_weights(robot: RobotModel) -> tuple[Array, Array]:
+    """Posture and speed-regularisation weights of the authors for the body joints of
+    ``robot`` (``layout.body_dof`` order; the base pitch excluded). ``ValueError`` for a joint
+    the table cannot place."""
+    m = robot.model
+    posture, speed = [], []
+    for dof in robot.layout.body_dof:
+        name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, m.dof_jntid[dof]) or ""
+        kind: str | int | None = _JOINT_KIND.get(name)
+        if kind is None and name[:-1].endswith("_j") and name[-1].isdigit():
+            kind = int(name[-1])
+        if kind is None:
+            raise ValueError(
+                f"no authors' regularisation weight for joint {name!r}; known: "
+                f"{sorted(map(str, _JOINT_KIND))} and <arm>_j1..7"
+            )
+        p, v = AUTHORS_JOINT_WEIGHTS[kind]
+        posture.append(p)
+        speed.append(v)
+    return np.array(posture), np.array(speed)
 
 
 def tilt_toward(acceleration: Array, max_tilt_deg: float) -> Array:
@@ -126,45 +222,44 @@ def tilt_toward(acceleration: Array, max_tilt_deg: float) -> Array:
     return R.reshape(3, 3)
 
 
-class HierarchicalController:
+class HierarchicalController(PolicyBase):
     """The paper's controller (see the module docstring)."""
 
+    config_class = HierarchicalConfig
+
     def __init__(self, robot: RobotModel, task: TaskInfo, config: HierarchicalConfig) -> None:
-        if config.tray_mode not in ("level", "specific_force"):
-            raise ValueError(f"tray_mode must be level or specific_force, got {config.tray_mode!r}")
-        self.robot = robot
-        self.task = task
-        self.config = config
+        super().__init__(robot, task, config)
         self.high_level = HighLevel(config.high_level, task.control_dt)
         self.qp = TaskQP(robot, task.torque_low, task.torque_high, config.qp)
-        self._recorder = DiagnosticsRecorder()
         m = robot.model
         self._sites = [
             mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, name) for name in ("ee", "ee_right")
         ]
         self._sites = [s for s in self._sites if s >= 0]
+        self.plan = None
+        self._fallbacks = 0
+        lay = robot.layout
+        self._mpc_tau_0 = not lay.planar and config.spin_source == "mpc_tau_0"
+        if self._mpc_tau_0:
+            self._wheels_of_tau_0 = generalized_to_wheel_matrix(
+                lay.wheel_radius, lay.wheel_separation
+            )[:, 0]
 
     @property
     def name(self) -> str:
         return "unified" if self.config.tray_mode == "level" else "unified-waiter"
 
-    @classmethod
-    def for_env(cls, env: gym.Env, config: HierarchicalConfig | None = None
-                ) -> HierarchicalController:  # fmt: skip
-        config = config or HierarchicalConfig()
-        return cls(make_robot(env, config.model), task_info(env, config.model), config)
-
     # ----------------------------------------------------------------- reset
     def reset(self, observation: dict[str, Array], info: dict[str, Any]) -> None:
         robot, cfg, lay = self.robot, self.config, self.robot.layout
         robot.update(observation["qpos"], observation["qvel"])
-        self._recorder.clear()
-        self._step = 0
+        self.begin_episode()
+        self._fallbacks = 0
         self.plan = self.high_level.reset(robot, self.task.goal, self.task.cup_friction)
         self.theta_task = ThetaTask(cfg.theta_weight, cfg.theta_kp, cfg.theta_kv)
         tasks: list[Task] = [self.theta_task]
         self.spin_task: SpinTask | None = None
-        if not lay.planar:
+        if not lay.planar and not self._mpc_tau_0:
             self.spin_task = SpinTask(cfg.spin_weight, cfg.spin_kp, cfg.spin_kv, psi_d=robot.psi)
             tasks.append(self.spin_task)
         self.orientation_tasks: list[FrameOrientationTask] = []
@@ -181,15 +276,33 @@ class HierarchicalController:
             self.orientation_tasks.append(orientation)
             self._orientation_reset.append(rotation.copy())
         columns = np.arange(lay.index_q1 + 1, lay.n_min)
+        if cfg.posture_weight == "authors" or cfg.speed_regularization_kv is not None:
+            posture_weights, speed_weights = authors_joint_weights(robot)
+        if cfg.posture_weight != "authors":
+            posture_weights = np.full(len(columns), float(cfg.posture_weight))
         if len(columns):
-            tasks.append(PostureTask(robot.q[columns].copy(),
-                                     np.full(len(columns), cfg.posture_weight), cfg.posture_kp,
+            tasks.append(PostureTask(robot.q[columns].copy(), posture_weights, cfg.posture_kp,
                                      cfg.posture_kv, columns=columns))  # fmt: skip
+        if cfg.speed_regularization_kv is not None:
+            # -Kv qd on the base pitch and every body joint: a posture task without stiffness
+            base_pitch = AUTHORS_JOINT_WEIGHTS["base"][1]
+            speed_columns = np.arange(lay.index_q1, lay.n_min)
+            tasks.append(
+                PostureTask(
+                    np.zeros(len(speed_columns)),
+                    np.concatenate([[base_pitch], speed_weights]),
+                    0.0,
+                    cfg.speed_regularization_kv,
+                    name="speed_regularization",
+                    columns=speed_columns,
+                )
+            )
         self.tasks = tasks
         self.qp.failures = 0
         # one QP now (creates and compiles the solver object), from the current state
         self.theta_task.theta_d, self.theta_task.thetad_d = robot.theta, robot.thetad
-        self.qp.solve(robot, isolated_dynamics(robot), self.tasks)
+        first = self.qp.solve(robot, isolated_dynamics(robot), self.tasks)
+        self._last_tau_0_qp = float(first.generalized[0])
         for task in self.tasks:
             if isinstance(task, DisturbanceRejectingTask):
                 task.restart()  # the first control step sees this same state again
@@ -241,15 +354,28 @@ class HierarchicalController:
         tick = time.perf_counter()
         solution = self.qp.solve(robot, iso, self.tasks)
         qp_time = time.perf_counter() - tick
-        action = np.clip(solution.actuators, self.task.torque_low, self.task.torque_high)
+        actuators = solution.actuators
+        if not solution.solved:
+            self._fallbacks += 1
+        if self._mpc_tau_0:
+            # the paper: the QP's tau_0 replaced by the MPC's (spin_source, config docstring)
+            tau_0_qp = solution.generalized[0] if solution.solved else self._last_tau_0_qp
+            self._last_tau_0_qp = tau_0_qp
+            actuators = actuators.copy()
+            wl, wr = self.robot.layout.wheel_actuators
+            shift = self._wheels_of_tau_0 * (self._ref.tau_0 - tau_0_qp)
+            actuators[wl] += shift[0]
+            actuators[wr] += shift[1]
+        action = self.finish(actuators)
         self._recorder.record(
             t=self._step * self.task.control_dt, wipm_state=wipm_state(robot),
             wipm_reference=self.plan.state(self._ref.mpc_index),
             theta_d=self._ref.theta, thetad_d=self._ref.thetad, thdd_ref=self._ref.thdd,
-            tau_0=self._ref.tau_0, torque=action, qp_solved=solution.solved,
-            qp_iterations=solution.iterations, qp_failures=self.qp.failures,
-            mpc_rejected=self.high_level.mpc.rejected, theta_error=robot.theta - self._ref.theta,
-            mpc_time=mpc_time, qp_time=qp_time, compute_time=time.perf_counter() - start,
+            tau_0=self._ref.tau_0, torque=action, clip_excess=self._clip.last_excess,
+            qp_solved=solution.solved, qp_iterations=solution.iterations,
+            qp_failures=self.qp.failures, mpc_rejected=self.high_level.mpc.rejected,
+            theta_error=robot.theta - self._ref.theta, mpc_time=mpc_time, qp_time=qp_time,
+            compute_time=time.perf_counter() - start,
         )  # fmt: skip
         self._step += 1
         return action
@@ -257,7 +383,20 @@ class HierarchicalController:
     @property
     def diagnostics(self) -> dict[str, Array]:
         """Per-step ``t``, ``wipm_state``, ``wipm_reference`` (plan at the MPC index),
-        ``theta_d``, ``thetad_d``, ``thdd_ref``, ``tau_0`` (MPC), ``torque`` (every actuator),
-        ``qp_solved``, ``qp_iterations``, ``qp_failures`` and ``mpc_rejected`` (running counts),
-        ``theta_error``, and the timings ``mpc_time``, ``qp_time``, ``compute_time``."""
+        ``theta_d``, ``thetad_d``, ``thdd_ref``, ``tau_0`` (MPC), ``torque`` (every actuator,
+        applied), ``clip_excess`` (N m by which the action exceeded its bounds),
+        ``qp_solved``, ``qp_iterations``, ``qp_failures`` and ``mpc_rejected`` (running
+        counts), ``theta_error``, and the timings ``mpc_time``, ``qp_time``,
+        ``compute_time``."""
         return self._recorder.as_arrays()
+
+    def controller_counters(self) -> dict[str, float]:
+        """``qp_fallbacks`` (steps that applied the previous step's torques because the QP was
+        not solved), ``qp_failures`` (QPs ProxQP did not solve; equal to the fallbacks, the
+        QP's own count), ``mpc_rejections``, ``plan_violations``, ``plan_converged``."""
+        counters = {"qp_fallbacks": float(self._fallbacks), "qp_failures": float(self.qp.failures)}
+        if self.high_level.mpc is not None:
+            counters["mpc_rejections"] = float(self.high_level.mpc.rejected)
+        if self.plan is not None:
+            counters.update(plan_counters(self.plan))
+        return counters

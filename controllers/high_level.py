@@ -39,7 +39,6 @@ class HighLevelReference:
     psi: float = 0.0
     psid: float = 0.0
     psidd: float = 0.0
-    axle_acceleration: tuple[float, float] = (0.0, 0.0)
 
 
 class HighLevel:
@@ -73,8 +72,7 @@ class HighLevel:
 
     def reference(self, robot: RobotModel) -> HighLevelReference:
         """Advance one control step: run the MPC when it is due (``lambda(q)`` from the robot's
-        current state), and return the references interpolated inside the MPC step, and the
-        axle's predicted horizontal acceleration ``(xdd, xd psid)`` in the axle frame."""
+        current state), and return the references interpolated inside the MPC step."""
         if self.mpc is None or self.plan is None:
             raise RuntimeError("HighLevel.reset() first")
         phase = self._step % self.steps_per_mpc
@@ -91,7 +89,6 @@ class HighLevel:
         thetad = (1 - fraction) * s0[tdi] + fraction * s1[tdi]
         control = last.control
         dt = self.config.mpc.dt
-        xdd = (s1[3] - s0[3]) / dt  # xd is index 3 in both state layouts
         if robot.layout.planar:
             return HighLevelReference(
                 theta=float(theta),
@@ -99,7 +96,6 @@ class HighLevel:
                 thdd=float(control[0]),
                 tau_0=0.0,
                 mpc_index=index,
-                axle_acceleration=(float(xdd), 0.0),
             )
         return HighLevelReference(
             theta=float(theta),
@@ -110,7 +106,6 @@ class HighLevel:
             psi=float((1 - fraction) * s0[1] + fraction * s1[1]),
             psid=float((1 - fraction) * s0[4] + fraction * s1[4]),
             psidd=float((s1[4] - s0[4]) / dt),
-            axle_acceleration=(float(xdd), float(s0[3] * s0[4])),
         )
 
     @property

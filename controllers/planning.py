@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass, field
+from typing import Literal
 
 import jax
 import numpy as np
@@ -28,6 +29,8 @@ from controllers.wipm_problem import (
     refs_for,
 )
 
+A_MAX_SPELLINGS = ("cup_safe", "none")
+
 
 @dataclass(frozen=True)
 class PlanConfig:
@@ -35,9 +38,14 @@ class PlanConfig:
 
     Attributes:
         horizon_s, dt: ``t_f`` and the step: 20 s at 10 ms (authors: the same).
-        a_max: bound on the axle's horizontal acceleration (m/s^2); None = ``0.5 mu g`` in tray
-            tasks (``mu`` the scenario's cup friction) and ``default_a_max`` otherwise.
-        default_a_max: the bound without a cup (1 m/s^2: a gentle drive for a 160 kg robot).
+        a_max: how aggressive the plan may be, independent of the cup's friction when given as
+            a number: ``"cup_safe"`` (default) caps the axle's horizontal acceleration at
+            ``0.5 mu g`` in tray tasks (``mu`` the scenario's cup friction: a level tray then
+            uses half its friction, by construction) and at ``default_a_max`` without a cup;
+            ``"none"``: no cap (the authors' plan, docs/AUTHORS_CONFIG.md §3.2); a float: that
+            cap in m/s^2. ``None`` is the older spelling of ``"cup_safe"``.
+        default_a_max: the ``"cup_safe"`` bound without a cup (1 m/s^2: a gentle drive for a
+            160 kg robot).
         theta_max: bound on ``|theta|`` (rad); 0.25 rad (14 deg).
         arrival_fraction: the plan must arrive by this fraction of ``t_f`` (0.6).
         q_theta, q_thetad, q_position, q_speed: running weights on the WIPM state (the paper:
@@ -59,7 +67,7 @@ class PlanConfig:
 
     horizon_s: float = 20.0
     dt: float = 0.01
-    a_max: float | None = None
+    a_max: float | Literal["cup_safe", "none"] | None = "cup_safe"
     default_a_max: float = 1.0
     theta_max: float = 0.25
     arrival_fraction: float = 0.6
@@ -76,6 +84,47 @@ class PlanConfig:
         default_factory=lambda: DDPConfig(max_iterations=100, tolerance=1e-9, second_order=False)
     )
 
+    def __post_init__(self) -> None:
+        a_max = self.a_max
+        if isinstance(a_max, str):
+            if a_max not in A_MAX_SPELLINGS:
+                raise ValueError(
+                    f"a_max must be a positive number (m/s^2) or one of "
+                    f"{A_MAX_SPELLINGS}, got {a_max!r}"
+                )
+        elif a_max is not None and (
+            isinstance(a_max, bool)
+            or not isinstance(a_max, int | float)
+            or not np.isfinite(a_max)
+            or a_max <= 0
+        ):
+            raise ValueError(
+                f"a_max must be a positive number (m/s^2) or one of "
+                f"{A_MAX_SPELLINGS}, got {a_max!r}"
+            )
+        if not (np.isfinite(self.default_a_max) and self.default_a_max > 0):
+            raise ValueError(f"default_a_max must be positive, got {self.default_a_max!r}")
+
+    @classmethod
+    def paper(cls) -> PlanConfig:
+        """The authors' offline DDP (docs/AUTHORS_CONFIG.md §3.2): running weights [0, 0.1,
+        1.0, 0.1, 0.1, 0.1, 0.1, 0.1] over [x, psi, theta, xd, psid, thetad, X0, Y0] (planar:
+        theta 1.0, thetad 0.1, x 0.1, xd 0.1), R = 0.01, control-rate weights 0.01, terminal
+        1e4, 20 s at 10 ms, and no acceleration cap. Kept from ours: the DDP solver settings,
+        the ``theta_max`` check and the arrival check (both only report)."""
+        return cls(
+            a_max="none",
+            q_theta=1.0,
+            q_thetad=0.1,
+            q_position=0.1,
+            q_speed=0.1,
+            q_heading=0.1,
+            r_control=0.01,
+            r_rate=0.01,
+            r_rate_spin=0.01,
+            q_terminal=1e4,
+        )
+
     @property
     def steps(self) -> int:
         steps = self.horizon_s / self.dt
@@ -84,9 +133,14 @@ class PlanConfig:
         return int(round(steps))
 
     def acceleration_bound(self, cup_friction: float | None, gravity: float = 9.81) -> float:
-        if self.a_max is not None:
-            return self.a_max
-        return 0.5 * cup_friction * gravity if cup_friction is not None else self.default_a_max
+        """The cap on the axle's horizontal acceleration (m/s^2; ``inf`` for ``"none"``)."""
+        if self.a_max == "none":
+            return float("inf")
+        if self.a_max is None or self.a_max == "cup_safe":
+            if cup_friction is None:
+                return self.default_a_max
+            return 0.5 * cup_friction * gravity
+        return float(self.a_max)
 
 
 @dataclass(frozen=True)

@@ -4,6 +4,7 @@
     policy.reset(observation, info)                  # all slow work: linearisation, planning
     action = policy(observation)                     # one control step
     policy.diagnostics                               # dict of signals a person would plot
+    policy.counters                                  # episode counts (clips, QP fallbacks, ...)
 
 A policy reads only the observation. It keeps its own MuJoCo data (a ``RobotModel``), rebuilt
 from ``qpos``/``qvel``, and never reads the env's simulator. ``for_env`` builds a **nominal**
@@ -16,7 +17,7 @@ from __future__ import annotations
 import dataclasses
 from collections import defaultdict
 from dataclasses import dataclass
-from typing import Any, Literal, Protocol, runtime_checkable
+from typing import Any, ClassVar, Literal, Protocol, Self, runtime_checkable
 
 import gymnasium as gym
 import mujoco
@@ -31,7 +32,8 @@ ModelChoice = Literal["nominal", "oracle"]
 
 @runtime_checkable
 class Policy(Protocol):
-    """What the benchmark CLI and the video helper call."""
+    """What the benchmark CLI, the rollout and the video helper call (the one protocol;
+    :class:`PolicyBase` implements it)."""
 
     def reset(self, observation: dict[str, NDArray[np.float64]], info: dict[str, Any]) -> None: ...
 
@@ -39,6 +41,9 @@ class Policy(Protocol):
 
     @property
     def diagnostics(self) -> dict[str, NDArray[np.float64]]: ...
+
+    @property
+    def counters(self) -> dict[str, float]: ...
 
 
 @dataclass(frozen=True)
@@ -115,3 +120,135 @@ class DiagnosticsRecorder:
 
     def as_arrays(self) -> dict[str, NDArray[np.float64]]:
         return {name: np.array(values, dtype=float) for name, values in self._signals.items()}
+
+
+class ClipCounter:
+    """The final clip of a policy's action to the action bounds, counted, never silent.
+
+    ``clip(action)`` returns the action inside ``[low, high]`` and counts the steps whose action
+    had to be clipped (``clipped_steps``), the largest amount by which a torque exceeded its
+    bound (``max_clip_excess``, N m) and the steps with any applied torque at its bound
+    (``actuator_limit_steps``: clipped, or placed there by the controller, e.g. by an active QP
+    torque constraint; within ``1e-6`` of the bound's size)."""
+
+    def __init__(self, low: NDArray[np.float64], high: NDArray[np.float64]) -> None:
+        self.low = np.asarray(low, dtype=float)
+        self.high = np.asarray(high, dtype=float)
+        if self.low.shape != self.high.shape or np.any(self.low > self.high):
+            raise ValueError(f"action bounds must be ordered and of one shape, got {low}, {high}")
+        self._at_limit_tolerance = 1e-6 * np.maximum(1.0, np.maximum(-self.low, self.high))
+        self.reset()
+
+    def reset(self) -> None:
+        self.clipped_steps = 0
+        self.max_clip_excess = 0.0
+        self.actuator_limit_steps = 0
+        self.last_excess = 0.0
+
+    def clip(self, action: NDArray[np.float64]) -> NDArray[np.float64]:
+        action = np.asarray(action, dtype=float)
+        if action.shape != self.low.shape:
+            raise ValueError(f"action must have shape {self.low.shape}, got {action.shape}")
+        if not np.all(np.isfinite(action)):
+            raise ValueError(f"the controller produced a non-finite action: {action}")
+        excess = float(np.max(np.maximum(action - self.high, self.low - action), initial=0.0))
+        self.last_excess = max(excess, 0.0)
+        clipped = np.clip(action, self.low, self.high)
+        if excess > 0.0:
+            self.clipped_steps += 1
+            self.max_clip_excess = max(self.max_clip_excess, excess)
+        tol = self._at_limit_tolerance
+        if np.any((clipped >= self.high - tol) | (clipped <= self.low + tol)):
+            self.actuator_limit_steps += 1
+        return clipped
+
+    @property
+    def counters(self) -> dict[str, float]:
+        return {
+            "clipped_steps": float(self.clipped_steps),
+            "max_clip_excess": float(self.max_clip_excess),
+            "actuator_limit_steps": float(self.actuator_limit_steps),
+        }
+
+
+class PolicyBase:
+    """What every wip-gym policy shares: ``for_env``, ``name``, ``diagnostics``, ``counters``,
+    the wheel-torque assembly and the final, counted clip to the action bounds.
+
+    A subclass sets ``config_class`` (a frozen dataclass with a ``model`` field) and
+    ``registry_name``, calls :meth:`begin_episode` in its ``reset``, builds its action with
+    :meth:`assemble` (or its own map) and returns :meth:`finish` of it from ``__call__``; it
+    adds its own counters by overriding :meth:`controller_counters`."""
+
+    config_class: ClassVar[type]
+    registry_name: ClassVar[str] = "policy"
+
+    def __init__(self, robot: RobotModel, task: TaskInfo, config: Any) -> None:
+        self.robot = robot
+        self.task = task
+        self.config = config
+        self._recorder = DiagnosticsRecorder()
+        self._clip = ClipCounter(task.torque_low, task.torque_high)
+        self._step = 0
+
+    @classmethod
+    def for_env(cls, env: gym.Env, config: Any = None) -> Self:
+        """The policy for ``env`` (reads the task, builds the nominal or oracle model)."""
+        config = cls.config_class() if config is None else config
+        if not isinstance(config, cls.config_class):
+            raise ValueError(
+                f"{cls.__name__} needs a {cls.config_class.__name__}, got {type(config).__name__}"
+            )
+        return cls(make_robot(env, config.model), task_info(env, config.model), config)
+
+    @property
+    def name(self) -> str:
+        return self.registry_name
+
+    def begin_episode(self) -> None:
+        """Clear the diagnostics, the counters and the step count (call from ``reset``)."""
+        self._recorder.clear()
+        self._clip.reset()
+        self._step = 0
+
+    def assemble(
+        self, wheels: tuple[float, float], joints: NDArray[np.float64] | None = None
+    ) -> NDArray[np.float64]:
+        """The action vector from the wheel torques ``(tau_L, tau_R)`` (N m, each wheel's own
+        actuator torque) and the body joints' torques (``layout.joint_actuators`` order)."""
+        lay = self.robot.layout
+        action = np.zeros(self.robot.model.nu)
+        wl, wr = lay.wheel_actuators
+        action[wl], action[wr] = wheels
+        if joints is not None:
+            action[list(lay.joint_actuators)] = joints
+        return action
+
+    def finish(self, action: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``action`` clipped to the action bounds, the clip counted (:class:`ClipCounter`)."""
+        return self._clip.clip(action)
+
+    def controller_counters(self) -> dict[str, float]:
+        """The subclass's own counters (QP fallbacks, MPC rejections, ...)."""
+        return {}
+
+    @property
+    def counters(self) -> dict[str, float]:
+        """Episode counts for the harness, reset at ``reset``: ``clipped_steps``,
+        ``max_clip_excess`` (N m), ``actuator_limit_steps``, and the controller's own
+        (``qp_fallbacks``, ``qp_failures``, ``mpc_rejections``, ``plan_violations``,
+        ``plan_converged``, ``max_joint_deviation_rad`` where they apply)."""
+        return {**self._clip.counters, **self.controller_counters()}
+
+    @property
+    def diagnostics(self) -> dict[str, NDArray[np.float64]]:
+        """Per-step signals (see the subclass)."""
+        return self._recorder.as_arrays()
+
+
+def plan_counters(plan: Any) -> dict[str, float]:
+    """``plan_violations`` (count) and ``plan_converged`` (1.0/0.0) of a ``Plan``."""
+    return {
+        "plan_violations": float(len(plan.violations)),
+        "plan_converged": 1.0 if plan.converged else 0.0,
+    }

@@ -13,7 +13,6 @@ from dataclasses import dataclass
 import numpy as np
 
 PEAK_ACCELERATION = 10.0 / np.sqrt(3.0)  # of the unit minimum-jerk profile, times D / T^2
-PEAK_VELOCITY = 1.875  # of the unit minimum-jerk profile, times D / T
 
 
 @dataclass(frozen=True)

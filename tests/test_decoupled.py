@@ -1,4 +1,6 @@
-"""The decoupled (Krang 2014) controller: its LQR, its reference, and the closed loop."""
+"""The decoupled controllers: Krang 2014 as published (``decoupled``) and our LQR
+(``decoupled-lqr``): their gains against the linearised model, the LQR's Riccati solution, the
+minimum-jerk reference, and the closed loop."""
 
 from __future__ import annotations
 
@@ -7,9 +9,16 @@ import numpy as np
 import pytest
 
 import wip_gym  # noqa: F401
-from controllers.decoupled import DecoupledConfig, DecoupledController
+from controllers.decoupled import (
+    BAL_LO_AMPS,
+    DecoupledConfig,
+    DecoupledController,
+    DecoupledLQRConfig,
+    DecoupledLQRController,
+)
 from controllers.lqr import dlqr, zero_order_hold
 from controllers.reference import GoalReference, MinimumJerk
+from controllers.wipm import linearize, params_from_lambda, planar_torque_dynamics
 
 
 def test_minimum_jerk_profile() -> None:
@@ -48,29 +57,68 @@ def test_dlqr_rejects_an_uncontrollable_model() -> None:
 
 
 @pytest.mark.parametrize("env_id", ["wip_gym/WIP-v0", "wip_gym/Planar-v0", "wip_gym/Krang-v0"])
-def test_lqr_stabilises_the_linearised_model(env_id: str) -> None:
+def test_lqr_closed_loop_is_stable_and_solves_the_riccati_equation(env_id: str) -> None:
+    env = gym.make(env_id)
+    obs, info = env.reset(seed=0)
+    policy = DecoupledLQRController.for_env(env)
+    policy.reset(obs, info)
+    Ad, Bd, Q, R, P = policy.riccati
+    K = policy.gains
+    # the discrete algebraic Riccati equation, to a relative residual of 1e-9
+    residual = (
+        Ad.T @ P @ Ad - P - Ad.T @ P @ Bd @ np.linalg.solve(R + Bd.T @ P @ Bd, Bd.T @ P @ Ad) + Q
+    )
+    assert np.abs(residual).max() < 1e-9 * np.abs(P).max()
+    assert np.all(np.linalg.eigvalsh(0.5 * (P + P.T)) > 0)
+    # closed loop: inside the unit circle at the control step, and the same gain on the
+    # continuous-time model puts every eigenvalue in the left half-plane
+    assert np.abs(np.linalg.eigvals(Ad - Bd @ K)).max() < 1.0
+    A, B = policy.continuous_model
+    assert np.linalg.eigvals(A - B @ K).real.max() < 0.0
+    # the open loop is unstable (the pendulum): the gain does the work
+    assert np.linalg.eigvals(A).real.max() > 0.1
+
+
+@pytest.mark.parametrize("env_id", ["wip_gym/WIP-v0", "wip_gym/Planar-v0"])
+def test_krang_2014_gains_stabilise_the_linearised_model(env_id: str) -> None:
+    """BAL_LO converted to wheel torque, signs as ``decoupled`` applies them: the continuous
+    closed loop of the planar WIPM (state theta, thetad, x, xd) is stable."""
     env = gym.make(env_id)
     obs, info = env.reset(seed=0)
     policy = DecoupledController.for_env(env)
-    policy.reset(obs, info)
-    assert np.abs(np.linalg.eigvals(policy.closed_loop_matrix)).max() < 1.0
-    # the open-loop pendulum is unstable: the gains are doing the work
-    K = policy.gains
-    assert np.all(np.isfinite(K)) and np.abs(K).max() > 0
+    robot = policy.robot
+    robot.update(obs["qpos"], obs["qvel"])
+    params = params_from_lambda(robot.wipm_parameters())
+    A, B = (
+        np.asarray(a)
+        for a in linearize(
+            lambda s, u, p: planar_torque_dynamics(s, u[0], p), np.zeros(4), np.zeros(1), params
+        )
+    )
+    k = DecoupledConfig().wheel_gains
+    r = robot.layout.wheel_radius
+    # total wheel torque = 2 (k0 theta + k1 thetad + k2 x / r + k3 xd / r)
+    K = 2.0 * np.array([[k[0], k[1], k[2] / r, k[3] / r]])
+    assert np.linalg.eigvals(A + B @ K).real.max() < 0.0
+    assert np.linalg.eigvals(A - B @ K).real.max() > 0.0  # the other sign does not balance
+    assert np.allclose(k[:4], 1.2711 * np.array(BAL_LO_AMPS[:4]))
+    assert k[0] == pytest.approx(352.6, abs=0.05) and k[1] == pytest.approx(78.7, abs=0.05)
+    assert k[2] / 0.25 == pytest.approx(37.9, abs=0.05)
+    assert k[3] / 0.25 == pytest.approx(92.7, abs=0.05)
 
 
 def test_ill_posed_posture_raises() -> None:
     """A CoM on the axle (zero pendulum length) leaves the LQR without a pendulum to balance."""
     env = gym.make("wip_gym/WIP-v0")
     obs, info = env.reset(seed=0)
-    policy = DecoupledController.for_env(env)
+    policy = DecoupledLQRController.for_env(env)
     model = policy.robot.model
     model.body_ipos[policy.robot.layout.base_body] = 0.0  # CoM exactly at the axle
     with pytest.raises(ValueError, match="ill-posed"):
         policy.reset(obs, info)
 
 
-def run_closed_loop(env: gym.Env, policy: DecoupledController, seconds: float) -> dict:
+def run_closed_loop(env: gym.Env, policy, seconds: float) -> dict:  # noqa: ANN001
     obs, info = env.reset(seed=0)
     policy.reset(obs, info)
     for _ in range(int(seconds / env.unwrapped.dt)):
@@ -80,10 +128,11 @@ def run_closed_loop(env: gym.Env, policy: DecoupledController, seconds: float) -
 
 
 @pytest.mark.parametrize("env_id", ["wip_gym/WIP-v0", "wip_gym/Planar-v0"])
-def test_reaches_a_2m_goal_and_stops(env_id: str) -> None:
+def test_krang_2014_reaches_a_2m_goal_and_stops(env_id: str) -> None:
     env = gym.make(env_id, goal=2.0)
     policy = DecoupledController.for_env(env)
     info = run_closed_loop(env, policy, 15.0)
+    assert np.all(policy.diagnostics["theta_ref"] == 0.0)
     assert info["goal_distance"] < 0.05
     assert abs(info["xd"]) < 0.05
     assert not info["fallen"]
@@ -92,7 +141,7 @@ def test_reaches_a_2m_goal_and_stops(env_id: str) -> None:
 def test_integral_action_reaches_the_goal_with_an_unmodelled_payload() -> None:
     """Krang with 2 kg in the hand that the nominal model does not know."""
     env = gym.make("wip_gym/Krang-v0", goal=(2.0, 0.0), payload_mass=2.0)
-    policy = DecoupledController.for_env(env, DecoupledConfig(model="nominal"))
+    policy = DecoupledLQRController.for_env(env, DecoupledLQRConfig(model="nominal"))
     assert policy.robot.model.body("payload").mass[0] == 0.0
     info = run_closed_loop(env, policy, 18.0)
     assert info["goal_distance"] < 0.05

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import wip_gym  # noqa: F401
-from controllers.decoupled import DecoupledController
+from controllers.decoupled import DecoupledLQRController
 from controllers.decoupled_mpc import DecoupledMPCController
 from controllers.mpc import ModelPredictiveController
 from controllers.planning import PlanConfig, plan_to_goal
@@ -90,7 +90,7 @@ def test_mpc_on_the_plan_reproduces_it_and_warm_starts() -> None:
 def test_decoupled_tracks_the_plan() -> None:
     env = gym.make("wip_gym/Planar-v0", goal=2.0)
     obs, info = env.reset(seed=0)
-    policy = DecoupledController.for_env(env)
+    policy = DecoupledLQRController.for_env(env)
     policy.reset(obs, info)
     assert policy.plan is not None
     ref = policy.reference(3.0)

@@ -9,9 +9,8 @@ The episode is recorded at the video rate (``wip_gym.recording``) and rendered a
 from __future__ import annotations
 
 import argparse
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
@@ -21,7 +20,8 @@ from wip_gym.camera import COMPUTED_CAMERAS
 from wip_gym.recording import DEFAULT_FPS, EpisodeRecorder, frame_interval
 from wip_gym.replay import DEFAULT_SIZE, open_video, parse_size, render_video
 
-Policy = Callable[[dict[str, np.ndarray]], np.ndarray]
+if TYPE_CHECKING:  # the one protocol; wip_gym does not import controllers at run time
+    from controllers.policy import Policy
 
 __all__ = ["frame_interval", "open_video", "record_episode"]
 

@@ -12,6 +12,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from benchmarks import overrides, presets
+from controllers import registry
 
 
 def _resolve(key: str, value: Any, env_id: str, controllers: Sequence[str], preset: Any) -> None:
@@ -28,7 +29,7 @@ def validate_key(
         raise ValueError(
             f"unknown key {key!r}: expected env.<argument>, plan.<field> or <controller>.<path>"
         )
-    configs = {name: overrides.controller_shim.default_config(name, preset) for name in controllers}
+    configs = {name: registry.default_config(name, preset) for name in controllers}
     settings = overrides.valid_settings(env_id, configs)
     if key not in settings:
         if head not in ("env", "plan", *controllers):

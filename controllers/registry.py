@@ -1,0 +1,147 @@
+"""The controllers by name: the one place a controller is registered.
+
+    from controllers.registry import controller_names, default_config, make_policy, register
+
+    controller_names()                      # ['decoupled', 'decoupled-lqr', ...]
+    config = default_config("unified", preset="paper")   # the frozen config dataclass
+    policy = make_policy("unified", env, config)          # Controller.for_env(env, config)
+
+A name maps to a controller class (a :class:`controllers.policy.PolicyBase` subclass, or any
+class with ``for_env(env, config)`` returning a :class:`controllers.policy.Policy`), its config
+dataclass and the config fields the name fixes (``unified-waiter`` is the hierarchical
+controller with ``tray_mode="specific_force"``). Adding a controller is one call::
+
+    register("my-controller", MyController, MyConfig, some_field=1.0)
+
+after which ``wip-bench`` and the sweep's workers find it by name (a worker process must import
+the module that registers it). Classes are imported on first use, so importing this module
+does not start JAX.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+from dataclasses import dataclass
+from typing import Any
+
+import gymnasium as gym
+
+from controllers.policy import ModelChoice, Policy
+
+PRESETS = ("paper",)
+
+
+@dataclass(frozen=True)
+class Registration:
+    """A registered controller: its class and config class (each a class or a
+    ``"module:Name"`` path, imported on first use) and the config fields its name fixes."""
+
+    controller: Any
+    config: Any
+    fields: dict[str, Any]
+
+    def controller_class(self) -> Any:
+        return _load(self.controller)
+
+    def config_class(self) -> Any:
+        return _load(self.config)
+
+
+def _load(target: Any) -> Any:
+    if not isinstance(target, str):
+        return target
+    module, _, attribute = target.partition(":")
+    return getattr(importlib.import_module(module), attribute)
+
+
+_REGISTRY: dict[str, Registration] = {
+    "decoupled": Registration(
+        "controllers.decoupled:DecoupledController", "controllers.decoupled:DecoupledConfig", {}
+    ),
+    "decoupled-lqr": Registration(
+        "controllers.decoupled:DecoupledLQRController",
+        "controllers.decoupled:DecoupledLQRConfig",
+        {},
+    ),
+    "decoupled-mpc": Registration(
+        "controllers.decoupled_mpc:DecoupledMPCController",
+        "controllers.decoupled_mpc:DecoupledMPCConfig",
+        {},
+    ),
+    "unified": Registration(
+        "controllers.hierarchical:HierarchicalController",
+        "controllers.hierarchical:HierarchicalConfig",
+        {"tray_mode": "level"},
+    ),
+    "unified-waiter": Registration(
+        "controllers.hierarchical:HierarchicalController",
+        "controllers.hierarchical:HierarchicalConfig",
+        {"tray_mode": "specific_force"},
+    ),
+}
+
+
+def controller_names() -> list[str]:
+    """Every registered name, in registration order."""
+    return list(_REGISTRY)
+
+
+def register(name: str, controller_cls: Any, config_cls: Any, **fields: Any) -> None:
+    """Register ``controller_cls`` (with ``for_env(env, config)``) under ``name``, configured
+    by ``config_cls`` (a frozen dataclass with a ``model`` field) with ``fields`` applied.
+    Either class may be given as a ``"module:Name"`` path, imported on first use. A name
+    already registered is replaced. ``ValueError`` for an empty name or a field the config
+    class does not have (checked when the config class is a class)."""
+    if not isinstance(name, str) or not name:
+        raise ValueError(f"a controller name must be a non-empty string, got {name!r}")
+    if not isinstance(config_cls, str):
+        if not dataclasses.is_dataclass(config_cls):
+            raise ValueError(f"config_cls must be a dataclass, got {config_cls!r}")
+        known = {f.name for f in dataclasses.fields(config_cls)}
+        unknown = sorted(set(fields) - known)
+        if unknown:
+            raise ValueError(
+                f"{config_cls.__name__} has no fields {unknown}; valid: {sorted(known)}"
+            )
+    _REGISTRY[name] = Registration(controller_cls, config_cls, dict(fields))
+
+
+def registration(name: str) -> Registration:
+    """The registration of ``name``; ``ValueError`` naming the valid names."""
+    if name not in _REGISTRY:
+        raise ValueError(f"unknown controller {name!r}; valid: {controller_names()}")
+    return _REGISTRY[name]
+
+
+def default_config(name: str, preset: str | None = None) -> Any:
+    """The config of ``name`` (its frozen dataclass) with the name's fields applied:
+    ``preset=None`` the defaults, ``"paper"`` the class's ``paper()`` constructor (the authors'
+    configuration). ``ValueError`` for an unknown name or preset, naming the valid ones."""
+    entry = registration(name)
+    config_cls = entry.config_class()
+    if preset is None:
+        return config_cls(**entry.fields)
+    if preset not in PRESETS:
+        raise ValueError(f"unknown preset {preset!r}; valid: {list(PRESETS)} or None")
+    constructor = getattr(config_cls, preset, None)
+    if constructor is None:
+        raise ValueError(f"controller {name!r} ({config_cls.__name__}) has no preset {preset!r}")
+    return dataclasses.replace(constructor(), **entry.fields)
+
+
+def make_policy(
+    name: str, env: gym.Env, config: Any = None, model: ModelChoice = "nominal"
+) -> Policy:
+    """``Controller.for_env(env, config)`` for the registered ``name``. Without ``config``:
+    ``default_config(name)`` with ``model`` applied; with one, it is used as given (its own
+    ``model``) and must be an instance of the name's config class."""
+    entry = registration(name)
+    config_cls = entry.config_class()
+    if config is None:
+        config = dataclasses.replace(default_config(name), model=model)
+    elif not isinstance(config, config_cls):
+        raise ValueError(
+            f"controller {name!r} needs a {config_cls.__name__}, got {type(config).__name__}"
+        )
+    return entry.controller_class().for_env(env, config)
