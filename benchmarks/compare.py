@@ -271,6 +271,8 @@ class _SimulatedSeconds:
             desc="simulated",
             unit="s",
             unit_scale=1e-3,
+            bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total:.1f} s "
+            "[{elapsed}<{remaining}]",
             position=1,
             leave=False,
         )
