@@ -147,35 +147,11 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         height: int = 320,
         **kwargs: Any,
     ) -> None:
-        if not hasattr(self, "_ezpickle_kwargs"):  # the task classes pickle their own kwargs
-            utils.EzPickle.__init__(
-                self,
-                robot,
-                tray,
-                goal,
-                cup_friction,
-                payload_mass,
-                payload_time,
-                push_force,
-                push_time,
-                push_duration,
-                reset_noise_scale,
-                mass_randomization,
-                wheel_torque_limit,
-                tray_attachment,
-                tray_rim,
-                tray_friction,
-                terminate_on_cup_loss,
-                fall_angle,
-                progress_weight,
-                ctrl_cost_weight,
-                fall_penalty,
-                cup_loss_penalty,
-                frame_skip,
-                width,
-                height,
-                **kwargs,
-            )
+        # pickled once, here, by keyword: a task class fixes ``robot`` and ``tray`` itself
+        arguments = {k: v for k, v in locals().items() if k not in ("self", "kwargs")}
+        if type(self) is not WIPEnv:
+            arguments = {k: v for k, v in arguments.items() if k not in ("robot", "tray")}
+        utils.EzPickle.__init__(self, **arguments, **kwargs)
         self._spec = robot_spec(robot)
         self._goal = _goal_array(goal, self._spec.planar)
         for name, value in (

@@ -8,8 +8,6 @@ from __future__ import annotations
 
 from typing import Any
 
-from gymnasium import utils
-
 from wip_gym.envs.base import WIPEnv
 
 _COMMON = """
@@ -124,7 +122,6 @@ class WIPDriveEnv(WIPEnv):
     __doc__ = (__doc__ or "") + _COMMON
 
     def __init__(self, **kwargs: Any) -> None:
-        utils.EzPickle.__init__(self, **kwargs)
         kwargs.setdefault("goal", (2.0, 0.0))
         super().__init__(robot="wip", tray=False, **kwargs)
 
@@ -139,7 +136,6 @@ class PlanarEnv(WIPEnv):
     __doc__ = (__doc__ or "") + _COMMON
 
     def __init__(self, **kwargs: Any) -> None:
-        utils.EzPickle.__init__(self, **kwargs)
         super().__init__(robot="planar7", tray=False, **kwargs)
 
 
@@ -157,7 +153,6 @@ class PlanarTrayEnv(WIPEnv):
     __doc__ = (__doc__ or "") + _COMMON
 
     def __init__(self, **kwargs: Any) -> None:
-        utils.EzPickle.__init__(self, **kwargs)
         super().__init__(robot="planar7", tray=True, **kwargs)
 
 
@@ -171,7 +166,6 @@ class KrangEnv(WIPEnv):
     __doc__ = (__doc__ or "") + _COMMON
 
     def __init__(self, **kwargs: Any) -> None:
-        utils.EzPickle.__init__(self, **kwargs)
         kwargs.setdefault("goal", (2.0, 0.0))
         super().__init__(robot="krang", tray=False, **kwargs)
 
@@ -202,6 +196,5 @@ class KrangTrayEnv(WIPEnv):
     __doc__ = (__doc__ or "") + _COMMON
 
     def __init__(self, **kwargs: Any) -> None:
-        utils.EzPickle.__init__(self, **kwargs)
         kwargs.setdefault("goal", (2.0, 0.0))
         super().__init__(robot="krang", tray=True, **kwargs)
