@@ -13,6 +13,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
+from conftest import home_data as home
 
 SCENE = Path(__file__).parents[1] / "assets/mjcf/scene_krang.xml"
 
@@ -47,17 +48,9 @@ HOME_JOINTS = {
 
 
 @pytest.fixture(scope="module")
-def model() -> mujoco.MjModel:
-    """The krang scene."""
-    return mujoco.MjModel.from_xml_path(str(SCENE))
+def model(scene_model) -> mujoco.MjModel:
+    return scene_model("krang")
 
-
-def home(model: mujoco.MjModel) -> mujoco.MjData:
-    """Data at the ``home`` keyframe, kinematics computed."""
-    data = mujoco.MjData(model)
-    mujoco.mj_resetDataKeyframe(model, data, model.key("home").id)
-    mujoco.mj_forward(model, data)
-    return data
 
 
 def base_pitch(data: mujoco.MjData) -> float:

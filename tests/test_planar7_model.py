@@ -13,6 +13,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
+from conftest import home_data
 
 ROOT = Path(__file__).parents[1]
 SCENE = ROOT / "assets/mjcf/scene_planar7.xml"
@@ -45,15 +46,9 @@ WHEEL_RADIUS = 0.25
 
 
 @pytest.fixture(scope="module")
-def model() -> mujoco.MjModel:
-    return mujoco.MjModel.from_xml_path(str(SCENE))
+def model(scene_model) -> mujoco.MjModel:
+    return scene_model("planar7")
 
-
-def home_data(model: mujoco.MjModel) -> mujoco.MjData:
-    data = mujoco.MjData(model)
-    mujoco.mj_resetDataKeyframe(model, data, model.key("home").id)
-    mujoco.mj_forward(model, data)
-    return data
 
 
 def body_com_in_axle_frame(model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:
