@@ -11,6 +11,7 @@ wip-bench render out/compare --camera tray --size 640x480
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 from benchmarks import compare, figures, profile, render, solvers
@@ -61,6 +62,8 @@ def main(argv: list[str] | None = None) -> int:
             render.run(args)
     except ValueError as error:
         parser.error(str(error))  # exits with status 2 and the message
+    except BrokenPipeError:  # the reader went away (`... --list-keys | head`): not an error
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
     return 0
 
 

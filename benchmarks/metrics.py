@@ -1,4 +1,4 @@
-"""Every metric of an episode, defined once, from the env's per-step ``info`` (README "Metrics").
+"""Every metric of an episode, defined once, from the env's per-step ``info`` (docs/metrics.md).
 
 ``EpisodeMetrics`` takes the reset's ``info`` and then, after every env step, that step's
 ``info``, the observation, the action and the control time; ``result()`` gives the JSON-ready
