@@ -31,7 +31,6 @@ from numpy.typing import NDArray
 
 from controllers.disturbance_tasks import DisturbanceRejectingTask, ObserverSettings
 from controllers.high_level import HighLevel, HighLevelConfig
-from controllers.isolated_dynamics import isolated_dynamics
 from controllers.policy import DiagnosticsRecorder, ModelChoice, TaskInfo, make_robot, task_info
 from controllers.task_qp import QPSettings, TaskQP
 from controllers.tasks import (
@@ -189,7 +188,7 @@ class HierarchicalController:
         self.qp.failures = 0
         # one QP now (creates and compiles the solver object), from the current state
         self.theta_task.theta_d, self.theta_task.thetad_d = robot.theta, robot.thetad
-        self.qp.solve(robot, isolated_dynamics(robot), self.tasks)
+        self.qp.solve(robot, None, self.tasks)  # None: eq. iso3 inside the QP's kernel
         for task in self.tasks:
             if isinstance(task, DisturbanceRejectingTask):
                 task.restart()  # the first control step sees this same state again
@@ -237,9 +236,8 @@ class HierarchicalController:
         tick = time.perf_counter()
         self._set_references(robot)
         mpc_time = time.perf_counter() - tick
-        iso = isolated_dynamics(robot)
         tick = time.perf_counter()
-        solution = self.qp.solve(robot, iso, self.tasks)
+        solution = self.qp.solve(robot, None, self.tasks)  # None: eq. iso3 in the QP's kernel
         qp_time = time.perf_counter() - tick
         action = np.clip(solution.actuators, self.task.torque_low, self.task.torque_high)
         self._recorder.record(
