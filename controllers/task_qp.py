@@ -16,7 +16,13 @@ checked every step, and an unsolved QP falls back to the last feasible torques (
 Before ProxQP, each step tries the minimiser without constraints, ``H qdd = -g`` (one LAPACK
 Cholesky solve, ``dposv``): when it satisfies every constraint it is the QP's exact optimum (the
 QP is convex and its constraints are then inactive), and ProxQP is not called. In closed loop
-that is most steps (no torque or joint limit active); ProxQP, warm-started, takes the others.
+that is most steps (no torque or joint limit active); ProxQP, warm-started, takes the others
+(``proxqp_calls`` counts them).
+
+Per step: the tasks fill the stacked rows (``J``, ``xdd*``, ``Jdot nu``, ``w``); then one call of
+``controllers.low_level_kernel`` computes eq. ``iso3`` (unless the caller passes it), ``T``,
+``b``, ``H``, ``g``, the constraint rows and the unconstrained minimiser with its feasibility.
+Weights are per row, so a task may weight each of its rows differently (per axis, per joint).
 """
 
 from __future__ import annotations
