@@ -21,9 +21,10 @@ env's data taken just before every ``env.step``, with the same control: the same
 same run, outside the timed loop.
 
 The unit (``benchmarks.yardstick``): ``reference_step_us``, the median of a bare, warm
-``mj_step`` of Krang-v0's model at its reset state, timed in this process half before and half
-after the episode; ``per_step_units`` and ``control_time_units`` are the same figures divided by
-it, so that they compare across machines and loads.
+``mj_step`` of Krang-v0's model at its reset state, timed in this process before and after the
+episode and once after every control step (outside the timed parts, so that its samples see
+the machine's load as the episode's do); ``per_step_units`` and ``control_time_units`` are
+the same figures divided by it, so that they compare across machines and loads.
 
 JSON schema (``--json PATH``; times per control step in microseconds unless named otherwise)::
 
@@ -80,7 +81,7 @@ import numpy as np
 
 from benchmarks.registry import controller_names, make_policy
 from benchmarks.scenario import Scenario
-from benchmarks.yardstick import reference_step_samples
+from benchmarks.yardstick import ReferenceStep, reference_step_samples
 
 PARTS = ("robot_model", "qp_assembly", "qp_solve", "high_level")
 ROWS = (
@@ -178,6 +179,8 @@ def profile_episode(env_id: str, controller: str, duration: float = 5.0, seed: i
     control = np.zeros(steps)
     env_step = np.zeros(steps)
     floor = np.zeros(steps)
+    reference_step = ReferenceStep()
+    interleaved = np.zeros(steps)
     fell = False
     n = 0
     for n in range(steps):
@@ -196,12 +199,14 @@ def profile_episode(env_id: str, controller: str, duration: float = 5.0, seed: i
         observation, _, terminated, truncated, info = env.step(action)
         env_step[n] = time.perf_counter() - start
         control[n] = tock - tick
+        interleaved[n] = reference_step.sample()
         fell = fell or bool(info.get("fallen", False))
         if terminated or truncated:
             break
     env.close()
-    reference = float(np.median(np.concatenate([reference_before, reference_step_samples()])))
     k = n + 1
+    reference = float(np.median(np.concatenate([reference_before, interleaved[:k],
+                                                reference_step_samples()])))  # fmt: skip
     control, env_step, floor = control[:k], env_step[:k], floor[:k]
     parts = {name: values[:k] for name, values in parts.items()}
     present = {name: name in timers for name in ("robot_model", "qp_assembly", "high_level")}

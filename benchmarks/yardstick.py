@@ -26,28 +26,38 @@ REFERENCE_ENV = "wip_gym/Krang-v0"
 REFERENCE_SEED = 0
 
 
+class ReferenceStep:
+    """The reference workload, ready to be timed one step at a time: interleaved with a
+    benchmark's own steps, its samples see the same machine load as they do."""
+
+    def __init__(self) -> None:
+        env = gym.make(REFERENCE_ENV)
+        try:
+            env.reset(seed=REFERENCE_SEED)
+            self.model = env.unwrapped.model
+            self.reset_data = mujoco.MjData(self.model)
+            mujoco.mj_copyData(self.reset_data, self.model, env.unwrapped.data)
+        finally:
+            env.close()
+        self.data = mujoco.MjData(self.model)
+
+    def sample(self) -> float:
+        """Wall time (s) of one bare ``mj_step`` from the reset state."""
+        mujoco.mj_copyData(self.data, self.model, self.reset_data)
+        start = time.perf_counter()
+        mujoco.mj_step(self.model, self.data)
+        return time.perf_counter() - start
+
+
 def reference_step_samples(repeats: int = 400, warmup: int = 50) -> np.ndarray:
     """Wall times (s) of ``repeats`` bare ``mj_step`` calls of :data:`REFERENCE_ENV`'s model,
     each from its reset state (seed :data:`REFERENCE_SEED`), after ``warmup`` untimed ones."""
     if repeats < 1 or warmup < 0:
         raise ValueError(f"repeats must be >= 1 and warmup >= 0, got {repeats}, {warmup}")
-    env = gym.make(REFERENCE_ENV)
-    try:
-        env.reset(seed=REFERENCE_SEED)
-        model, reset = env.unwrapped.model, env.unwrapped.data
-        data = mujoco.MjData(model)
-        samples = np.zeros(repeats)
-        clock = time.perf_counter
-        for k in range(warmup + repeats):
-            mujoco.mj_copyData(data, model, reset)
-            start = clock()
-            mujoco.mj_step(model, data)
-            elapsed = clock() - start
-            if k >= warmup:
-                samples[k - warmup] = elapsed
-    finally:
-        env.close()
-    return samples
+    reference = ReferenceStep()
+    for _ in range(warmup):
+        reference.sample()
+    return np.array([reference.sample() for _ in range(repeats)])
 
 
 def reference_step_us(repeats: int = 400, warmup: int = 50) -> float:
