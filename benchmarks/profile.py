@@ -37,7 +37,7 @@ JSON schema (``--json PATH``; times per control step in microseconds unless name
       "per_step_us": {                    # each {"mean": float, "median": float} or null
         "mujoco_step": ...,               # the floor: bare mj_step for one control period
         "robot_model": ...,               # RobotModel.update in the policy
-        "qp_assembly": ...,               # TaskQP.assemble (tasks, Jdot nu, H, g, C, l, u)
+        "qp_assembly": ...,               # TaskQP.assemble (tasks, Jdot nu, iso3, H, g, C, ...)
         "qp_solve": ...,                  # TaskQP.solve minus assembly (ProxQP + torques)
         "high_level": ...,                # MPC + references (mean = amortised)
         "python_overhead": ...,           # control minus the four parts above
