@@ -52,6 +52,7 @@ from tqdm import tqdm
 import wip_gym  # noqa: F401  (registers the environments)
 from benchmarks.crocoddyl_wipm import CrocoddylWIPM
 from benchmarks.numpy_ilqr import NumpyILQR
+from benchmarks.yardstick import ReferenceStep
 from controllers.mpc import ModelPredictiveController, MPCConfig, mpc_problem
 from controllers.planning import Plan, PlanConfig, plan_to_goal, planning_problem
 from controllers.policy import make_robot
@@ -198,13 +199,20 @@ class _PeerMPC:
         return U[0].copy()
 
 
+REFERENCE_SAMPLES: list[float] = []  # the unit's samples taken between the timed MPC steps
+
+
 def _mpc_times(step: Callable[[int], Any], warmup: Callable[[], Any], steps: int, label: str
                ) -> tuple[float, list[float]]:  # fmt: skip
-    """``mpc_compile_s`` (a throwaway first step minus the median) and the step times (s)."""
+    """``mpc_compile_s`` (a throwaway first step minus the median) and the step times (s).
+    After every step one reference step (``benchmarks.yardstick``) is timed too, into
+    ``REFERENCE_SAMPLES``, so that the unit sees the same machine load as the steps."""
     first, _ = _timed(warmup)
+    reference = ReferenceStep()
     times = []
     for i in tqdm(range(steps), desc=label, leave=False, disable=None):
         times.append(_timed(lambda i=i: step(i))[0])
+        REFERENCE_SAMPLES.append(reference.sample())
     return max(first - statistics.median(times), 0.0), times
 
 

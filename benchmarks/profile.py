@@ -20,17 +20,24 @@ every 10 ms). A part the controller lacks is ``null``. The floor, ``mujoco_step`
 env's data taken just before every ``env.step``, with the same control: the same states, in the
 same run, outside the timed loop.
 
+The unit (``benchmarks.yardstick``): ``reference_step_us``, the median of a bare, warm
+``mj_step`` of Krang-v0's model at its reset state, timed in this process before and after the
+episode and once after every control step (outside the timed parts, so that its samples see
+the machine's load as the episode's do); ``per_step_units`` and ``control_time_units`` are
+the same figures divided by it, so that they compare across machines and loads.
+
 JSON schema (``--json PATH``; times per control step in microseconds unless named otherwise)::
 
     {
       "env": str, "controller": str, "seed": int, "model": "nominal",
       "duration_s": float, "steps": int, "control_dt_s": float, "frame_skip": int,
       "setup_s": float,                   # env reset + policy construction + policy.reset
+      "reference_step_us": float,         # the unit (benchmarks.yardstick)
       "control_time_ms": {"mean": float, "median": float, "p99": float},  # policy __call__
       "per_step_us": {                    # each {"mean": float, "median": float} or null
         "mujoco_step": ...,               # the floor: bare mj_step for one control period
         "robot_model": ...,               # RobotModel.update in the policy
-        "qp_assembly": ...,               # TaskQP.assemble (tasks, Jdot nu, H, g, C, l, u)
+        "qp_assembly": ...,               # TaskQP.assemble (tasks, Jdot nu, iso3, H, g, C, ...)
         "qp_solve": ...,                  # TaskQP.solve minus assembly (ProxQP + torques)
         "high_level": ...,                # MPC + references (mean = amortised)
         "python_overhead": ...,           # control minus the four parts above
@@ -40,6 +47,8 @@ JSON schema (``--json PATH``; times per control step in microseconds unless name
         "env_overhead": ...,              # env_step minus mujoco_step
         "loop": ...                       # control + env_step
       },
+      "per_step_units": {...},            # per_step_us / reference_step_us, same keys
+      "control_time_units": {"mean": float, "median": float, "p99": float},
       "qp_iterations": {"mean": float, "max": int} | null,  # ProxQP's; 0 on a shortcut step
       "qp_paths": {"shortcut": int, "proxqp": int} | null,  # steps solved by each path
       "control_over_mujoco_step": float,  # mean control / mean floor
@@ -72,6 +81,7 @@ import numpy as np
 
 from benchmarks.registry import controller_names, make_policy
 from benchmarks.scenario import Scenario
+from benchmarks.yardstick import ReferenceStep, reference_step_samples
 
 PARTS = ("robot_model", "qp_assembly", "qp_solve", "high_level")
 ROWS = (
@@ -127,6 +137,10 @@ def _stats(values: np.ndarray | None) -> dict[str, float] | None:
     return {"mean": float(values.mean() * 1e6), "median": float(np.median(values) * 1e6)}
 
 
+def _in_units(stats: dict[str, float] | None, unit_us: float) -> dict[str, float] | None:
+    return None if stats is None else {key: value / unit_us for key, value in stats.items()}
+
+
 def _iterations(iterations: np.ndarray | None) -> dict[str, float] | None:
     if iterations is None:
         return None
@@ -146,6 +160,7 @@ def profile_episode(env_id: str, controller: str, duration: float = 5.0, seed: i
     if duration <= 0:
         raise ValueError(f"duration must be positive, got {duration}")
     scenario = Scenario(env_id, duration=duration)
+    reference_before = reference_step_samples()
     env = scenario.make_env()
     setup_start = time.perf_counter()
     observation, info = env.reset(seed=seed)
@@ -164,6 +179,8 @@ def profile_episode(env_id: str, controller: str, duration: float = 5.0, seed: i
     control = np.zeros(steps)
     env_step = np.zeros(steps)
     floor = np.zeros(steps)
+    reference_step = ReferenceStep()
+    interleaved = np.zeros(steps)
     fell = False
     n = 0
     for n in range(steps):
@@ -182,11 +199,14 @@ def profile_episode(env_id: str, controller: str, duration: float = 5.0, seed: i
         observation, _, terminated, truncated, info = env.step(action)
         env_step[n] = time.perf_counter() - start
         control[n] = tock - tick
+        interleaved[n] = reference_step.sample()
         fell = fell or bool(info.get("fallen", False))
         if terminated or truncated:
             break
     env.close()
     k = n + 1
+    reference = float(np.median(np.concatenate([reference_before, interleaved[:k],
+                                                reference_step_samples()])))  # fmt: skip
     control, env_step, floor = control[:k], env_step[:k], floor[:k]
     parts = {name: values[:k] for name, values in parts.items()}
     present = {name: name in timers for name in ("robot_model", "qp_assembly", "high_level")}
@@ -207,6 +227,11 @@ def profile_episode(env_id: str, controller: str, duration: float = 5.0, seed: i
     diagnostics = getattr(policy, "diagnostics", {})
     iterations = diagnostics.get("qp_iterations")
     floor_mean = float(floor.mean())
+    control_ms = {
+        "mean": float(control.mean() * 1e3),
+        "median": float(np.median(control) * 1e3),
+        "p99": float(np.percentile(control, 99) * 1e3),
+    }
     return {
         "env": scenario.env_id,
         "controller": controller,
@@ -217,12 +242,13 @@ def profile_episode(env_id: str, controller: str, duration: float = 5.0, seed: i
         "control_dt_s": dt,
         "frame_skip": frame_skip,
         "setup_s": setup_s,
-        "control_time_ms": {
-            "mean": float(control.mean() * 1e3),
-            "median": float(np.median(control) * 1e3),
-            "p99": float(np.percentile(control, 99) * 1e3),
-        },
+        "reference_step_us": reference * 1e6,
+        "control_time_ms": control_ms,
         "per_step_us": per_step,
+        "per_step_units": {
+            name: _in_units(stats, reference * 1e6) for name, stats in per_step.items()
+        },  # fmt: skip
+        "control_time_units": {key: value * 1e-3 / reference for key, value in control_ms.items()},
         "qp_iterations": _iterations(iterations),
         "qp_paths": _paths(iterations),
         "control_over_mujoco_step": float(control.mean() / floor_mean),
@@ -241,26 +267,31 @@ def profile_episode(env_id: str, controller: str, duration: float = 5.0, seed: i
 def format_table(result: dict[str, Any]) -> str:
     per_step = result["per_step_us"]
     floor = per_step["mujoco_step"]["mean"]
+    unit = result["reference_step_us"]
     lines = [
         f"{result['controller']} on {result['env']}: {result['steps']} steps of "
         f"{result['control_dt_s'] * 1e3:g} ms, seed {result['seed']}, setup "
         f"{result['setup_s']:.1f} s",
+        f"unit: a bare mj_step of Krang-v0 at its reset state, {unit:.1f} us in this run",
         "",
-        "| part (per control step) | mean us | median us | x mj_step |",
-        "|---|---|---|---|",
+        "| part (per control step) | mean us | median us | mean units | median units | x mj_step |",
+        "|---|---|---|---|---|---|",
     ]
     for name in ROWS:
         stats = per_step[name]
         if stats is None:
-            lines.append(f"| {name} | - | - | - |")
+            lines.append(f"| {name} | - | - | - | - | - |")
             continue
         lines.append(f"| {name} | {stats['mean']:.1f} | {stats['median']:.1f} | "
+                     f"{stats['mean'] / unit:.2f} | {stats['median'] / unit:.2f} | "
                      f"{stats['mean'] / floor:.2f} |")  # fmt: skip
     lines += [
         "",
         f"control time (policy __call__): mean {result['control_time_ms']['mean']:.3f} ms, "
         f"median {result['control_time_ms']['median']:.3f} ms, "
-        f"p99 {result['control_time_ms']['p99']:.3f} ms",
+        f"p99 {result['control_time_ms']['p99']:.3f} ms "
+        f"({result['control_time_units']['mean']:.1f} / "
+        f"{result['control_time_units']['p99']:.1f} units mean / p99)",
         f"controller cost: {result['control_over_mujoco_step']:.1f}x the bare mj_step "
         f"(low level alone {result['low_level_over_mujoco_step']:.1f}x)",
         f"real-time factor: {result['real_time_factor']:.1f} (simulation alone "

@@ -22,7 +22,12 @@ JSON (``--json PATH``), beyond the details of each half (``ddp``, ``qp``):
   ``qp_SOLVER_krang``, ``qp_SOLVER_planar`` for each QP peer against ``proxqp``;
 * ``ratios_controller_path``: the QP peers' ``qp_SOLVER_ENV`` against ``proxqp_shortcut``;
 * ``optimum_checks``: the DDP cost agreement (plan and MPC step) and each QP solver's agreement;
-* ``targets``: issue 6's solver targets, each ``{figure, limit, met}`` (:func:`targets`).
+* ``reference_step_us``: the unit (``benchmarks.yardstick``: a bare, warm ``mj_step`` of
+  Krang-v0 at its reset state), the median of its timings before and after the DDP half and
+  after every timed MPC step (the same load as the steps);
+  ``mpc_step_units``: ``{planar|3d: {median, p99}}``, our MPC step in that unit;
+* ``targets``: issue 6's solver targets and the MPC's in units, each ``{figure, limit, met}``
+  (:func:`targets`).
 
     wip-bench solvers [--quick] [--json PATH] [--mpc-steps K]
 
@@ -39,6 +44,8 @@ import platform
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
+
+import numpy as np
 
 if TYPE_CHECKING:
     from benchmarks.ddp_bench import DDPBenchConfig
@@ -132,11 +139,20 @@ def targets(summary: dict[str, Any]) -> dict[str, Any]:
         out[f"qp_krang_within_2x_fastest_peer{suffix}"] = _target(
             None if ours is None or fastest is None else ours / fastest, 2.0
         )
+    units = summary.get("mpc_step_units")
+    if units is not None:
+        for p, limit in (("3d", 15.0), ("planar", 8.0)):
+            out[f"mpc_step_under_{limit:g}_units_{p}"] = _target(units[p]["median"], limit)
+            out[f"mpc_step_p99_under_2x_median_{p}"] = _target(
+                units[p]["p99"] / units[p]["median"], 2.0
+            )
+        out["plan_under_50ms_3d"] = _target(plan["3d"]["ours"]["median"], 50.0)
     return out
 
 
-def summarise(ddp: dict[str, Any], qp: dict[str, Any]) -> dict[str, Any]:
-    """The top-level schema (module docstring) from the two halves' details."""
+def summarise(ddp: dict[str, Any], qp: dict[str, Any], unit_us: float | None = None
+              ) -> dict[str, Any]:  # fmt: skip
+    """The top-level schema (module docstring) from the two halves' details and the unit."""
     out: dict[str, Any] = {}
     for key, field in (("ddp_plan_ms", "plan_ms"), ("ddp_iter_ms", "iter_ms"),
                        ("mpc_step_ms", "mpc_step_ms")):  # fmt: skip
@@ -179,6 +195,12 @@ def summarise(ddp: dict[str, Any], qp: dict[str, Any]) -> dict[str, Any]:
             )
     out["ratios"] = ratios
     out["ratios_controller_path"] = path_ratios
+    if unit_us is not None:
+        out["reference_step_us"] = unit_us
+        out["mpc_step_units"] = {
+            p: {q: out["mpc_step_ms"][p]["ours"][q] * 1e3 / unit_us for q in ("median", "p99")}
+            for p in PROBLEMS
+        }
     out["ratio_definition"] = RATIO_DEFINITION
     out["optimum_checks"] = {
         "ddp": {
@@ -223,15 +245,22 @@ def run_benchmark(quick: bool = False, mpc_steps: int | None = None) -> dict[str
         "cpus": os.cpu_count(),
         "load_average_1min_at_start": os.getloadavg()[0],
     }
+    from benchmarks.yardstick import reference_step_samples  # noqa: PLC0415
+
+    unit_before = reference_step_samples()
+    ddp_bench.REFERENCE_SAMPLES.clear()
     ddp = ddp_bench.run(ddp_config)
+    interleaved = np.array(ddp_bench.REFERENCE_SAMPLES)
+    unit_after = reference_step_samples()
     qp = qp_bench.run(qp_config)
     machine["load_average_1min_at_end"] = os.getloadavg()[0]
+    unit_us = float(np.median(np.concatenate([unit_before, interleaved, unit_after])) * 1e6)
     return {
         "command": "wip-bench solvers" + (" --quick" if quick else ""),
         "quick": quick,
         "machine": machine,
         "versions": _versions(),
-        **summarise(ddp, qp),
+        **summarise(ddp, qp, unit_us),
         "ddp": ddp,
         "qp": qp,
     }
@@ -261,6 +290,16 @@ def format_table(results: dict[str, Any]) -> str:
                 f"| {r['plan_cost']:.10g} |"
             )
     lines.append("")
+    if "mpc_step_units" in results:
+        units = results["mpc_step_units"]
+        lines.append(
+            f"unit: a bare mj_step of Krang-v0 at its reset state, "
+            f"{results['reference_step_us']:.1f} us; our MPC step: "
+            + ", ".join(
+                f"{p} median {units[p]['median']:.1f} units, p99 {units[p]['p99']:.1f}"
+                for p in PROBLEMS
+            )  # fmt: skip
+        )
     for p in PROBLEMS:
         checks = ddp[p]["optimum_check"]
         lines.append(

@@ -32,7 +32,6 @@ from numpy.typing import NDArray
 
 from controllers.disturbance_tasks import DisturbanceRejectingTask, ObserverSettings
 from controllers.high_level import HighLevel, HighLevelConfig
-from controllers.isolated_dynamics import isolated_dynamics
 from controllers.planning import PlanConfig
 from controllers.policy import ModelChoice, PolicyBase, TaskInfo, plan_counters
 from controllers.task_qp import QPSettings, TaskQP
@@ -301,7 +300,7 @@ class HierarchicalController(PolicyBase):
         self.qp.failures = 0
         # one QP now (creates and compiles the solver object), from the current state
         self.theta_task.theta_d, self.theta_task.thetad_d = robot.theta, robot.thetad
-        first = self.qp.solve(robot, isolated_dynamics(robot), self.tasks)
+        first = self.qp.solve(robot, None, self.tasks)  # None: eq. iso3 inside the QP's kernel
         self._last_tau_0_qp = float(first.generalized[0])
         for task in self.tasks:
             if isinstance(task, DisturbanceRejectingTask):
@@ -350,9 +349,8 @@ class HierarchicalController(PolicyBase):
         tick = time.perf_counter()
         self._set_references(robot)
         mpc_time = time.perf_counter() - tick
-        iso = isolated_dynamics(robot)
         tick = time.perf_counter()
-        solution = self.qp.solve(robot, iso, self.tasks)
+        solution = self.qp.solve(robot, None, self.tasks)  # None: eq. iso3 in the QP's kernel
         qp_time = time.perf_counter() - tick
         actuators = solution.actuators
         if not solution.solved:

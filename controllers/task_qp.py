@@ -16,7 +16,13 @@ checked every step, and an unsolved QP falls back to the last feasible torques (
 Before ProxQP, each step tries the minimiser without constraints, ``H qdd = -g`` (one LAPACK
 Cholesky solve, ``dposv``): when it satisfies every constraint it is the QP's exact optimum (the
 QP is convex and its constraints are then inactive), and ProxQP is not called. In closed loop
-that is most steps (no torque or joint limit active); ProxQP, warm-started, takes the others.
+that is most steps (no torque or joint limit active); ProxQP, warm-started, takes the others
+(``proxqp_calls`` counts them).
+
+Per step: the tasks fill the stacked rows (``J``, ``xdd*``, ``Jdot nu``, ``w``); then one call of
+``controllers.low_level_kernel`` computes eq. ``iso3`` (unless the caller passes it), ``T``,
+``b``, ``H``, ``g``, the constraint rows and the unconstrained minimiser with its feasibility.
+Weights are per row, so a task may weight each of its rows differently (per axis, per joint).
 """
 
 from __future__ import annotations
@@ -30,6 +36,7 @@ from numpy.typing import NDArray
 from scipy.linalg.lapack import dposv
 
 from controllers.isolated_dynamics import IsolatedDynamics
+from controllers.low_level_kernel import KernelLayout, LowLevelKernel
 from controllers.motion_probe import MotionProbe
 from controllers.tasks import Task
 from wip_gym.robot_model import RobotModel
@@ -46,8 +53,6 @@ class QPSettings:
     eps_abs: ProxQP's absolute tolerance. Its default (1e-5 on the KKT residual) can stop
         with constraint errors of order 1e-3 N m here; 1e-9 gives answers that are right.
     limit_horizon: ``h`` of the joint-limit acceleration bounds (s).
-    fd_step: time step of the finite difference giving ``Jdot nu`` for a task without an
-        exact ``jdot_nu`` (s).
     max_iterations: ProxQP's iteration cap (its default, 10000, lets an infeasible QP run for
         a minute before it gives up; a feasible one here takes under 20).
     unconstrained_first: try the unconstrained minimiser before ProxQP (module docstring).
@@ -56,7 +61,6 @@ class QPSettings:
     regularization: float = 1e-6
     eps_abs: float = 1e-9
     limit_horizon: float = 0.05
-    fd_step: float = 1e-6
     max_iterations: int = 1000
     unconstrained_first: bool = True
 
@@ -142,52 +146,48 @@ class TaskQP:
         columns, indices, q_min, q_max = (np.array(v) for v in zip(*limited, strict=True)) if (
             limited) else (np.zeros(0, dtype=int), np.zeros(0, dtype=int), np.zeros(0),
                            np.zeros(0))  # fmt: skip
+        self._limit_columns = columns.astype(int)
         self._limit_index = indices.astype(int)
         self._limit_min, self._limit_max = q_min.astype(float), q_max.astype(float)
-        self._C_limit = np.zeros((len(limited), self.n))
-        self._C_limit[np.arange(len(limited)), columns.astype(int)] = 1.0
+        self._index_q1, self._wheel_radius = k, float(lay.wheel_radius)
         self._qp: proxsuite.proxqp.dense.QP | None = None
         self.failures = 0
-        self.probe = RobotModel(robot.model)
+        self.proxqp_calls = 0
         self.motion = MotionProbe(robot)
         self._last_actuators: Array | None = None
-        self._J: Array | None = None  # assembly buffers, made by _buffers
+        self._J: Array | None = None  # task-row buffers and kernel, made by _buffers
         self._rows = -1
+        self._feasible = False
 
     def _buffers(self, rows: int, n_min: int) -> None:
-        """(Re)allocate the assembly buffers for ``rows`` task rows (once per task set)."""
-        n, m = self.n, self.M_act.shape[0]
+        """(Re)allocate the task-row buffers and the kernel for ``rows`` rows (once per task
+        set)."""
         self._rows = rows
         self._J = np.zeros((rows, n_min))
         self._target = np.zeros(rows)
         self._w = np.zeros(rows)
         self._bias = np.zeros(rows)
-        self._JE = np.zeros((rows, n))
-        self._Je = np.zeros(rows)
-        self._T = np.zeros((rows, n))
-        self._b = np.zeros(rows)
-        self._H = np.zeros((n, n))
-        self._g = np.zeros(n)
-        self._reg_eye = self.settings.regularization * np.eye(n)
-        n_limit = len(self._C_limit)
-        self._C = np.zeros((m + n_limit, n))
-        self._C[m:] = self._C_limit
-        self._lower = np.zeros(m + n_limit)
-        self._upper = np.zeros(m + n_limit)
-        self._offset = np.zeros(m)
-        self._drift = np.zeros(n_limit)
+        self.kernel = LowLevelKernel(KernelLayout(
+            n_min=n_min, index_q1=self._index_q1, wheel_radius=self._wheel_radius,
+            actuator_map=self.M_act, torque_low=self.torque_low, torque_high=self.torque_high,
+            limit_columns=self._limit_columns, limit_indices=self._limit_index,
+            limit_min=self._limit_min, limit_max=self._limit_max,
+            limit_horizon=self.settings.limit_horizon,
+            regularization=self.settings.regularization, rows=rows,
+        ))  # fmt: skip
 
-    def task_rows(self, robot: RobotModel, iso: IsolatedDynamics, tasks: Sequence[Task]
-                  ) -> tuple[Array, Array]:  # fmt: skip
-        """``T`` and ``b`` of the stacked weighted tasks (the QP's buffers: overwritten by the
-        next call, copy to keep)."""
+    def _snapshot(self, robot: RobotModel, tasks: Sequence[Task]) -> None:
+        """The stacked tasks' ``J``, reference accelerations, weights and ``Jdot nu`` into
+        the row buffers."""
         blocks = [task.jacobian(robot) for task in tasks]
         rows = sum(len(block) for block in blocks)
         J = self._J
-        if J is None or self._rows != rows or J.shape[1] != blocks[0].shape[1]:
+        if (J is None or self._rows != rows or J.shape[1] != blocks[0].shape[1]
+                or self.kernel.layout.torque_low is not self.torque_low
+                or self.kernel.layout.torque_high is not self.torque_high):  # fmt: skip
             self._buffers(rows, blocks[0].shape[1])
             J = self._J
-        target, w, bias = self._target, self._w, self._bias
+        target, w = self._target, self._w
         start = 0
         for task, block in zip(tasks, blocks, strict=True):
             stop = start + len(block)
@@ -195,88 +195,55 @@ class TaskQP:
             target[start:stop] = task.reference_acceleration(robot)
             w[start:stop] = task.weights()
             start = stop
-        self._jdot_nu(robot, tasks, out=bias)
-        T, b = self._T, self._b
-        np.matmul(J, iso.E, out=self._JE)
-        np.multiply(w[:, None], self._JE, out=T)
-        np.matmul(J, iso.e, out=self._Je)
-        np.subtract(target, bias, out=b)
-        b -= self._Je
-        b *= w
-        return T, b
+        self._jdot_nu(robot, tasks, out=self._bias)
+
+    def _run_kernel(self, robot: RobotModel, iso: IsolatedDynamics | None,
+                    tasks: Sequence[Task]) -> bool:  # fmt: skip
+        self._snapshot(robot, tasks)
+        A, h = (robot.A, robot.h) if iso is None else (None, None)
+        return self.kernel.run(A, h, self._J, self._target, self._bias, self._w, robot.q,
+                               robot.nu, iso)  # fmt: skip
+
+    def task_rows(self, robot: RobotModel, iso: IsolatedDynamics | None,
+                  tasks: Sequence[Task]) -> tuple[Array, Array]:  # fmt: skip
+        """``T`` and ``b`` of the stacked weighted tasks (the kernel's buffers: overwritten by
+        the next call, copy to keep). ``iso`` None: eq. iso3 from ``robot`` in the kernel."""
+        self._run_kernel(robot, iso, tasks)
+        return self.kernel.T, self.kernel.b
 
     def _jdot_nu(self, robot: RobotModel, tasks: Sequence[Task], out: Array | None = None
                  ) -> Array:  # fmt: skip
-        """``Jdot nu`` = d/dt of ``J(q) nu`` at fixed ``nu``: exact from each task's
-        ``jdot_nu`` (``controllers.motion_probe``); by a central difference for a task
-        without one. Written into ``out`` when given."""
+        """``Jdot nu`` = d/dt of ``J(q) nu`` at fixed ``nu``, exact from each task's
+        ``jdot_nu`` (``controllers.motion_probe``). Written into ``out`` when given."""
         self.motion.update(robot)
         parts = []
         for task in tasks:
             exact = getattr(task, "jdot_nu", None)
-            parts.append(exact(self.motion) if exact is not None
-                         else self._jdot_nu_fd(robot, [task]))  # fmt: skip
+            if exact is None:
+                raise ValueError(f"task {getattr(task, 'name', task)!r} has no jdot_nu(probe): "
+                                 "every task of the QP needs its exact Jdot nu")  # fmt: skip
+            parts.append(exact(self.motion))
         return np.concatenate(parts, out=out)
 
-    def _jdot_nu_fd(self, robot: RobotModel, tasks: Sequence[Task]) -> Array:
-        """``Jdot nu`` by a central difference of ``J nu`` between the states
-        ``(q +- fd_step nu, nu)`` on the floor (two kinematic updates of a probe model)."""
-        eps = self.settings.fd_step
-        q, nu = robot.q, robot.nu
-        xy = robot.axle_position[:2]
-        sides = []
-        for sign in (1.0, -1.0):
-            qpos, qvel = robot.full_state(q + sign * eps * nu, nu, xy)
-            self.probe.update(qpos, qvel, dynamics=False)
-            sides.append(np.concatenate([task.jacobian(self.probe) @ nu for task in tasks]))
-        return (sides[0] - sides[1]) / (2 * eps)
-
-    def constraints(self, robot: RobotModel, iso: IsolatedDynamics) -> tuple[Array, Array, Array]:
-        """``C``, ``lower``, ``upper``: the actuator torque rows, then the joint-limit rows (the
-        QP's buffers: overwritten by the next call, copy to keep)."""
-        if self._J is None:
-            self._buffers(0, robot.layout.n_min)
-        m = len(self.M_act)
-        offset, drift = self._offset, self._drift
-        C, lower, upper = self._C, self._lower, self._upper
-        np.matmul(self.M_act, iso.Ph, out=offset)
-        h = self.settings.limit_horizon
-        index = self._limit_index
-        # drift = q + nu h; the bounds 2 (q_lim - drift) / h^2
-        np.multiply(robot.nu[index], h, out=drift)
-        drift += robot.q[index]
-        np.matmul(self.M_act, iso.calA, out=C[:m])
-        np.subtract(self.torque_low, offset, out=lower[:m])
-        np.subtract(self.torque_high, offset, out=upper[:m])
-        scale = h**2
-        for bound, limit in ((lower, self._limit_min), (upper, self._limit_max)):
-            rows = bound[m:]
-            np.subtract(limit, drift, out=rows)
-            rows *= 2.0
-            rows /= scale
-        return C, lower, upper
-
-    def assemble(self, robot: RobotModel, iso: IsolatedDynamics, tasks: Sequence[Task]
+    def assemble(self, robot: RobotModel, iso: IsolatedDynamics | None, tasks: Sequence[Task]
                  ) -> tuple[Array, Array, Array, Array, Array]:  # fmt: skip
         """The QP ``min 0.5 qdd' H qdd + g' qdd  s.t.  lower <= C qdd <= upper`` of this state,
         as ``(H, g, C, lower, upper)`` (what ``solve`` hands ProxQP; the benchmark's peers
-        solve the same arrays). They are the QP's buffers, overwritten by the next call: copy
-        to keep."""
-        T, b = self.task_rows(robot, iso, tasks)
-        H, g = self._H, self._g
-        np.matmul(T.T, T, out=H)
-        H += self._reg_eye
-        np.matmul(T.T, b, out=g)
-        np.negative(g, out=g)
-        C, lower, upper = self.constraints(robot, iso)
-        return H, g, C, lower, upper
+        solve the same arrays), by one call of the kernel (``controllers.low_level_kernel``),
+        which also tries the unconstrained minimiser. They are the kernel's buffers,
+        overwritten by the next call: copy to keep. ``iso`` None: eq. iso3 in the kernel."""
+        self._feasible = self._run_kernel(robot, iso, tasks)
+        k = self.kernel
+        return k.H, k.g, k.C, k.lower, k.upper
 
-    def solve(self, robot: RobotModel, iso: IsolatedDynamics, tasks: Sequence[Task]) -> QPSolution:
+    def solve(self, robot: RobotModel, iso: IsolatedDynamics | None, tasks: Sequence[Task]
+              ) -> QPSolution:  # fmt: skip
+        """The task QP of this state (``iso`` None: eq. iso3 computed in the kernel from
+        ``robot``). ``proxqp_calls`` counts the steps ProxQP solved."""
         H, g, C, lower, upper = self.assemble(robot, iso, tasks)
-        if self._qp is not None and self.settings.unconstrained_first:
-            qdd = feasible_unconstrained_minimiser(H, g, C, lower, upper)
-            if qdd is not None:
-                return self._solution(iso, qdd, iterations=0)
+        if self._qp is not None and self.settings.unconstrained_first and self._feasible:
+            return self._solution(self.kernel.x.copy(), iterations=0)
+        self.proxqp_calls += 1
         if self._qp is None:
             self._qp = start_proxqp(H, g, C, lower, upper, self.settings)
         else:
@@ -285,20 +252,21 @@ class TaskQP:
         results = self._qp.results
         iterations = int(results.info.iter)
         if results.info.status == _SOLVED and bool(np.all(np.isfinite(results.x))):
-            return self._solution(iso, np.array(results.x), iterations)
+            return self._solution(np.array(results.x), iterations)
         self.failures += 1
         # start the next step cold: a warm start from a failed result does not recover
         self._qp = None
         if self._last_actuators is None:
             raise RuntimeError("the first task QP was not solved: no feasible torques yet")
         nan = np.full(self.n, np.nan)
-        return QPSolution(qdd=nan, nu_dot=np.full(len(iso.e), np.nan), generalized=nan.copy(),
+        return QPSolution(qdd=nan, nu_dot=np.full(self.n + 1, np.nan), generalized=nan.copy(),
                           actuators=self._last_actuators, solved=False,
                           iterations=iterations)  # fmt: skip
 
-    def _solution(self, iso: IsolatedDynamics, qdd: Array, iterations: int) -> QPSolution:
-        generalized = iso.torques(qdd)
+    def _solution(self, qdd: Array, iterations: int) -> QPSolution:
+        k = self.kernel
+        generalized = k.calA @ qdd + k.Ph
         actuators = self.M_act @ generalized
         self._last_actuators = actuators
-        return QPSolution(qdd=qdd, nu_dot=iso.E @ qdd + iso.e, generalized=generalized,
+        return QPSolution(qdd=qdd, nu_dot=k.E @ qdd + k.e, generalized=generalized,
                           actuators=actuators, solved=True, iterations=iterations)  # fmt: skip

@@ -75,6 +75,15 @@ def test_quick_run_schema_and_agreement(tmp_path: Path, capsys: pytest.CaptureFi
     for key in ("qp_krang_under_40us", "qp_krang_within_2x_fastest_peer", "plan_under_10ms_3d",
                 "qp_krang_under_40us_controller_path"):  # fmt: skip
         assert set(results["targets"][key]) == {"figure", "limit", "met"}, key
+    unit = results["reference_step_us"]
+    assert math.isfinite(unit) and unit > 0
+    for p in PROBLEMS:
+        units = results["mpc_step_units"][p]
+        assert units["median"] == pytest.approx(results["mpc_step_ms"][p]["ours"]["median"] * 1e3
+                                                / unit)  # fmt: skip
+    for key in ("mpc_step_under_15_units_3d", "mpc_step_under_8_units_planar",
+                "mpc_step_p99_under_2x_median_3d", "plan_under_50ms_3d"):  # fmt: skip
+        assert set(results["targets"][key]) == {"figure", "limit", "met"}, key
     # the optimum checks: every DDP solver converged to the same cost
     for p in PROBLEMS:
         for what in ("plan", "mpc_step"):

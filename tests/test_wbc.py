@@ -18,7 +18,7 @@ import pytest
 from dynamics_reference import constrained_accelerations, random_minimal_state
 from numpy.typing import NDArray
 
-from controllers.isolated_dynamics import IsolatedDynamics, isolated_dynamics
+from controllers.isolated_dynamics import isolated_dynamics
 from controllers.task_qp import QPSettings, QPSolution, TaskQP, actuator_map
 from controllers.tasks import (
     FrameOrientationTask,
@@ -230,7 +230,7 @@ def _full_qp(
     target = np.concatenate([task.reference_acceleration(robot) for task in tasks])
     w = np.concatenate([task.weights() for task in tasks])
     rows = w[:, None] * J
-    rhs = w * (target - _jdot_nu(robot, tasks, settings.fd_step))
+    rhs = w * (target - _jdot_nu(robot, tasks))
     H = np.zeros((n + n_u, n + n_u))
     g = np.zeros(n + n_u)
     H[:n, :n] = rows.T @ rows
@@ -457,18 +457,18 @@ def test_first_qp_unsolved_raises(monkeypatch: pytest.MonkeyPatch) -> None:
     _set_state(robot, 401, still=True)
     iso = isolated_dynamics(robot)
     qp = TaskQP(robot, *_limits(robot), QPSettings())
-    original = qp.constraints
+    original = qp.assemble
 
-    def contradicting(robot: RobotModel, iso: IsolatedDynamics) -> tuple[Array, Array, Array]:
-        C, lower, upper = original(robot, iso)
+    def contradicting(*args: object) -> tuple[Array, Array, Array, Array, Array]:
+        H, g, C, lower, upper = original(*args)
         C = C.copy()
         C[1] = C[0]  # the same row twice, with disjoint bounds
         lower, upper = lower.copy(), upper.copy()
         lower[0], upper[0] = 1.0, 1.0
         lower[1], upper[1] = 2.0, 2.0
-        return C, lower, upper
+        return H, g, C, lower, upper
 
-    monkeypatch.setattr(qp, "constraints", contradicting)
+    monkeypatch.setattr(qp, "assemble", contradicting)
     with pytest.raises(RuntimeError, match="first task QP"):
         qp.solve(robot, iso, _realistic_tasks(robot))
     assert qp.failures == 1

@@ -1,0 +1,129 @@
+"""Where the MPC step's time goes: its pieces jitted alone, in units (``benchmarks.yardstick``).
+
+    python -m benchmarks.ddp_parts [--rounds 3]
+
+On Krang's WIPM (``benchmarks.ddp_bench``: the plan to (2, 0) planar, (2, 1) 3-D), the MPC's
+problem at plan index 400 from the plan's state plus 0.01 (``N = 100``), each piece timed as its
+own jitted call (median of 200 calls, then the median over ``--rounds`` interleaved rounds):
+
+* ``empty_call``: a jitted call with the solver's inputs that reads one entry: the floor;
+* ``rollout``: one ``lax.scan`` of the dynamics over the horizon;
+* ``cost``: the trajectory cost (``trajectory_cost``: a ``lax.map`` of the running cost);
+* ``backward``: one backward pass (derivatives of every step and the Riccati recursion);
+* ``solve_0``, ``solve_1``, ``solve_2``: the MPC's DDP with a budget of 0, 1, 2 iterations
+  (0: the warm start's rollout, its cost and one backward pass).
+
+A piece's cost minus ``empty_call`` over the horizon is its cost per step of the loop.
+Measured (2 shared cores, load 4; units of 12-16 us), planar / 3-D: empty_call 1.1 / 1.5,
+rollout 3.0 / 7.3, cost 4.0 / 5.2, backward 12.2 / 24.4, solve_0 14.6 / 29.4, solve_2 22.3 /
+59.7 units. With XLA's small-loop option (``controllers.jax_setup``) a loop step costs little
+beyond its arithmetic (the option off doubles ``cost``); the time is the arithmetic of the
+backward pass (about 1.7 / 2.9 us per step: every step's ``jacfwd`` of the dynamics, the
+penalty's derivatives, the Riccati step), then the rollouts with their costs, then the floor of
+one call. Separate top-level loops of one call cost more than the same loops nested in one
+(four rollouts as four loops: 130 us, nested in one loop: 47 us, one alone: 31 us), which is
+why ``controllers.ddp`` runs the warm start's rollout inside its iteration loop.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from benchmarks.yardstick import ReferenceStep
+
+PIECES = ("empty_call", "rollout", "cost", "backward", "solve_0", "solve_1", "solve_2")
+
+
+def _median_us(function: Callable[[], Any], calls: int = 200) -> float:
+    function()
+    times = []
+    for _ in range(calls):
+        start = time.perf_counter()
+        function()
+        times.append(time.perf_counter() - start)
+    return float(np.median(times) * 1e6)
+
+
+def _problem_calls(problem: str, params: Any, theta0: float) -> dict[str, Callable[[], Any]]:
+    """The pieces of :data:`PIECES` of one problem as argument-free calls."""
+    import jax  # noqa: PLC0415
+    import jax.numpy as jnp  # noqa: PLC0415
+
+    from benchmarks.ddp_bench import GOALS, initial_state  # noqa: PLC0415
+    from controllers.ddp import DDPConfig, rollout, trajectory_cost  # noqa: PLC0415
+    from controllers.mpc import MPCConfig, mpc_problem  # noqa: PLC0415
+    from controllers.planning import plan_to_goal  # noqa: PLC0415
+    from controllers.wipm_problem import ddp_solver_for, refs_for  # noqa: PLC0415
+
+    planar = problem == "planar"
+    plan = plan_to_goal(initial_state(problem, theta0), params, np.array(GOALS[problem]),
+                        planar=planar)  # fmt: skip
+    wipm = mpc_problem(planar, MPCConfig(), plan.a_max, plan.theta_max)
+    horizon, index = MPCConfig().steps, 400
+    refs = jax.tree.map(jnp.asarray, refs_for(plan.window(index, horizon + 1), params))
+    x0 = jnp.asarray(plan.states[index] + 0.01)  # off the plan: every iteration has work
+    U = jnp.asarray(plan.control_window(index, horizon))
+    dynamics = wipm.dynamics()
+    running, terminal = wipm.costs()
+    X = rollout(dynamics, x0, U, params)
+    base = MPCConfig().ddp
+    solvers = {
+        it: ddp_solver_for(wipm, DDPConfig(**{**base.__dict__, "max_iterations": it}))
+        for it in (0, 1, 2)
+    }
+    mu = jnp.asarray(1e-3)
+    jitted = {
+        "empty_call": jax.jit(lambda X, U, p, r: X[0]),
+        "rollout": jax.jit(lambda X, U, p, r: rollout(dynamics, X[0], U, p)),
+        "cost": jax.jit(lambda X, U, p, r: trajectory_cost(running, terminal, X, U, r)),
+        "backward": jax.jit(lambda X, U, p, r: solvers[2]._backward(X, U, p, r, mu).K),
+    }
+    calls: dict[str, Callable[[], Any]] = {
+        name: (lambda f=f: jax.block_until_ready(f(X, U, params, refs)))
+        for name, f in jitted.items()
+    }
+    for it, solver in solvers.items():
+        calls[f"solve_{it}"] = lambda s=solver: jax.block_until_ready(
+            s.jitted(x0, U, params, refs).U
+        )
+    return calls
+
+
+def measure(rounds: int = 3) -> dict[str, dict[str, float]]:
+    """``{planar|3d: {piece: units}}`` and each problem's ``unit_us``."""
+    from benchmarks.ddp_bench import krang_params  # noqa: PLC0415
+
+    params, theta0 = krang_params()
+    reference = ReferenceStep()
+    out: dict[str, dict[str, float]] = {}
+    for problem in ("planar", "3d"):
+        calls = _problem_calls(problem, params, theta0)
+        samples: dict[str, list[float]] = {name: [] for name in PIECES}
+        units: list[float] = []
+        for _ in range(rounds):
+            for name in PIECES:
+                samples[name].append(_median_us(calls[name]))
+                units.append(float(np.median([reference.sample() for _ in range(50)]) * 1e6))
+        unit = float(np.median(units))
+        out[problem] = {name: float(np.median(v)) / unit for name, v in samples.items()}
+        out[problem]["unit_us"] = unit
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rounds", type=int, default=3)
+    args = parser.parse_args()
+    for problem, pieces in measure(args.rounds).items():
+        unit = pieces.pop("unit_us")
+        print(f"{problem} (unit {unit:.1f} us): "
+              + ", ".join(f"{name} {value:.1f}" for name, value in pieces.items()))  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()

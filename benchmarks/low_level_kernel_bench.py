@@ -1,0 +1,210 @@
+"""The low level's kernel (``controllers.low_level_kernel``) in NumPy against the same arithmetic
+as a jitted JAX function, on the inputs of a real ``unified`` closed loop on KrangTray-v0.
+
+    python -m benchmarks.low_level_kernel_bench [--steps 300] [--repeats 5]
+
+Timed per call (median over the recorded states, then the median of ``--repeats`` rounds,
+interleaved so that the machine's load falls on every variant alike), beside the unit of
+``benchmarks.yardstick``:
+
+* ``numpy``: ``LowLevelKernel.run`` (steps 1 to 5, eq. iso3 included);
+* ``before``: the same arithmetic as the task QP did it before the kernel, piece by piece
+  (``isolated_dynamics``, products with ``E`` and ``e``, the constraint rows,
+  ``feasible_unconstrained_minimiser``);
+* ``jax``: the same five steps as one ``jax.jit`` function of the eight input arrays
+  (``jax.scipy.linalg.cho_factor``/``cho_solve`` for the minimiser), result fetched to NumPy;
+* ``jax_packed``: the same with the inputs packed in one vector (one transfer);
+* ``jax_empty``: a jitted function of the packed vector that returns it: the call's floor.
+
+Measured (``--steps 300 --repeats 5``, the 2-core machine shared with other jobs; two runs):
+``numpy`` 4.3 / 3.3 units, ``before`` 4.5 units, ``jax`` 7.4 / 5.1, ``jax_packed`` 6.0 / 3.9,
+``jax_empty`` 1.35 / 0.95. NumPy is kept: a jitted call's floor is about one unit before any
+arithmetic, and XLA:CPU runs this size's arithmetic no faster than NumPy. The fusion itself
+gains little over the separate calls it replaced (the same ~30 NumPy calls): what costs is the
+number of calls, not the arithmetic (18 variables, 30 task rows, 34 constraint rows for Krang).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from collections.abc import Callable
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+import wip_gym  # noqa: F401
+from benchmarks.yardstick import reference_step_us
+from controllers import jax_setup  # noqa: F401  (float64)
+from controllers.hierarchical import HierarchicalController
+from controllers.low_level_kernel import KernelLayout
+
+Inputs = tuple[np.ndarray, ...]
+
+
+def record_inputs(steps: int) -> tuple[KernelLayout, Any, list[Inputs]]:
+    """The kernel's inputs ``(A, h, J, target, jdot_nu, w, q, nu)`` at every step of a
+    ``unified`` closed loop on KrangTray-v0 (seed 0)."""
+    env = gym.make("wip_gym/KrangTray-v0")
+    obs, info = env.reset(seed=0)
+    policy = HierarchicalController.for_env(env)
+    policy.reset(obs, info)
+    qp, robot = policy.qp, policy.robot
+    inputs: list[Inputs] = []
+    for _ in range(steps):
+        action = policy(obs)
+        inputs.append(tuple(np.array(a) for a in (robot.A, robot.h, qp._J, qp._target,
+                                                  qp._bias, qp._w, robot.q, robot.nu)))  # fmt: skip
+        obs, *_ = env.step(action)
+    env.close()
+    return qp.kernel.layout, robot.layout, inputs
+
+
+def jax_kernel(layout: KernelLayout) -> Callable[..., Any]:
+    """Steps 1 to 5 of the kernel in JAX (not jitted)."""
+    import jax.numpy as jnp  # noqa: PLC0415
+    from jax.scipy.linalg import cho_factor, cho_solve  # noqa: PLC0415
+
+    k, r = layout.index_q1, layout.wheel_radius
+    M = jnp.asarray(layout.actuator_map)
+    n = layout.n_min - 1
+    columns = jnp.asarray(layout.limit_columns)
+    index = jnp.asarray(layout.limit_indices)
+    C_limit = jnp.zeros((len(columns), n)).at[jnp.arange(len(columns)), columns].set(1.0)
+
+    def kernel(A: Any, h: Any, J: Any, target: Any, jdot_nu: Any, w: Any, q: Any, nu: Any
+               ) -> Any:  # fmt: skip
+        a_xx, a_xq, h_x, h_q = A[0, 0], A[1:, 0], h[0], h[1:]
+        A_star = A[1:, 1:] - jnp.outer(a_xq, a_xq) / a_xx
+        beta = 1.0 / (1.0 + a_xq[k] / (r * a_xx))
+        scale = beta / (r * a_xx)
+        calA = A_star - scale * jnp.outer(a_xq, A_star[k])
+        h_star = h_q - a_xq * h_x / a_xx
+        Ph = h_star - scale * a_xq * h_star[k]
+        E0 = (-calA[k] / r - a_xq) / a_xx
+        e0 = (-Ph[k] / r - h_x) / a_xx
+        T = w[:, None] * (J[:, 1:] + J[:, :1] * E0)
+        b = w * (target - jdot_nu - J[:, 0] * e0)
+        H = T.T @ T + layout.regularization * jnp.eye(n)
+        g = -T.T @ b
+        C = jnp.concatenate([M @ calA, C_limit])
+        offset = M @ Ph
+        drift = q[index] + nu[index] * layout.limit_horizon
+        scale_limit = 2.0 / layout.limit_horizon**2
+        lower = jnp.concatenate([layout.torque_low - offset,
+                                 (layout.limit_min - drift) * scale_limit])  # fmt: skip
+        upper = jnp.concatenate([layout.torque_high - offset,
+                                 (layout.limit_max - drift) * scale_limit])  # fmt: skip
+        x = cho_solve(cho_factor(H), -g)
+        Cx = C @ x
+        feasible = jnp.all(Cx >= lower) & jnp.all(Cx <= upper)
+        return jnp.concatenate([x, calA.ravel(), Ph, feasible[None].astype(x.dtype)])
+
+    return kernel
+
+
+def before_kernel(layout: KernelLayout, robot_layout: Any) -> Callable[..., Any]:
+    """The pre-kernel sequence of calls for the same five steps."""
+    from types import SimpleNamespace  # noqa: PLC0415
+
+    from controllers.isolated_dynamics import isolated_dynamics  # noqa: PLC0415
+    from controllers.task_qp import feasible_unconstrained_minimiser  # noqa: PLC0415
+
+    M = layout.actuator_map
+    n = layout.n_min - 1
+    C_limit = np.zeros((len(layout.limit_columns), n))
+    C_limit[np.arange(len(layout.limit_columns)), layout.limit_columns] = 1.0
+    reg = layout.regularization * np.eye(n)
+    index, horizon = layout.limit_indices, layout.limit_horizon
+
+    def kernel(A: Any, h: Any, J: Any, target: Any, jdot_nu: Any, w: Any, q: Any, nu: Any
+               ) -> Any:  # fmt: skip
+        iso = isolated_dynamics(SimpleNamespace(layout=robot_layout, A=A, h=h))  # type: ignore[arg-type]
+        T = w[:, None] * (J @ iso.E)
+        b = w * (target - jdot_nu - J @ iso.e)
+        H = T.T @ T + reg
+        g = -(T.T @ b)
+        C = np.vstack([M @ iso.calA, C_limit])
+        offset = M @ iso.Ph
+        drift = q[index] + nu[index] * horizon
+        lower = np.concatenate([layout.torque_low - offset,
+                                2.0 * (layout.limit_min - drift) / horizon**2])  # fmt: skip
+        upper = np.concatenate([layout.torque_high - offset,
+                                2.0 * (layout.limit_max - drift) / horizon**2])  # fmt: skip
+        return feasible_unconstrained_minimiser(H, g, C, lower, upper)
+
+    return kernel
+
+
+def _median_call(function: Callable[[Inputs], Any], inputs: list[Inputs]) -> float:
+    function(inputs[0])
+    times = []
+    for args in inputs:
+        start = time.perf_counter()
+        function(args)
+        times.append(time.perf_counter() - start)
+    return float(np.median(times))
+
+
+def compare(steps: int, repeats: int) -> dict[str, float]:
+    """Median microseconds per call of each variant (module docstring) and the unit."""
+    import jax  # noqa: PLC0415
+
+    from controllers.low_level_kernel import LowLevelKernel  # noqa: PLC0415
+
+    layout, robot_layout, inputs = record_inputs(steps)
+    before = before_kernel(layout, robot_layout)
+    ours = LowLevelKernel(layout)
+    kernel = jax_kernel(layout)
+    jitted = jax.jit(kernel)
+    sizes = [a.size for a in inputs[0]]
+    shapes = [a.shape for a in inputs[0]]
+    bounds = np.cumsum([0, *sizes])
+
+    def unpack(packed: Any) -> list[Any]:
+        return [packed[bounds[i] : bounds[i + 1]].reshape(shapes[i]) for i in range(len(sizes))]
+
+    packed_kernel = jax.jit(lambda packed: kernel(*unpack(packed)))
+    empty = jax.jit(lambda packed: packed)
+
+    def pack(args: Inputs) -> np.ndarray:
+        return np.concatenate([a.ravel() for a in args])
+
+    variants: dict[str, Callable[[Inputs], Any]] = {
+        "numpy": lambda args: ours.run(*args),
+        "before": lambda args: before(*args),
+        "jax": lambda args: np.asarray(jitted(*args)),
+        "jax_packed": lambda args: np.asarray(packed_kernel(pack(args))),
+        "jax_empty": lambda args: np.asarray(empty(pack(args))),
+    }
+    # the JAX result agrees with NumPy's (x, calA, Ph)
+    for args in inputs[:: max(1, len(inputs) // 20)]:
+        ours.run(*args)
+        out = np.asarray(jitted(*args))
+        n = ours.n
+        np.testing.assert_allclose(out[:n], ours.x, rtol=1e-8, atol=1e-8)
+        np.testing.assert_allclose(out[n : n + n * n], ours.calA.ravel(), rtol=1e-12, atol=1e-9)
+    rounds: dict[str, list[float]] = {name: [] for name in (*variants, "unit")}
+    for _ in range(repeats):
+        rounds["unit"].append(reference_step_us(repeats=200))
+        for name, function in variants.items():
+            rounds[name].append(_median_call(function, inputs) * 1e6)
+    return {name: float(np.median(values)) for name, values in rounds.items()}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=300)
+    parser.add_argument("--repeats", type=int, default=5)
+    args = parser.parse_args()
+    result = compare(args.steps, args.repeats)
+    unit = result["unit"]
+    print(f"unit (bare mj_step of Krang-v0): {unit:.1f} us")
+    for name, value in result.items():
+        if name != "unit":
+            print(f"{name:>11}: {value:7.1f} us = {value / unit:5.2f} units")
+
+
+if __name__ == "__main__":
+    main()

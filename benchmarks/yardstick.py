@@ -1,0 +1,65 @@
+"""The benchmarks' unit of time: one bare, warm ``mj_step`` of Krang-v0's model at its reset state.
+
+Timings on a shared 2-core machine move with its load and differ between machines; their
+ratios to a fixed reference workload timed in the same process move much less. The reference is
+deliberately the physics of the plain robot (no cup, no controller), so that making an env's own
+physics cheaper does not count against it (docs/DESIGN.md §8).
+
+    reference = median over ``repeats`` of the wall time of ``mujoco.mj_step(model, data)``, each
+                from a copy of the state ``env.reset(seed=0)`` leaves (``warmup`` untimed first)
+
+``wip-bench profile`` and ``wip-bench solvers`` report it as ``reference_step_us`` and their
+figures also in its units.
+"""
+
+from __future__ import annotations
+
+import time
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+
+import wip_gym  # noqa: F401  (registers the envs)
+
+REFERENCE_ENV = "wip_gym/Krang-v0"
+REFERENCE_SEED = 0
+
+
+class ReferenceStep:
+    """The reference workload, ready to be timed one step at a time: interleaved with a
+    benchmark's own steps, its samples see the same machine load as they do."""
+
+    def __init__(self) -> None:
+        env = gym.make(REFERENCE_ENV)
+        try:
+            env.reset(seed=REFERENCE_SEED)
+            self.model = env.unwrapped.model
+            self.reset_data = mujoco.MjData(self.model)
+            mujoco.mj_copyData(self.reset_data, self.model, env.unwrapped.data)
+        finally:
+            env.close()
+        self.data = mujoco.MjData(self.model)
+
+    def sample(self) -> float:
+        """Wall time (s) of one bare ``mj_step`` from the reset state."""
+        mujoco.mj_copyData(self.data, self.model, self.reset_data)
+        start = time.perf_counter()
+        mujoco.mj_step(self.model, self.data)
+        return time.perf_counter() - start
+
+
+def reference_step_samples(repeats: int = 400, warmup: int = 50) -> np.ndarray:
+    """Wall times (s) of ``repeats`` bare ``mj_step`` calls of :data:`REFERENCE_ENV`'s model,
+    each from its reset state (seed :data:`REFERENCE_SEED`), after ``warmup`` untimed ones."""
+    if repeats < 1 or warmup < 0:
+        raise ValueError(f"repeats must be >= 1 and warmup >= 0, got {repeats}, {warmup}")
+    reference = ReferenceStep()
+    for _ in range(warmup):
+        reference.sample()
+    return np.array([reference.sample() for _ in range(repeats)])
+
+
+def reference_step_us(repeats: int = 400, warmup: int = 50) -> float:
+    """The unit (module docstring) in microseconds."""
+    return float(np.median(reference_step_samples(repeats, warmup)) * 1e6)

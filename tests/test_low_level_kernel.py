@@ -1,0 +1,93 @@
+"""The low level's one-call kernel (``controllers.low_level_kernel``) against the pieces it
+fuses, computed here the plain way: eq. ``iso3`` by ``controllers.isolated_dynamics``, the task
+rows by matrix products with ``E`` and ``e``, the QP by ``T^T T``, the constraints row by row,
+the unconstrained minimiser by ``numpy.linalg.solve``; on random states of both robots."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_wbc import _limits, _load, _realistic_tasks, _set_state
+
+from controllers.isolated_dynamics import isolated_dynamics
+from controllers.task_qp import QPSettings, TaskQP
+from wip_gym.robot_model import RobotModel
+
+
+def _close(actual: np.ndarray, expected: np.ndarray, tol: float = 1e-12) -> None:
+    scale = max(1.0, float(np.abs(expected).max())) if expected.size else 1.0
+    np.testing.assert_allclose(actual, expected, rtol=0.0, atol=tol * scale)
+
+
+@pytest.mark.parametrize("name", ["krang", "planar7"])
+def test_kernel_equals_the_plain_computation(name: str) -> None:
+    robot = RobotModel(_load(name))
+    low, high = _limits(robot)
+    settings = QPSettings()
+    qp = TaskQP(robot, low, high, settings)
+    feasible_seen = {True: 0, False: 0}
+    for seed in range(8):
+        _set_state(robot, 700 + seed, still=seed % 2 == 0)
+        tasks = _realistic_tasks(robot)
+        H, g, C, lower, upper = qp.assemble(robot, None, tasks)  # iso3 inside the kernel
+        kernel = qp.kernel
+        iso = isolated_dynamics(robot)
+        for ours, plain in ((kernel.calA, iso.calA), (kernel.Ph, iso.Ph), (kernel.E, iso.E),
+                            (kernel.e, iso.e)):  # fmt: skip
+            _close(ours, plain)
+        J = np.vstack([task.jacobian(robot) for task in tasks])
+        target = np.concatenate([task.reference_acceleration(robot) for task in tasks])
+        w = np.concatenate([task.weights() for task in tasks])
+        jdot_nu = qp._jdot_nu(robot, tasks)
+        T = w[:, None] * (J @ iso.E)
+        b = w * (target - jdot_nu - J @ iso.e)
+        _close(H, T.T @ T + settings.regularization * np.eye(len(T.T)))
+        _close(g, -T.T @ b)
+        M = qp.M_act
+        m = len(M)
+        _close(C[:m], M @ iso.calA)
+        _close(lower[:m], low - M @ iso.Ph)
+        _close(upper[:m], high - M @ iso.Ph)
+        h = settings.limit_horizon
+        for row, column in enumerate(np.argmax(C[m:], axis=1)):
+            index = column + 1  # x is not a QP variable
+            drift = robot.q[index] + robot.nu[index] * h
+            limits = robot.model.jnt_range[robot.model.dof_jntid[robot.layout.body_dof[
+                index - robot.layout.index_q1 - 1]]]  # fmt: skip
+            _close(lower[m + row], 2.0 * (limits[0] - drift) / h**2)
+            _close(upper[m + row], 2.0 * (limits[1] - drift) / h**2)
+        x = np.linalg.solve(H, -g)
+        _close(kernel.x, x, 1e-9)
+        feasible = bool(np.all(C @ x >= lower) and np.all(C @ x <= upper))
+        assert qp._feasible == feasible
+        feasible_seen[feasible] += 1
+        # the same with the caller's iso3
+        H2, g2, *_ = qp.assemble(robot, iso, tasks)
+        _close(H2, T.T @ T + settings.regularization * np.eye(len(T.T)))
+        _close(g2, -T.T @ b)
+    assert feasible_seen[True] > 0
+
+
+def test_a_task_without_an_exact_jdot_nu_is_an_error() -> None:
+    robot = RobotModel(_load("planar7"))
+    _set_state(robot, 3)
+    tasks = _realistic_tasks(robot)
+
+    class NoDrift:
+        name = "no_drift"
+
+        def __init__(self, task: object) -> None:
+            self._task = task
+
+        def jacobian(self, robot: RobotModel) -> np.ndarray:
+            return self._task.jacobian(robot)  # type: ignore[attr-defined]
+
+        def reference_acceleration(self, robot: RobotModel) -> np.ndarray:
+            return self._task.reference_acceleration(robot)  # type: ignore[attr-defined]
+
+        def weights(self) -> np.ndarray:
+            return self._task.weights()  # type: ignore[attr-defined]
+
+    qp = TaskQP(robot, *_limits(robot), QPSettings())
+    with pytest.raises(ValueError, match="no_drift"):
+        qp.solve(robot, None, [*tasks, NoDrift(tasks[0])])
