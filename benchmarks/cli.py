@@ -16,6 +16,7 @@ import sys
 
 from benchmarks import compare, figures, profile, render, solvers
 from benchmarks.sweep import cli as sweep_cli
+from controllers import jax_setup
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -47,6 +48,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    jax_setup.configure()  # the solvers' JAX settings, before JAX starts (one explicit call)
     try:
         if args.command == "compare":
             compare.run(args)

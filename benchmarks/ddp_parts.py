@@ -116,6 +116,9 @@ def measure(rounds: int = 3) -> dict[str, dict[str, float]]:
 
 
 def main() -> None:
+    from controllers import jax_setup
+
+    jax_setup.configure()  # the solvers' JAX settings, before JAX starts
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=3)
     args = parser.parse_args()

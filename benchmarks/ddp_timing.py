@@ -76,6 +76,9 @@ def bench(problem: str, params: WIPMParams, theta0: float, reps: int, mpc_steps:
 
 
 def main() -> None:
+    from controllers import jax_setup
+
+    jax_setup.configure()  # the solvers' JAX settings, before JAX starts
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--reps", type=int, default=10)
     parser.add_argument("--mpc-steps", type=int, default=200)

@@ -18,6 +18,9 @@ from controllers.planning import plan_to_goal
 
 
 def main() -> None:
+    from controllers import jax_setup
+
+    jax_setup.configure()  # the solvers' JAX settings, before JAX starts
     params, theta0 = krang_params()
     state = np.array([theta0, 0.0, 0.0, 0.0])
     start = time.perf_counter()

@@ -36,7 +36,6 @@ import numpy as np
 
 import wip_gym  # noqa: F401
 from benchmarks.yardstick import reference_step_us
-from controllers import jax_setup  # noqa: F401  (float64)
 from controllers.hierarchical import HierarchicalController
 from controllers.low_level_kernel import KernelLayout
 
@@ -194,6 +193,9 @@ def compare(steps: int, repeats: int) -> dict[str, float]:
 
 
 def main() -> None:
+    from controllers import jax_setup
+
+    jax_setup.configure()  # the solvers' JAX settings, before JAX starts
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=300)
     parser.add_argument("--repeats", type=int, default=5)

@@ -2,9 +2,11 @@
 
     from controllers import HierarchicalController, make_policy
 
-The names below are imported on first use (PEP 562), so ``import controllers`` alone neither
-imports JAX nor applies its settings (``controllers.jax_setup``); the controllers that compile
-JAX code do, when first used.
+The names below are imported on first use (PEP 562), so ``import controllers`` alone does not
+import JAX, and no import changes JAX's settings: the solvers' settings (float64, XLA's loop
+option, the compilation cache) are applied by one explicit call,
+``controllers.jax_setup.configure()``, before JAX starts (wip-bench, the sweep's workers and the
+tests make it); without it the first DDP solver warns what that costs.
 """
 
 from __future__ import annotations

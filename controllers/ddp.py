@@ -98,8 +98,9 @@ previous (shifted) controls as ``U_init`` (warm start). ``DDPSolver.solve`` (als
 ``__call__``) validates the inputs in Python first and raises ``ValueError``. ``ddp_solve`` is
 the one-shot form; it caches solvers by ``(dynamics, running, terminal, config)`` identity.
 
-Float64 is switched on at import (``jax_enable_x64``): DDP's convergence tests and the
-Riccati recursion need it.
+Float64 (``jax_enable_x64``) is needed by DDP's convergence tests and the Riccati recursion:
+``controllers.jax_setup.configure()`` switches it on (an explicit call of the program's entry
+point); a solver built without it warns once (``jax_setup.check``).
 
 Speed (issue 6; ``controllers.jax_setup``). Every loop (the rollouts, the backward scan with the
 derivatives of each step computed inside it, the stage costs, the line search) is written so
@@ -125,7 +126,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from controllers import jax_setup  # noqa: F401  (float64, XLA's loop option, compile cache)
+from controllers import jax_setup
 
 __all__ = [
     "DDPConfig",
@@ -381,6 +382,7 @@ class DDPSolver:
         self.config = config
         self.running_derivatives = running_derivatives
         self.trace_count = 0
+        jax_setup.check()  # warns once if float64 or XLA's loop option is missing
         self.jitted: Callable[[Array, Array, PyTree, PyTree], DDPResult] = jax.jit(self._solve)
 
     def __call__(self, x0: Any, U_init: Any, params: PyTree, refs: PyTree) -> DDPResult:

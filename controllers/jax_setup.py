@@ -1,5 +1,9 @@
-"""Process-wide JAX settings of the controllers (issue 6), applied once at import of any module
-that compiles JAX code (``controllers.ddp``, ``controllers.wipm``).
+"""Process-wide JAX settings of the controllers' solvers, applied by ONE explicit call:
+``controllers.jax_setup.configure()``, before JAX starts (its first computation). wip-gym's entry
+points make it (``wip-bench``, the sweep's workers, the test suite's ``conftest.py``, the tools);
+importing ``controllers`` changes nothing in the process. A program that uses the controllers
+without it (or whose JAX already runs with other settings) gets one warning from :func:`check`,
+when the first DDP solver is built, saying what it costs.
 
 * float64 (``jax_enable_x64``): DDP's convergence tests and the Riccati recursion need it.
 * XLA:CPU's "small while loop" threshold, raised (``xla_cpu_small_while_loop_byte_threshold``,
@@ -26,7 +30,7 @@ from pathlib import Path
 import jax
 from jax._src import xla_bridge  # backends_are_initialized: no public equivalent
 
-__all__ = ["CACHE_ENV", "SMALL_LOOP_ENV", "cache_dir", "configure"]
+__all__ = ["CACHE_ENV", "SMALL_LOOP_ENV", "cache_dir", "check", "configure"]
 
 CACHE_ENV = "WIP_GYM_JAX_CACHE"
 SMALL_LOOP_ENV = "WIP_GYM_XLA_SMALL_LOOP_BYTES"
@@ -78,4 +82,40 @@ def configure() -> None:
         jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
 
 
-configure()
+_checked = False
+
+
+def missing_settings() -> list[str]:
+    """What the running process lacks of the settings above, each with its cost."""
+    missing = []
+    if not jax.config.jax_enable_x64:
+        missing.append(
+            "float64 is off (jax_enable_x64): the DDP would run in float32, losing the "
+            "precision its convergence tests and Riccati recursion need"
+        )
+    flag = _small_loop_flag()
+    if flag is not None and SMALL_LOOP_OPTION not in os.environ.get("XLA_FLAGS", ""):
+        missing.append(
+            f"XLA's small-loop option is not set ({flag}): the DDP's loops run operation by "
+            "operation, about 10x slower"
+        )
+    return missing
+
+
+def check() -> None:
+    """Warn once per process if the solver settings are missing (see :func:`missing_settings`);
+    never changes JAX's configuration."""
+    global _checked
+    if _checked:
+        return
+    _checked = True
+    missing = missing_settings()
+    if missing:
+        warnings.warn(
+            "wip-gym's JAX settings are not applied: "
+            + "; ".join(missing)
+            + ". Call controllers.jax_setup.configure() before JAX starts (wip-bench, the "
+            "sweep's workers and the tests do).",
+            RuntimeWarning,
+            stacklevel=3,
+        )

@@ -79,8 +79,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from controllers import jax_setup  # noqa: F401  (float64, XLA's loop option, compile cache)
-
 if TYPE_CHECKING:
     from wip_gym.robot_model import WIPMParameters
 

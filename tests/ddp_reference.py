@@ -80,6 +80,9 @@ def _krang() -> tuple[WIPMParams, float]:
 
 
 def main() -> None:
+    from controllers import jax_setup
+
+    jax_setup.configure()  # the solvers' JAX settings, before JAX starts
     params, theta0 = _krang()
     data = compute(params, theta0) | params_to_arrays(params) | {"theta0": np.array(theta0)}
     np.savez_compressed(PATH, **data)

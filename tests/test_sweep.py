@@ -174,8 +174,6 @@ def test_workers_get_the_jax_settings_before_jax_starts(cluster, tmp_path):
     def report_settings(job):
         import jax
 
-        import controllers.jax_setup  # noqa: F401  (what the controllers import)
-
         return {
             "x64": bool(jax.config.jax_enable_x64),
             "xla_flags": os.environ.get("XLA_FLAGS"),

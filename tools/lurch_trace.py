@@ -81,6 +81,9 @@ def print_series(series: np.ndarray, start: float, stop: float, every: float) ->
 
 
 def main() -> None:
+    from controllers import jax_setup
+
+    jax_setup.configure()  # the solvers' JAX settings, before JAX starts
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--env", default="wip_gym/PlanarTray-v0")
     parser.add_argument("--goal", type=float, default=2.0)

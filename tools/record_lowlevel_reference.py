@@ -95,6 +95,9 @@ def record(case: str, steps: int, every: int) -> dict[str, np.ndarray]:
 
 
 def main() -> None:
+    from controllers import jax_setup
+
+    jax_setup.configure()  # the solvers' JAX settings, before JAX starts
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=300)
     parser.add_argument("--every", type=int, default=10)

@@ -93,7 +93,9 @@ def _run_task(
     job: Mapping[str, Any], episode_fn: EpisodeFn | None, timeout_s: float
 ) -> dict[str, Any]:
     from benchmarks.sweep.worker import execute
+    from controllers import jax_setup
 
+    jax_setup.configure()  # before the episode's first JAX computation (idempotent)
     if episode_fn is None:
         from benchmarks.sweep.episode import run_episode_job
 
