@@ -8,7 +8,7 @@ PYTHON ?= python3
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: install test lint demo clean
+.PHONY: install test lint typecheck demo clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -26,6 +26,10 @@ test: $(STAMP)
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
+
+# The public API's types ([tool.mypy] in pyproject.toml lists the files).
+typecheck: $(STAMP)
+	$(VENV)/bin/mypy
 
 demo: $(STAMP)
 	MUJOCO_GL=$${MUJOCO_GL:-egl} $(VENV)/bin/wip-bench compare --env wip_gym/PlanarTray-v0 \

@@ -43,6 +43,7 @@ import gymnasium as gym
 
 from benchmarks import presets
 from controllers import registry
+from wip_gym.envs.base import wip_env
 
 FIXED_ENV_ARGUMENTS = ("robot", "tray")  # set by the task class
 RENDER_ENV_ARGUMENTS = ("render_mode", "width", "height")  # how to draw, not what happens
@@ -168,15 +169,18 @@ def _load(path: str) -> Any:
 def _env_signature(env_id: str) -> tuple[tuple[str, Any, Any], ...]:
     entry = gym.spec(env_id).entry_point
     env_class = _load(entry) if isinstance(entry, str) else entry
+    if not isinstance(env_class, type):
+        raise ValueError(f"{env_id}'s entry point is not a class: {entry!r}")
     found: dict[str, tuple[Any, Any]] = {}
     for cls in reversed(env_class.__mro__):
-        if "__init__" not in vars(cls) or cls.__module__.startswith(("gymnasium", "builtins")):
+        init = vars(cls).get("__init__")
+        if init is None or cls.__module__.startswith(("gymnasium", "builtins")):
             continue
         try:
-            hints = typing.get_type_hints(cls.__init__)
+            hints = typing.get_type_hints(init)
         except Exception:  # noqa: BLE001 - an unresolvable annotation: fall back to defaults
             hints = {}
-        for parameter in inspect.signature(cls.__init__).parameters.values():
+        for parameter in inspect.signature(init).parameters.values():
             if parameter.name == "self" or parameter.kind in (
                 parameter.VAR_KEYWORD,
                 parameter.VAR_POSITIONAL,
@@ -210,7 +214,7 @@ def _task_goal(env_id: str) -> tuple[tuple[float, ...], bool]:
     an env: the task classes set the goal in their constructors, where no signature shows it)."""
     env = gym.make(env_id)
     try:
-        base = env.unwrapped
+        base = wip_env(env)
         return tuple(float(v) for v in base.goal), bool(base.robot.layout.planar)
     finally:
         env.close()

@@ -29,6 +29,7 @@ from benchmarks.metrics import EpisodeMetrics
 from benchmarks.overrides import config_dict, parse_value, resolve_run
 from benchmarks.scenario import resolve_env_id
 from controllers import registry
+from wip_gym.envs.base import wip_env
 
 PROGRESS_INTERVAL_S = 0.1  # simulated seconds between progress callbacks
 
@@ -77,8 +78,11 @@ def rollout(
         policy = registry.make_policy(controller, env, config)
         policy.reset(observation, info)
         setup_s = time.perf_counter() - setup_start
-        dt = float(env.unwrapped.dt)
-        metrics = EpisodeMetrics(dt, info, observation, env.action_space.low, env.action_space.high)
+        base = wip_env(env)
+        dt = float(base.dt)
+        low = np.asarray(base.action_space.low, dtype=np.float64)
+        high = np.asarray(base.action_space.high, dtype=np.float64)
+        metrics = EpisodeMetrics(dt, info, observation, low, high)
         if on_step is not None:
             on_step(env, info, 0)
         steps = int(round(duration / dt))

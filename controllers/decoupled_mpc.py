@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from controllers.high_level import HighLevel, HighLevelConfig
-from controllers.planning import PlanConfig
+from controllers.planning import Plan, PlanConfig
 from controllers.policy import ModelChoice, PolicyBase, TaskInfo, plan_counters
 from controllers.posture import PostureHold
 from controllers.wipm import (
@@ -79,7 +79,7 @@ class DecoupledMPCController(PolicyBase):
         super().__init__(robot, task, config)
         self.high_level = HighLevel(config.high_level, task.control_dt)
         self._posture = PostureHold(config.posture_frequency_hz, config.posture_damping_ratio)
-        self.plan = None
+        self.plan: Plan | None = None
 
     def reset(self, observation: dict[str, Array], info: dict[str, Any]) -> None:
         robot = self.robot
@@ -98,9 +98,12 @@ class DecoupledMPCController(PolicyBase):
 
     @property
     def plan_violations(self) -> tuple[str, ...]:
-        return self.plan.violations
+        return () if self.plan is None else self.plan.violations
 
     def __call__(self, observation: dict[str, Array]) -> Array:
+        if self.plan is None:
+            raise RuntimeError(f"{type(self).__name__}: reset() before the first step")
+        plan = self.plan
         start = time.perf_counter()
         robot, lay, cfg = self.robot, self.robot.layout, self.config
         robot.update(observation["qpos"], observation["qvel"])
@@ -126,11 +129,11 @@ class DecoupledMPCController(PolicyBase):
         last = self.high_level.last_solution
         self._recorder.record(
             t=self._step * self.task.control_dt, wipm_state=state,
-            wipm_reference=self.plan.state(ref.mpc_index),
+            wipm_reference=plan.state(ref.mpc_index),
             theta_d=ref.theta, thetad_d=ref.thetad, thdd_ref=ref.thdd, tau_0=ref.tau_0,
             thdd_command=thdd, torque=applied, clip_excess=self._clip.last_excess,
             joint_deviation=self._posture.last_deviation,
-            mpc_rejected=self.high_level.mpc.rejected, mpc_cost=last.cost,
+            mpc_rejected=self.high_level.rejections, mpc_cost=last.cost,
             compute_time=time.perf_counter() - start,
         )  # fmt: skip
         self._step += 1
@@ -141,7 +144,7 @@ class DecoupledMPCController(PolicyBase):
         if self.plan is not None:
             counters.update(plan_counters(self.plan))
         if self.high_level.mpc is not None:
-            counters["mpc_rejections"] = float(self.high_level.mpc.rejected)
+            counters["mpc_rejections"] = float(self.high_level.rejections)
         return counters
 
     @property

@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 
 from controllers.disturbance_tasks import DisturbanceRejectingTask, ObserverSettings
 from controllers.high_level import HighLevel, HighLevelConfig
-from controllers.planning import PlanConfig
+from controllers.planning import Plan, PlanConfig
 from controllers.policy import ModelChoice, PolicyBase, TaskInfo, plan_counters
 from controllers.task_qp import QPSettings, TaskQP
 from controllers.tasks import (
@@ -179,8 +179,9 @@ AUTHORS_JOINT_WEIGHTS = {"base": (0.0, 1.0), "waist": (0.0, 10.0), "torso": (1.0
                          4: (10.0, 1.0), 5: (5.0, 1.0), 6: (5.0, 1.0), 7: (5.0, 1.0)}  # fmt: skip
 # our joint names -> the authors' kind: Krang's own names; the planar arm's shoulder, elbow and
 # wrist pitch are Krang's bending joints 2, 4, 6
-_JOINT_KIND = {"waist": "waist", "spine": "waist", "torso": "torso", "kinect": "kinect",
-               "shoulder": 2, "elbow": 4, "wrist": 6}  # fmt: skip
+_JOINT_KIND: dict[str, str | int] = {"waist": "waist", "spine": "waist", "torso": "torso",
+                                     "kinect": "kinect", "shoulder": 2, "elbow": 4,
+                                     "wrist": 6}  # fmt: skip
 
 
 def authors_joint_weights(robot: RobotModel) -> tuple[Array, Array]:
@@ -191,7 +192,7 @@ def authors_joint_weights(robot: RobotModel) -> tuple[Array, Array]:
     posture, speed = [], []
     for dof in robot.layout.body_dof:
         name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, m.dof_jntid[dof]) or ""
-        kind: str | int | None = _JOINT_KIND.get(name)
+        kind = _JOINT_KIND.get(name)
         if kind is None and name[:-1].endswith("_j") and name[-1].isdigit():
             kind = int(name[-1])
         if kind is None:
@@ -235,7 +236,7 @@ class HierarchicalController(PolicyBase):
             mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, name) for name in ("ee", "ee_right")
         ]
         self._sites = [s for s in self._sites if s >= 0]
-        self.plan = None
+        self.plan: Plan | None = None
         self._fallbacks = 0
         lay = robot.layout
         self._mpc_tau_0 = not lay.planar and config.spin_source == "mpc_tau_0"
@@ -279,6 +280,8 @@ class HierarchicalController(PolicyBase):
             posture_weights, speed_weights = authors_joint_weights(robot)
         if cfg.posture_weight != "authors":
             posture_weights = np.full(len(columns), float(cfg.posture_weight))
+        # the two ignores below: tasks.py annotates PostureTask.columns as float64, they are
+        # indices (an int array); to go when that annotation is fixed
         if len(columns):
             tasks.append(PostureTask(robot.q[columns].copy(), posture_weights, cfg.posture_kp,
                                      cfg.posture_kv, columns=columns))  # fmt: skip
@@ -343,6 +346,9 @@ class HierarchicalController(PolicyBase):
 
     # ------------------------------------------------------------------ step
     def __call__(self, observation: dict[str, Array]) -> Array:
+        if self.plan is None:
+            raise RuntimeError(f"{type(self).__name__}: reset() before the first step")
+        plan = self.plan
         start = time.perf_counter()
         robot = self.robot
         robot.update(observation["qpos"], observation["qvel"])
@@ -367,11 +373,11 @@ class HierarchicalController(PolicyBase):
         action = self.finish(actuators)
         self._recorder.record(
             t=self._step * self.task.control_dt, wipm_state=wipm_state(robot),
-            wipm_reference=self.plan.state(self._ref.mpc_index),
+            wipm_reference=plan.state(self._ref.mpc_index),
             theta_d=self._ref.theta, thetad_d=self._ref.thetad, thdd_ref=self._ref.thdd,
             tau_0=self._ref.tau_0, torque=action, clip_excess=self._clip.last_excess,
             qp_solved=solution.solved, qp_iterations=solution.iterations,
-            qp_failures=self.qp.failures, mpc_rejected=self.high_level.mpc.rejected,
+            qp_failures=self.qp.failures, mpc_rejected=self.high_level.rejections,
             theta_error=robot.theta - self._ref.theta, mpc_time=mpc_time, qp_time=qp_time,
             compute_time=time.perf_counter() - start,
         )  # fmt: skip
@@ -394,7 +400,7 @@ class HierarchicalController(PolicyBase):
         QP's own count), ``mpc_rejections``, ``plan_violations``, ``plan_converged``."""
         counters = {"qp_fallbacks": float(self._fallbacks), "qp_failures": float(self.qp.failures)}
         if self.high_level.mpc is not None:
-            counters["mpc_rejections"] = float(self.high_level.mpc.rejected)
+            counters["mpc_rejections"] = float(self.high_level.rejections)
         if self.plan is not None:
             counters.update(plan_counters(self.plan))
         return counters

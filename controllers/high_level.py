@@ -109,5 +109,13 @@ class HighLevel:
         )
 
     @property
-    def last_solution(self) -> MPCStep | None:
+    def last_solution(self) -> MPCStep:
+        """The latest MPC solution (``RuntimeError`` before the first ``reference``)."""
+        if self._last is None:
+            raise RuntimeError("HighLevel.reference() first")
         return self._last
+
+    @property
+    def rejections(self) -> int:
+        """The MPC solutions rejected since ``reset`` (0 before it)."""
+        return 0 if self.mpc is None else self.mpc.rejected

@@ -208,6 +208,11 @@ class Plan:
 def planning_problem(planar: bool, config: PlanConfig, a_max: float, heading_given: bool
                      ) -> WIPMProblem:  # fmt: skip
     c = config
+    # state and control sizes differ: planar 4 and 1, spatial 8 and 2
+    q: tuple[float, ...]
+    q_terminal: tuple[float, ...]
+    r: tuple[float, ...]
+    r_rate: tuple[float, ...]
     if planar:
         q = (c.q_theta, c.q_thetad, c.q_position, c.q_speed)
         q_terminal = (c.q_terminal,) * 4
@@ -267,7 +272,7 @@ def plan_to_goal(
     goal_xy = np.asarray(goal_xy, dtype=float)
     if goal_xy.shape != (2,) or not np.all(np.isfinite(goal_xy)):
         raise ValueError(f"goal must be a finite (x, y), got {goal_xy!r}")
-    a_max = config.acceleration_bound(cup_friction, float(params.gravity))
+    a_max = config.acceleration_bound(cup_friction, float(np.asarray(params.gravity)))
     problem = planning_problem(planar, config, a_max, goal_heading is not None)
     if planar:
         goal = np.array([0.0, 0.0, goal_xy[0], 0.0])

@@ -24,6 +24,7 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from wip_gym.envs.base import wip_env
 from wip_gym.robot_model import RobotModel
 from wip_gym.scene import build_model
 
@@ -44,6 +45,13 @@ class Policy(Protocol):
 
     @property
     def counters(self) -> dict[str, float]: ...
+
+
+class PolicyConfig(Protocol):
+    """What ``PolicyBase.for_env`` reads of a policy's config: which model it plans with."""
+
+    @property
+    def model(self) -> ModelChoice: ...
 
 
 @dataclass(frozen=True)
@@ -73,7 +81,7 @@ def controller_model(env: gym.Env, choice: ModelChoice) -> mujoco.MjModel:
     A free tray (``tray_attachment="free"``) is welded at its nominal place in the nominal model
     (level on the hand at the reset pose, as in a welded-tray env): the designer knows the
     tray's mass, not its contact with the hand."""
-    base = env.unwrapped
+    base = wip_env(env)
     if choice == "oracle":
         return base.model
     if choice != "nominal":
@@ -85,13 +93,13 @@ def controller_model(env: gym.Env, choice: ModelChoice) -> mujoco.MjModel:
 
 
 def task_info(env: gym.Env, choice: ModelChoice) -> TaskInfo:
-    base = env.unwrapped
+    base = wip_env(env)
     return TaskInfo(
-        goal=np.asarray(base.goal, dtype=float),
+        goal=np.asarray(base.goal, dtype=np.float64),
         cup_friction=base.cup_friction,
         control_dt=float(base.dt),
-        torque_low=np.asarray(env.action_space.low, dtype=float),
-        torque_high=np.asarray(env.action_space.high, dtype=float),
+        torque_low=np.asarray(base.action_space.low, dtype=np.float64),
+        torque_high=np.asarray(base.action_space.high, dtype=np.float64),
         model_choice=choice,
     )
 
@@ -180,7 +188,7 @@ class PolicyBase:
     :meth:`assemble` (or its own map) and returns :meth:`finish` of it from ``__call__``; it
     adds its own counters by overriding :meth:`controller_counters`."""
 
-    config_class: ClassVar[type]
+    config_class: ClassVar[type[PolicyConfig]]
     registry_name: ClassVar[str] = "policy"
 
     def __init__(self, robot: RobotModel, task: TaskInfo, config: Any) -> None:

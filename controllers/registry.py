@@ -96,8 +96,8 @@ def register(name: str, controller_cls: Any, config_cls: Any, **fields: Any) -> 
     if not isinstance(name, str) or not name:
         raise ValueError(f"a controller name must be a non-empty string, got {name!r}")
     if not isinstance(config_cls, str):
-        if not dataclasses.is_dataclass(config_cls):
-            raise ValueError(f"config_cls must be a dataclass, got {config_cls!r}")
+        if not (isinstance(config_cls, type) and dataclasses.is_dataclass(config_cls)):
+            raise ValueError(f"config_cls must be a dataclass class, got {config_cls!r}")
         known = {f.name for f in dataclasses.fields(config_cls)}
         unknown = sorted(set(fields) - known)
         if unknown:

@@ -245,7 +245,7 @@ class PostureTask:
     kp: float = 10.0
     kv: float = 20.0
     name: str = "posture"
-    columns: Array = field(default_factory=lambda: np.zeros(0, dtype=int))
+    columns: NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, dtype=int))
 
     def jacobian(self, robot: RobotModel) -> Array:
         rows = np.zeros((len(self.columns), robot.layout.n_min))

@@ -111,13 +111,13 @@ def test_every_controller_has_the_paper_preset(name: str) -> None:
 def test_bad_configs_are_refused() -> None:
     for bad in ("fast", -1.0, 0.0, float("nan"), True):
         with pytest.raises(ValueError, match="a_max"):
-            PlanConfig(a_max=bad)  # type: ignore[arg-type]
+            PlanConfig(a_max=bad)
     with pytest.raises(ValueError, match="spin_source"):
-        HierarchicalConfig(spin_source="wheels")  # type: ignore[arg-type]
+        HierarchicalConfig(spin_source="wheels")
     with pytest.raises(ValueError, match="ee_position_weight"):
-        HierarchicalConfig(ee_position_weight=(1.0, 2.0))  # type: ignore[arg-type]
+        HierarchicalConfig(ee_position_weight=(1.0, 2.0))
     with pytest.raises(ValueError, match="gains_amps"):
-        DecoupledConfig(gains_amps=(1.0, 2.0))  # type: ignore[arg-type]
+        DecoupledConfig(gains_amps=(1.0, 2.0))
 
 
 # ------------------------------------------------------------------------ the plan's a_max

@@ -59,7 +59,7 @@ def _low_level_only(case: str) -> tuple[gym.Env, HierarchicalController]:
     policy = HierarchicalController.for_env(
         env, HierarchicalConfig(tray_mode=mode, hand_observer_bandwidth=None)
     )
-    policy.high_level.reset = lambda *args: SimpleNamespace()  # type: ignore[method-assign]
+    policy.high_level.reset = lambda *args: SimpleNamespace()
     policy.reset(obs, info)
     return env, policy
 

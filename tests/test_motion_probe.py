@@ -26,7 +26,7 @@ def test_exact_jdot_nu_equals_the_finite_difference(env_id: str, goal, mode: str
     env = gym.make(env_id, goal=goal)
     obs, info = env.reset(seed=3)
     policy = HierarchicalController.for_env(env, HierarchicalConfig(tray_mode=mode))
-    policy.high_level.reset = lambda *args: SimpleNamespace()  # type: ignore[method-assign]
+    policy.high_level.reset = lambda *args: SimpleNamespace()
     policy.reset(obs, info)
     robot, qp = policy.robot, policy.qp
     rng = np.random.default_rng(0)

@@ -53,7 +53,7 @@ def record(case: str, steps: int, every: int) -> dict[str, np.ndarray]:
     solve = policy.qp.solve
     state = {"step": 0, "obs": obs}
 
-    def recording_solve(robot, iso, tasks):  # type: ignore[no-untyped-def]
+    def recording_solve(robot, iso, tasks):
         if state["step"] % every:
             return solve(robot, iso, tasks)
         H, g, C, lower, upper = policy.qp.assemble(robot, iso, tasks)
@@ -77,7 +77,7 @@ def record(case: str, steps: int, every: int) -> dict[str, np.ndarray]:
         samples["step"].append(np.array(state["step"]))
         return solution
 
-    policy.qp.solve = recording_solve  # type: ignore[method-assign]
+    policy.qp.solve = recording_solve
     qpos, qvel, actions = [], [], []
     for n in range(steps):
         state["step"], state["obs"] = n, obs

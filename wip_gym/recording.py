@@ -22,6 +22,8 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
+from wip_gym.envs.base import wip_env
+
 DEFAULT_FPS = 30.0
 RECORDING_VERSION = 1
 # make() arguments that choose how to render, not what happens: not part of the scenario
@@ -195,7 +197,7 @@ class EpisodeRecorder:
 
     def on_reset(self, env: gym.Env, info: dict[str, Any]) -> None:
         """Start (or restart) the recording at the reset state: frame 0."""
-        base = env.unwrapped
+        base = wip_env(env)
         if self._scenario is None:
             self._scenario = scenario_of(env)
         self._dt = float(base.dt)
@@ -210,7 +212,7 @@ class EpisodeRecorder:
         """After step ``step_index`` (0-based): note a lost cup; keep a frame at the rate."""
         if self._every == 0:
             raise RuntimeError("EpisodeRecorder.on_step before on_reset")
-        base = env.unwrapped
+        base = wip_env(env)
         self._steps = step_index + 1
         if not info.get("cup_on_tray", True) and math.isnan(self._cup_lost_at):
             self._cup_lost_at = float(base.data.time)

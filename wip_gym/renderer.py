@@ -17,6 +17,7 @@ import atexit
 import weakref
 from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import Literal, overload
 
 import mujoco
 import numpy as np
@@ -128,6 +129,18 @@ class FrameRenderer:
         _LIVE.add(self)
         _register_exit_hook()  # after the first GL context: runs before eglTerminate
 
+    @overload
+    def render(
+        self, data: mujoco.MjData, hidden_geoms: Iterable[int] = (), depth: Literal[False] = False
+    ) -> NDArray[np.uint8]: ...
+    @overload
+    def render(
+        self, data: mujoco.MjData, hidden_geoms: Iterable[int], depth: Literal[True]
+    ) -> NDArray[np.float32]: ...
+    @overload
+    def render(
+        self, data: mujoco.MjData, hidden_geoms: Iterable[int] = (), depth: bool = False
+    ) -> NDArray[np.uint8] | NDArray[np.float32]: ...
     def render(
         self, data: mujoco.MjData, hidden_geoms: Iterable[int] = (), depth: bool = False
     ) -> NDArray[np.uint8] | NDArray[np.float32]:
@@ -137,6 +150,33 @@ class FrameRenderer:
         in the hand). ``depth``: the depth image instead (metres)."""
         return self.render_qpos(data.qpos, hidden_geoms, depth, data.mocap_pos, data.mocap_quat)
 
+    @overload
+    def render_qpos(
+        self,
+        qpos: NDArray[np.float64],
+        hidden_geoms: Iterable[int] = (),
+        depth: Literal[False] = False,
+        mocap_pos: NDArray[np.float64] | None = None,
+        mocap_quat: NDArray[np.float64] | None = None,
+    ) -> NDArray[np.uint8]: ...
+    @overload
+    def render_qpos(
+        self,
+        qpos: NDArray[np.float64],
+        hidden_geoms: Iterable[int],
+        depth: Literal[True],
+        mocap_pos: NDArray[np.float64] | None = None,
+        mocap_quat: NDArray[np.float64] | None = None,
+    ) -> NDArray[np.float32]: ...
+    @overload
+    def render_qpos(
+        self,
+        qpos: NDArray[np.float64],
+        hidden_geoms: Iterable[int] = (),
+        depth: bool = False,
+        mocap_pos: NDArray[np.float64] | None = None,
+        mocap_quat: NDArray[np.float64] | None = None,
+    ) -> NDArray[np.uint8] | NDArray[np.float32]: ...
     def render_qpos(
         self,
         qpos: NDArray[np.float64],

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Iterator, Sequence
+from collections.abc import Generator, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -21,11 +21,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 import wip_gym  # noqa: F401  (registers the environments)
+from wip_gym.envs.base import wip_env
 from wip_gym.overlay import OverlayValues, draw_overlay
 from wip_gym.recording import Recording
 from wip_gym.renderer import FAST, FrameRenderer, RenderSettings, check_size
 
 DEFAULT_SIZE = (480, 320)
+#: a stream of RGB frames that owns resources (a decoder, a writer): close it when done
+Frames = Generator[NDArray[np.uint8], None, None]
 # A state that moved less than this (m or rad, any qpos entry) since the last drawn frame is
 # not drawn again: 0.1 mm at the default framing (a 480 x 320 frame spans ~2.5 m) is 1/50 of a
 # pixel. Once a controller has arrived, about half the frames of a 25 s episode are such.
@@ -68,7 +71,7 @@ def open_video(path: str | Path, fps: float, first_frame: NDArray[np.uint8]) -> 
     return writer
 
 
-def read_frames(path: str | Path) -> Iterator[NDArray[np.uint8]]:
+def read_frames(path: str | Path) -> Frames:
     """The frames of a video, decoded one at a time (ffmpeg started as in :func:`open_video`)."""
     with warnings.catch_warnings():
         warnings.filterwarnings(
@@ -144,7 +147,7 @@ class Replay:
         self.recording = recording
         self.overlay = overlay
         self._env = gym.make(recording.env_id, max_episode_steps=None, **recording.env_kwargs)
-        base = self._env.unwrapped
+        base = wip_env(self._env)
         base.reset(seed=0)
         model = base.model
         if recording.qpos.shape[1] != model.nq:
@@ -167,6 +170,7 @@ class Replay:
         rec = self.recording
         if (
             still_from is not None
+            and self._scene is not None
             and self._scene_of == still_from
             and rec.payload_visible[k] == rec.payload_visible[still_from]
             and np.abs(rec.qpos[k] - rec.qpos[still_from]).max() <= self.still_tolerance
@@ -180,7 +184,7 @@ class Replay:
             image = draw_overlay(image, overlay_values(rec, k))
         return image
 
-    def frames(self, fps: float | None = None, count: int | None = None) -> Iterator[np.ndarray]:
+    def frames(self, fps: float | None = None, count: int | None = None) -> Frames:
         """The video's frames at ``fps`` (default: the recording's), ``count`` of them (default:
         the episode's; more hold the last frame). A recorded frame is drawn once and repeated
         while it is the one shown; a robot standing still (within ``still_tolerance``) is not
@@ -192,7 +196,7 @@ class Replay:
                 f"fps {fps} is above the recording's {rec.fps}: record at a higher rate"
             )
         count = frame_count(rec, fps) if count is None else count
-        last_k, image = -1, None
+        last_k = -1  # no frame index: the first iteration draws
         for j in range(count):
             k = source_index(rec, fps, j)
             if k != last_k:
@@ -252,7 +256,7 @@ def tile(images: Sequence[np.ndarray], rows: int, columns: int) -> NDArray[np.ui
     return out
 
 
-def _held(frames: Iterator[np.ndarray], count: int) -> Iterator[np.ndarray]:
+def _held(frames: Iterator[NDArray[np.uint8]], count: int) -> Frames:
     """``frames`` cut or padded to ``count`` by holding the last one."""
     produced, last = 0, None
     for image in frames:
@@ -267,7 +271,7 @@ def _held(frames: Iterator[np.ndarray], count: int) -> Iterator[np.ndarray]:
         yield last
 
 
-def _tee(frames: Iterator[np.ndarray], path: str | Path, fps: float) -> Iterator[np.ndarray]:
+def _tee(frames: Iterator[NDArray[np.uint8]], path: str | Path, fps: float) -> Frames:
     """``frames``, also written to their own video at ``path`` (closed when exhausted or
     closed)."""
     writer = None
@@ -314,8 +318,8 @@ def render_grid(
     rows, columns = grid_layout(n)
     count = max(frame_count(r, fps) for r in recordings)
     replays: list[Replay] = []
-    inner: list[Iterator[np.ndarray]] = []
-    sources: list[Iterator[np.ndarray]] = []
+    inner: list[Frames] = []
+    sources: list[Frames] = []
     try:
         for rec, video, own in zip(recordings, panel_videos, also_write, strict=True):
             if video is not None:

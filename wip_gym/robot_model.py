@@ -563,9 +563,9 @@ class RobotModel:
         w = lay.wheel_bodies[0]
         wheel_inertia = np.asarray(m.body_inertia[w])
         # inertia about the wheel's axle (y of the wheel body) and about a diameter
-        R = np.zeros(9)
-        mujoco.mju_quat2Mat(R, m.body_iquat[w])
-        R = R.reshape(3, 3)
+        flat = np.zeros(9)
+        mujoco.mju_quat2Mat(flat, m.body_iquat[w])
+        R = flat.reshape(3, 3)
         tensor = R @ np.diag(wheel_inertia) @ R.T
         com = self._com.copy()
         return WIPMParameters(
@@ -598,6 +598,9 @@ class RobotModel:
         n = lay.n_min
         if q.shape != (n,) or nu.shape != (n,):
             raise ValueError(f"expected q and nu of shape ({n},), got {q.shape}, {nu.shape}")
+        axle = np.asarray(axle_xy, dtype=float)
+        if axle.shape != (2,):
+            raise ValueError(f"axle_xy must be (x, y), got {axle_xy!r}")
         r, sep = lay.wheel_radius, lay.wheel_separation
         qpos = np.zeros(lay.nq)
         qvel = np.zeros(lay.nv)
@@ -616,7 +619,7 @@ class RobotModel:
             return qpos, qvel
         psi, psid = float(q[1]), float(nu[1])
         o = lay.root_qpos
-        qpos[o : o + 3] = axle_xy[0], axle_xy[1], r
+        qpos[o : o + 3] = axle[0], axle[1], r
         # yaw (cos, 0, 0, sin)(psi / 2) times pitch (cos, 0, sin, 0)(q1 / 2), written out
         cy, sy = math.cos(psi / 2), math.sin(psi / 2)
         cp, sp = math.cos(q1 / 2), math.sin(q1 / 2)

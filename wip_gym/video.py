@@ -17,6 +17,7 @@ import numpy as np
 
 import wip_gym  # noqa: F401  (registers the environments, sets MUJOCO_GL)
 from wip_gym.camera import COMPUTED_CAMERAS
+from wip_gym.envs.base import wip_env
 from wip_gym.recording import DEFAULT_FPS, EpisodeRecorder, frame_interval
 from wip_gym.replay import DEFAULT_SIZE, open_video, parse_size, render_video
 
@@ -44,7 +45,7 @@ def record_episode(
     ``camera``. Stops at termination, truncation or after ``seconds``. The recording is saved
     beside the video (``.npz``, for ``wip-bench render``). Returns the last ``info`` with
     ``frames`` and ``steps`` added."""
-    base = env.unwrapped
+    base = wip_env(env)
     dt = base.dt
     max_steps = None if seconds is None else int(round(seconds / dt))
     recorder = EpisodeRecorder(fps=fps, label=label)
@@ -52,7 +53,7 @@ def record_episode(
     recorder.on_reset(env, info)
     if policy is not None and hasattr(policy, "reset"):
         policy.reset(obs, info)
-    zero = np.zeros(env.action_space.shape)
+    zero = np.zeros(base.action_space.shape)
     steps = 0
     while max_steps is None or steps < max_steps:
         action = zero if policy is None else policy(obs)

@@ -10,6 +10,7 @@ import math
 from collections.abc import Collection
 from typing import Any
 
+import gymnasium as gym
 import mujoco
 import numpy as np
 from gymnasium import spaces, utils
@@ -118,6 +119,9 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
     """
 
     metadata = {"render_modes": ["human", "rgb_array", "depth_array"]}
+    #: the actuators' torques (N m) between their control limits (float32, as MujocoEnv sets)
+    action_space: spaces.Box[np.float32]
+    observation_space: spaces.Dict
 
     def __init__(
         self,
@@ -249,7 +253,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         self._layout = lay
         self._cos_psi, self._sin_psi = 1.0, 0.0
         self._nq, self._nv = lay.nq, lay.nv
-        obs = {
+        obs: dict[str, spaces.Space[Any]] = {
             "qpos": spaces.Box(-np.inf, np.inf, (lay.nq,), np.float64),
             "qvel": spaces.Box(-np.inf, np.inf, (lay.nv,), np.float64),
             "goal": spaces.Box(-np.inf, np.inf, (2,), np.float64),
@@ -364,7 +368,8 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         return dict(self._arguments)
 
     # ----------------------------------------------------------------- reset
-    def reset_model(self) -> dict[str, NDArray[np.float64]]:
+    # MujocoEnv types observations as one array; ours is the Dict space's dict
+    def reset_model(self) -> dict[str, NDArray[np.float64]]:  # type: ignore[override]
         m, d, lay = self.model, self.data, self.robot.layout
         rng = self.np_random
         m.body_mass[:] = self._nominal_mass
@@ -465,7 +470,8 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         return info
 
     # ------------------------------------------------------------------ step
-    def step(
+    # MujocoEnv types observations as one array and info as floats; ours are dicts of arrays
+    def step(  # type: ignore[override]
         self, action: NDArray[np.floating]
     ) -> tuple[dict[str, NDArray[np.float64]], float, bool, bool, dict[str, Any]]:
         action = self._check_action(action)
@@ -790,9 +796,11 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             self._frame_renderer = FrameRenderer(
                 self.model, self.width, self.height, camera=self._render_camera
             )
-        depth = self.render_mode == "depth_array"
-        frame = self._frame_renderer.render(self.data, self.render_hidden_geoms(), depth=depth)
-        if self._render_overlay and not depth:
+        hidden = self.render_hidden_geoms()
+        if self.render_mode == "depth_array":
+            return self._frame_renderer.render(self.data, hidden, depth=True)
+        frame = self._frame_renderer.render(self.data, hidden)
+        if self._render_overlay:
             frame = draw_overlay(frame, self.overlay_values())
         return frame
 
@@ -801,3 +809,11 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             self._frame_renderer.close()
             self._frame_renderer = None
         super().close()
+
+
+def wip_env(env: gym.Env[Any, Any]) -> WIPEnv:
+    """The wip-gym env under ``env``'s wrappers; ``ValueError`` for any other env."""
+    base = env.unwrapped
+    if not isinstance(base, WIPEnv):
+        raise ValueError(f"expected a wip-gym env (a WIPEnv), got {type(base).__name__}")
+    return base
