@@ -239,3 +239,14 @@ def test_the_report_says_when_commits_are_mixed_and_survives_a_torn_line(tmp_pat
     assert summary["episodes_missing"] == len(episodes) - 2
     assert cut_torn_tail(tmp_path) == len('{"id": "torn", "sta')
     assert Path(tmp_path / "episodes.jsonl").read_text().endswith("\n")
+
+
+def test_episodes_run_replicate_by_replicate_so_a_partial_sweep_is_balanced():
+    spec = parse_spec(ISSUE_SPEC, validate_env=False)
+    episodes = spec.episodes()
+    per_replicate = len(spec.cells()) * len(spec.controllers)
+    first = episodes[:per_replicate]
+    assert {e.replicate for e in first} == {0}
+    assert {e.cell_index for e in first} == set(range(len(spec.cells())))
+    assert [e.replicate for e in episodes] == sorted(e.replicate for e in episodes)
+    assert len({e.id for e in episodes}) == len(episodes) == per_replicate * spec.seeds

@@ -122,12 +122,16 @@ class SweepSpec:
         ]
 
     def episodes(self) -> list[Episode]:
-        """Every episode, cell by cell, replicate by replicate, controller by controller."""
+        """Every episode, replicate by replicate, cell by cell, controller by controller: the
+        first replicate of every cell runs before any cell's second, so a sweep stopped early
+        (or resumed later) holds a balanced map rather than finished and missing cells. An
+        episode's id and seed do not depend on this order."""
         random_spec = {key: dist.as_json() for key, dist in self.random.items()}
         episodes = []
-        for index, cell in enumerate(self.cells()):
-            resolved = {**self.base, **cell}
-            for replicate in range(self.seeds):
+        cells = list(enumerate(self.cells()))
+        for replicate in range(self.seeds):
+            for index, cell in cells:
+                resolved = {**self.base, **cell}
                 seed = episode_seed(self.env, self.preset, resolved, replicate, self.seed)
                 draws = {key: dist.draw(key_stream(seed, key)) for key, dist in self.random.items()}
                 for controller in self.controllers:
