@@ -16,7 +16,7 @@ import sys
 
 from benchmarks import compare, figures, profile, render, solvers
 from benchmarks.sweep import cli as sweep_cli
-from controllers import jax_setup
+from controllers.optimizer import jax_setup
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,4 +1,4 @@
-"""``wip-bench compare``: scenarios x controllers x seeds, a table, JSON and videos (issue 3).
+"""``wip-bench compare``: scenarios x controllers x seeds, a table, JSON and videos.
 
 Episode ``i`` of a run with ``--seed S`` uses ``benchmarks.seeding.episode_seed(S, i)`` (= S + i).
 Episodes run in parallel in spawned processes with ``--jobs`` (JAX does not survive a fork).

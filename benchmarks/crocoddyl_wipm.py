@@ -1,15 +1,16 @@
 """The WIPM as a crocoddyl problem: the peer ``wip-bench solvers`` compares our DDP with.
 
-The same discrete problem as ``controllers.wipm_problem.WIPMProblem`` (the explicit-Euler step
-after the paper's eq. ``WIPdyn`` / the 3-D model, the running cost with its ``dt`` factor, the
-acceleration and ``theta`` penalties, the terminal cost; eq. (1) of ``controllers.ddp``), written
-as a Python action model: a subclass of ``crocoddyl.ActionModelAbstract`` whose ``calc`` and
-``calcDiff`` fill crocoddyl's data with NumPy arrays, node by node, as a user of crocoddyl with
-a model in Python would. The values come from the problem's own JAX functions (the dynamics,
-``jax.jacfwd`` of it, ``jax.grad`` / ``jax.hessian`` of the costs: the derivatives the NumPy
-iLQR peer uses, iLQR's Gauss-Newton terms only), jitted once per problem, one call per node
-returning one flat NumPy vector. So every peer solves exactly our problem; what differs is the
-solver (crocoddyl's ``SolverDDP``, C++) and the per-node Python model it calls back.
+The same discrete problem as ``controllers.simplified.wipm_problem.WIPMProblem`` (the
+explicit-Euler step after the paper's eq. ``WIPdyn`` / the 3-D model, the running cost with its
+``dt`` factor, the acceleration and ``theta`` penalties, the terminal cost; eq. (1) of
+``controllers.optimizer.ddp``), written as a Python action model: a subclass of
+``crocoddyl.ActionModelAbstract`` whose ``calc`` and ``calcDiff`` fill crocoddyl's data with NumPy
+arrays, node by node, as a user of crocoddyl with a model in Python would. The values come from the
+problem's own JAX functions (the dynamics, ``jax.jacfwd`` of it, ``jax.grad`` / ``jax.hessian`` of
+the costs: the derivatives the NumPy iLQR peer uses, iLQR's Gauss-Newton terms only), jitted once
+per problem, one call per node returning one flat NumPy vector. So every peer solves exactly our
+problem; what differs is the solver (crocoddyl's ``SolverDDP``, C++) and the per-node Python model
+it calls back.
 
 Solver settings: crocoddyl's ``SolverDDP`` with its own globalisation (regularisation of
 ``Q_uu`` and ``V_xx``, line search over ``2^0 ... 2^-9``), started at our ``mu_init``. Its
@@ -30,8 +31,8 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 from numpy.typing import NDArray
 
-from controllers.wipm import WIPMParams
-from controllers.wipm_problem import WIPMProblem
+from controllers.simplified.wipm import WIPMParams
+from controllers.simplified.wipm_problem import WIPMProblem
 
 __all__ = [
     "CrocoddylResult",
@@ -110,8 +111,8 @@ def _flat_params(params: WIPMParams) -> FloatArray:
 
 class WIPMActionModel(crocoddyl.ActionModelAbstract):
     """One running node: ``x_next = dynamics(x, u)``, ``cost = running(x, u, (s_ref, params))``
-    (``controllers.wipm_problem``), with ``p = [s_ref, params]`` (set by :class:`CrocoddylWIPM`
-    before each solve)."""
+    (``controllers.simplified.wipm_problem``), with ``p = [s_ref, params]`` (set by
+    :class:`CrocoddylWIPM` before each solve)."""
 
     def __init__(self, kernels: _Kernels, p: FloatArray) -> None:
         crocoddyl.ActionModelAbstract.__init__(self, crocoddyl.StateVector(kernels.nx), kernels.nu)
@@ -183,7 +184,7 @@ class CrocoddylWIPM:
     """crocoddyl's ``SolverDDP`` on one :class:`WIPMProblem` over a fixed horizon.
 
     ``solve(x0, U_init, params, s_refs, max_iterations, th_stop)``: ``s_refs`` are the ``N + 1``
-    reference states (the ``refs[0]`` leaf of ``controllers.wipm_problem.refs_for``); the
+    reference states (the ``refs[0]`` leaf of ``controllers.simplified.wipm_problem.refs_for``); the
     problem's nodes keep their models between calls and only their references change, so the
     MPC reuses one problem and one solver (as a crocoddyl MPC would).
     """

@@ -1,17 +1,19 @@
 """The DDP half of ``wip-bench solvers``: our JAX DDP against crocoddyl and a NumPy iLQR on
-the WIPM (issue 6 item 1).
+the WIPM.
 
 Two problems, both from Krang's ``lambda(q)`` at its initial pose (``Krang-v0``,
 ``reset(seed=0)``, no reset noise):
 
-* planar: the planar 4-state WIPM (paper eq. ``WIPdyn``, ERRATA 1) from ``[theta0, 0, 0, 0]``
-  to ``x = 2 m``;
+* planar: the planar 4-state WIPM (paper eq. ``WIPdyn``, docs/ERRATA.md §1) from
+  ``[theta0, 0, 0, 0]`` to ``x = 2 m``;
 * 3d: the 3-D 8-state WIPM from ``[0, 0, theta0, 0, 0, 0, 0, 0]`` to ``(X0, Y0) = (2, 1)``.
 
-Three solvers of the same discrete problem (``controllers.wipm_problem``: explicit Euler, the
-running cost with its ``dt``, the penalties, the terminal cost; eq. (1) of ``controllers.ddp``):
+Three solvers of the same discrete problem (``controllers.simplified.wipm_problem``: explicit
+Euler, the running cost with its ``dt``, the penalties, the terminal cost; eq. (1) of
+``controllers.optimizer.ddp``):
 
-* ``ours``: ``controllers.ddp`` through ``controllers.planning`` / ``controllers.mpc``;
+* ``ours``: ``controllers.optimizer.ddp`` through ``controllers.high_level.planning`` /
+  ``controllers.high_level.mpc``;
 * ``crocoddyl``: crocoddyl's ``SolverDDP`` with the problem as a Python action model
   (:mod:`benchmarks.crocoddyl_wipm`);
 * ``numpy_ilqr``: :mod:`benchmarks.numpy_ilqr` (our algorithm, step for step, in NumPy loops).
@@ -53,11 +55,11 @@ import wip_gym  # noqa: F401  (registers the environments)
 from benchmarks.crocoddyl_wipm import CrocoddylWIPM
 from benchmarks.numpy_ilqr import NumpyILQR
 from benchmarks.yardstick import ReferenceStep
-from controllers.mpc import ModelPredictiveController, MPCConfig, mpc_problem
-from controllers.planning import Plan, PlanConfig, plan_to_goal, planning_problem
+from controllers.high_level.mpc import ModelPredictiveController, MPCConfig, mpc_problem
+from controllers.high_level.planning import Plan, PlanConfig, plan_to_goal, planning_problem
 from controllers.policy import make_robot
-from controllers.wipm import WIPMParams, params_from_lambda
-from controllers.wipm_problem import ddp_solver_for, refs_for
+from controllers.simplified.wipm import WIPMParams, params_from_lambda
+from controllers.simplified.wipm_problem import ddp_solver_for, refs_for
 
 ENV_ID = "wip_gym/Krang-v0"
 PROBLEMS = ("planar", "3d")
@@ -157,8 +159,9 @@ def _plan_runs(
     return max(first - statistics.median(times), 0.0), times, iterations, result
 
 
-def _plan_entry(compile_s: float, times: list[float], iterations: list[int], result: Any
-                ) -> dict[str, Any]:  # fmt: skip
+def _plan_entry(
+    compile_s: float, times: list[float], iterations: list[int], result: Any
+) -> dict[str, Any]:
     return {
         "compile_s": compile_s,
         "plan_ms": stats_ms(times),
@@ -202,8 +205,9 @@ class _PeerMPC:
 REFERENCE_SAMPLES: list[float] = []  # the unit's samples taken between the timed MPC steps
 
 
-def _mpc_times(step: Callable[[int], Any], warmup: Callable[[], Any], steps: int, label: str
-               ) -> tuple[float, list[float]]:  # fmt: skip
+def _mpc_times(
+    step: Callable[[int], Any], warmup: Callable[[], Any], steps: int, label: str
+) -> tuple[float, list[float]]:
     """``mpc_compile_s`` (a throwaway first step minus the median) and the step times (s).
     After every step one reference step (``benchmarks.yardstick``) is timed too, into
     ``REFERENCE_SAMPLES``, so that the unit sees the same machine load as the steps."""
@@ -216,8 +220,9 @@ def _mpc_times(step: Callable[[int], Any], warmup: Callable[[], Any], steps: int
     return max(first - statistics.median(times), 0.0), times
 
 
-def bench_problem(problem: str, params: WIPMParams, theta0: float, config: DDPBenchConfig
-                  ) -> dict[str, Any]:  # fmt: skip
+def bench_problem(
+    problem: str, params: WIPMParams, theta0: float, config: DDPBenchConfig
+) -> dict[str, Any]:
     """The three solvers on one problem: optimum checks, then timings (module docstring)."""
     planar = problem == "planar"
     plan_config = PlanConfig(horizon_s=config.plan_horizon_s)
@@ -236,8 +241,9 @@ def bench_problem(problem: str, params: WIPMParams, theta0: float, config: DDPBe
 
     # --- offline plan: each solver's converged solve, timed over repetitions
     ours = ddp_solver_for(wipm, ddp)
-    runs = _plan_runs(lambda: ours(z0, U0, params, refs), config.plan_reps_ours,
-                      f"{problem} plan ours")  # fmt: skip
+    runs = _plan_runs(
+        lambda: ours(z0, U0, params, refs), config.plan_reps_ours, f"{problem} plan ours"
+    )
     solvers["ours"] = _plan_entry(*runs)
     croc = CrocoddylWIPM(wipm, params, steps, ddp.mu_init)
     runs = _plan_runs(
@@ -248,8 +254,11 @@ def bench_problem(problem: str, params: WIPMParams, theta0: float, config: DDPBe
     solvers["crocoddyl"] = _plan_entry(*runs)
     running, terminal = wipm.costs()
     numpy_peer = NumpyILQR(wipm.dynamics(), running, terminal, ddp)
-    runs = _plan_runs(lambda: numpy_peer(z0, U0, params, refs), config.plan_reps_peers,
-                      f"{problem} plan numpy_ilqr")  # fmt: skip
+    runs = _plan_runs(
+        lambda: numpy_peer(z0, U0, params, refs),
+        config.plan_reps_peers,
+        f"{problem} plan numpy_ilqr",
+    )
     solvers["numpy_ilqr"] = _plan_entry(*runs)
     plan_costs = {name: solvers[name]["plan_cost"] for name in SOLVERS}
     plan_check = _check("offline plan", problem, plan_costs, solvers)
@@ -304,8 +313,11 @@ def bench_problem(problem: str, params: WIPMParams, theta0: float, config: DDPBe
     # --- MPC: one step run to convergence from the same shifted warm start (after the timed
     # steps, so that every solver's first MPC call, its compilation, falls in the timing's
     # throwaway step; a disagreement still raises and no figure is reported)
-    converged_ddp = replace(mpc_config.ddp, max_iterations=PlanConfig().ddp.max_iterations,
-                            tolerance=PlanConfig().ddp.tolerance)  # fmt: skip
+    converged_ddp = replace(
+        mpc_config.ddp,
+        max_iterations=PlanConfig().ddp.max_iterations,
+        tolerance=PlanConfig().ddp.tolerance,
+    )
     check_index = min(steps // 4, max(steps - 2, 1))
     previous = ModelPredictiveController(plan, mpc_config).step(
         check_index - 1, plan.states[check_index - 1], params
@@ -343,8 +355,9 @@ def bench_problem(problem: str, params: WIPMParams, theta0: float, config: DDPBe
     }
 
 
-def _check(what: str, problem: str, costs: dict[str, float], entries: dict[str, dict[str, Any]]
-           ) -> dict[str, Any]:  # fmt: skip
+def _check(
+    what: str, problem: str, costs: dict[str, float], entries: dict[str, dict[str, Any]]
+) -> dict[str, Any]:
     """The converged solves' costs agree with ours to :data:`COST_TOLERANCE` (raises if not)."""
     rel = {name: relative_difference(cost, costs["ours"]) for name, cost in costs.items()}
     converged = {name: bool(entries[name]["plan_converged"]) for name in costs}

@@ -16,13 +16,13 @@ own jitted call (median of 200 calls, then the median over ``--rounds`` interlea
 A piece's cost minus ``empty_call`` over the horizon is its cost per step of the loop.
 Measured (2 shared cores, load 4; units of 12-16 us), planar / 3-D: empty_call 1.1 / 1.5,
 rollout 3.0 / 7.3, cost 4.0 / 5.2, backward 12.2 / 24.4, solve_0 14.6 / 29.4, solve_2 22.3 /
-59.7 units. With XLA's small-loop option (``controllers.jax_setup``) a loop step costs little
-beyond its arithmetic (the option off doubles ``cost``); the time is the arithmetic of the
+59.7 units. With XLA's small-loop option (``controllers.optimizer.jax_setup``) a loop step costs
+little beyond its arithmetic (the option off doubles ``cost``); the time is the arithmetic of the
 backward pass (about 1.7 / 2.9 us per step: every step's ``jacfwd`` of the dynamics, the
 penalty's derivatives, the Riccati step), then the rollouts with their costs, then the floor of
 one call. Separate top-level loops of one call cost more than the same loops nested in one
 (four rollouts as four loops: 130 us, nested in one loop: 47 us, one alone: 31 us), which is
-why ``controllers.ddp`` runs the warm start's rollout inside its iteration loop.
+why ``controllers.optimizer.ddp`` runs the warm start's rollout inside its iteration loop.
 """
 
 from __future__ import annotations
@@ -55,14 +55,15 @@ def _problem_calls(problem: str, params: Any, theta0: float) -> dict[str, Callab
     import jax.numpy as jnp  # noqa: PLC0415
 
     from benchmarks.ddp_bench import GOALS, initial_state  # noqa: PLC0415
-    from controllers.ddp import DDPConfig, rollout, trajectory_cost  # noqa: PLC0415
-    from controllers.mpc import MPCConfig, mpc_problem  # noqa: PLC0415
-    from controllers.planning import plan_to_goal  # noqa: PLC0415
-    from controllers.wipm_problem import ddp_solver_for, refs_for  # noqa: PLC0415
+    from controllers.high_level.mpc import MPCConfig, mpc_problem  # noqa: PLC0415
+    from controllers.high_level.planning import plan_to_goal  # noqa: PLC0415
+    from controllers.optimizer.ddp import DDPConfig, rollout, trajectory_cost  # noqa: PLC0415
+    from controllers.simplified.wipm_problem import ddp_solver_for, refs_for  # noqa: PLC0415
 
     planar = problem == "planar"
-    plan = plan_to_goal(initial_state(problem, theta0), params, np.array(GOALS[problem]),
-                        planar=planar)  # fmt: skip
+    plan = plan_to_goal(
+        initial_state(problem, theta0), params, np.array(GOALS[problem]), planar=planar
+    )
     wipm = mpc_problem(planar, MPCConfig(), plan.a_max, plan.theta_max)
     horizon, index = MPCConfig().steps, 400
     refs = jax.tree.map(jnp.asarray, refs_for(plan.window(index, horizon + 1), params))
@@ -116,7 +117,7 @@ def measure(rounds: int = 3) -> dict[str, dict[str, float]]:
 
 
 def main() -> None:
-    from controllers import jax_setup
+    from controllers.optimizer import jax_setup
 
     jax_setup.configure()  # the solvers' JAX settings, before JAX starts
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -124,8 +125,10 @@ def main() -> None:
     args = parser.parse_args()
     for problem, pieces in measure(args.rounds).items():
         unit = pieces.pop("unit_us")
-        print(f"{problem} (unit {unit:.1f} us): "
-              + ", ".join(f"{name} {value:.1f}" for name, value in pieces.items()))  # fmt: skip
+        print(
+            f"{problem} (unit {unit:.1f} us): "
+            + ", ".join(f"{name} {value:.1f}" for name, value in pieces.items())
+        )
 
 
 if __name__ == "__main__":

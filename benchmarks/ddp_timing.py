@@ -1,4 +1,4 @@
-"""Timing of the JAX DDP alone (issue 6): the offline plan (N = 2000) and the MPC step, as the
+"""Timing of the JAX DDP alone: the offline plan (N = 2000) and the MPC step, as the
 caller sees them and as a bare jitted call, for the planar and the 3-D WIPM.
 
 ``python -m benchmarks.ddp_timing [--reps R] [--mpc-steps S]`` prints medians (ms). The problems
@@ -17,10 +17,10 @@ import jax
 import numpy as np
 
 from benchmarks.ddp_bench import GOALS, krang_params
-from controllers.mpc import ModelPredictiveController
-from controllers.planning import PlanConfig, plan_to_goal, planning_problem
-from controllers.wipm import WIPMParams
-from controllers.wipm_problem import ddp_solver_for, refs_for
+from controllers.high_level.mpc import ModelPredictiveController
+from controllers.high_level.planning import PlanConfig, plan_to_goal, planning_problem
+from controllers.simplified.wipm import WIPMParams
+from controllers.simplified.wipm_problem import ddp_solver_for, refs_for
 
 
 def _time(fn: Callable[[], Any]) -> float:
@@ -36,8 +36,11 @@ def _median_ms(times: list[float]) -> float:
 def bench(problem: str, params: WIPMParams, theta0: float, reps: int, mpc_steps: int) -> dict:
     planar = problem == "planar"
     config = PlanConfig()
-    state = (np.array([theta0, 0.0, 0.0, 0.0]) if planar
-             else np.array([0.0, 0.0, theta0, 0.0, 0.0, 0.0, 0.0, 0.0]))  # fmt: skip
+    state = (
+        np.array([theta0, 0.0, 0.0, 0.0])
+        if planar
+        else np.array([0.0, 0.0, theta0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    )
     goal_xy = np.asarray(GOALS[problem])
     plan = plan_to_goal(state, params, goal_xy, planar=planar, config=config)  # compiles
     wipm = planning_problem(planar, config, config.acceleration_bound(None), False)
@@ -53,8 +56,9 @@ def bench(problem: str, params: WIPMParams, theta0: float, reps: int, mpc_steps:
     mpc.step(500, plan.states[500], params)  # compiles
     traces = mpc.compiled.trace_count  # the compiled step is shared process-wide
     mpc = ModelPredictiveController(plan)
-    step_times = [_time(lambda i=i: mpc.step(i, plan.states[i], params).control)
-                  for i in range(mpc_steps)]  # fmt: skip
+    step_times = [
+        _time(lambda i=i: mpc.step(i, plan.states[i], params).control) for i in range(mpc_steps)
+    ]
     # the bare compiled solve on device arrays, same inputs as the MPC's last call
     refs_mpc = jax.device_put(refs_for(plan.window(0, mpc.horizon + 1), params))
     warm = jax.device_put(plan.control_window(0, mpc.horizon))
@@ -76,7 +80,7 @@ def bench(problem: str, params: WIPMParams, theta0: float, reps: int, mpc_steps:
 
 
 def main() -> None:
-    from controllers import jax_setup
+    from controllers.optimizer import jax_setup
 
     jax_setup.configure()  # the solvers' JAX settings, before JAX starts
     parser = argparse.ArgumentParser(description=__doc__)
@@ -88,8 +92,9 @@ def main() -> None:
         start = time.perf_counter()
         out = bench(problem, params, theta0, args.reps, args.mpc_steps)
         setup = time.perf_counter() - start
-        cells = "  ".join(f"{k}={v:.3f}" if isinstance(v, float) else f"{k}={v}"
-                          for k, v in out.items())  # fmt: skip
+        cells = "  ".join(
+            f"{k}={v:.3f}" if isinstance(v, float) else f"{k}={v}" for k, v in out.items()
+        )
         print(f"{problem:6s} {cells}  (total {setup:.1f} s)", flush=True)
 
 

@@ -38,9 +38,9 @@ from numpy.typing import NDArray
 from benchmarks.overrides import resolve_run
 from benchmarks.rollout import rollout
 from benchmarks.scenario import Scenario, check_task_flags, parse_controllers, resolve_env_id
-from controllers.planning import Plan
+from controllers.high_level.planning import Plan
 from controllers.registry import controller_names
-from controllers.wipm_problem import PLANAR_STATE, SPATIAL_STATE
+from controllers.simplified.wipm_problem import PLANAR_STATE, SPATIAL_STATE
 from wip_gym.scene import TRAY_HALF_SIZE
 
 Array = NDArray[np.float64]
@@ -178,8 +178,14 @@ class Run:
         return float(np.max(np.abs(self.info[key]))) if key in self.info else None
 
 
-def project(points: Array, camera_position: Array, camera_matrix: Array, fovy_deg: float,
-            width: int, height: int) -> Array:  # fmt: skip
+def project(
+    points: Array,
+    camera_position: Array,
+    camera_matrix: Array,
+    fovy_deg: float,
+    width: int,
+    height: int,
+) -> Array:
     """World points (k, 3) to pixel coordinates (k, 2) ``(u right, v down)`` of a MuJoCo
     camera (it looks along its -z, x to the right, y up; ``fovy`` is the vertical field of
     view); points behind the camera come out as NaN."""
@@ -212,8 +218,11 @@ def _robot_extent_points(base: Any) -> Array:
         body = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, name)
         if body >= 0:
             roots.add(m.body_rootid[body])
-    geoms = [g for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] in roots
-             and m.geom_bodyid[g] != 0]  # fmt: skip
+    geoms = [
+        g
+        for g in range(m.ngeom)
+        if m.body_rootid[m.geom_bodyid[g]] in roots and m.geom_bodyid[g] != 0
+    ]
     corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
     points = [d.geom_xpos[g] + m.geom_rbound[g] * corners for g in geoms]
     return np.concatenate(points) if points else np.zeros((0, 3))
@@ -227,8 +236,11 @@ def _skeleton(base: Any) -> Array:
     root = m.body_rootid[lay.base_body]
     wheels = set(lay.wheel_bodies)
     bodies = {b for b in range(1, m.nbody) if m.body_rootid[b] == root and b not in wheels}
-    segments = [(d.xpos[m.body_parentid[b]], d.xpos[b]) for b in sorted(bodies)
-                if m.body_parentid[b] in bodies]  # fmt: skip
+    segments = [
+        (d.xpos[m.body_parentid[b]], d.xpos[b])
+        for b in sorted(bodies)
+        if m.body_parentid[b] in bodies
+    ]
     for name in ("ee", "ee_right"):
         site = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, name)
         if site >= 0:
@@ -243,12 +255,14 @@ def _tray_ends(base: Any) -> Array | None:
         return None
     R = d.xmat[body].reshape(3, 3)
     top = 2 * TRAY_HALF_SIZE[2]
-    return np.array([d.xpos[body] + R @ np.array([s * TRAY_HALF_SIZE[0], 0.0, top])
-                     for s in (-1.0, 1.0)])  # fmt: skip
+    return np.array(
+        [d.xpos[body] + R @ np.array([s * TRAY_HALF_SIZE[0], 0.0, top]) for s in (-1.0, 1.0)]
+    )
 
 
-def render_snapshots(env: Any, qpos: Array, qvel: Array, com_world: Array, axle_world: Array,
-                     run: Run) -> list[Snapshot]:  # fmt: skip
+def render_snapshots(
+    env: Any, qpos: Array, qvel: Array, com_world: Array, axle_world: Array, run: Run
+) -> list[Snapshot]:
     """Restore each chosen instant's state into the env, render it and project the marks."""
     base = env.unwrapped
     m, d = base.model, base.data
@@ -267,8 +281,7 @@ def render_snapshots(env: Any, qpos: Array, qvel: Array, com_world: Array, axle_
         camera_position = d.cam_xpos[camera].copy()
         camera_matrix = d.cam_xmat[camera].reshape(3, 3).copy()
 
-        def to_pixels(points: Array, c: Array = camera_position, R: Array = camera_matrix
-                      ) -> Array:  # fmt: skip
+        def to_pixels(points: Array, c: Array = camera_position, R: Array = camera_matrix) -> Array:
             return project(points, c, R, float(m.cam_fovy[camera]), width, height)
 
         extent = to_pixels(_robot_extent_points(base))
@@ -309,8 +322,7 @@ def render_snapshots(env: Any, qpos: Array, qvel: Array, com_world: Array, axle_
     return snapshots
 
 
-def run_controller(scenario: Scenario, controller: str, seed: int, width: int, height: int
-                   ) -> Run:  # fmt: skip
+def run_controller(scenario: Scenario, controller: str, seed: int, width: int, height: int) -> Run:
     """One seeded episode of ``controller`` on ``scenario`` (the one rollout, its metrics),
     recorded for the figures."""
     env_kwargs: dict[str, Any] = {
@@ -405,8 +417,9 @@ def wipm_references(run: Run) -> dict[str, tuple[Array, Array]]:
     names = PLANAR_STATE if run.planar else SPATIAL_STATE
     if run.plan is not None:
         keep = run.plan.times <= run.duration + 1e-9
-        return {name: (run.plan.times[keep], run.plan.states[keep, i])
-                for i, name in enumerate(names)}  # fmt: skip
+        return {
+            name: (run.plan.times[keep], run.plan.states[keep, i]) for i, name in enumerate(names)
+        }
     diag = run.diagnostics
     return {
         name: (diag["t"], diag[f"{name}_ref"])
@@ -431,9 +444,10 @@ def _outcome(run: Run) -> str:
     elif "cup_on_tray" in run.info:
         parts.append("cup kept")
     parts.append(
-        f"goal reached at {run.reached_at:.2f} s" if run.reached_at is not None else
-        "goal not reached"
-    )  # fmt: skip
+        f"goal reached at {run.reached_at:.2f} s"
+        if run.reached_at is not None
+        else "goal not reached"
+    )
     return ", ".join(parts)
 
 
@@ -455,29 +469,59 @@ def wipm_figure(run: Run, path: Path) -> Path:
     ax.set_ylabel(r"control $\ddot\theta$ (rad/s$^2$)")
     if run.plan is not None:
         keep = run.plan.times[:-1] <= run.duration + 1e-9
-        ax.plot(run.plan.times[:-1][keep], run.plan.controls[keep, 0], "--", color="tab:orange",
-                lw=1.5, label="plan (DDP)")  # fmt: skip
+        ax.plot(
+            run.plan.times[:-1][keep],
+            run.plan.controls[keep, 0],
+            "--",
+            color="tab:orange",
+            lw=1.5,
+            label="plan (DDP)",
+        )
     if "thdd_ref" in run.diagnostics:
-        ax.plot(run.diagnostics["t"], run.diagnostics["thdd_ref"], "-", color="tab:blue",
-                lw=1.0, label=r"MPC $\ddot\theta^{ref}$")  # fmt: skip
+        ax.plot(
+            run.diagnostics["t"],
+            run.diagnostics["thdd_ref"],
+            "-",
+            color="tab:blue",
+            lw=1.0,
+            label=r"MPC $\ddot\theta^{ref}$",
+        )
     else:
-        ax.text(0.5, 0.92, "no MPC: LQR on the wheel torques", transform=ax.transAxes,
-                ha="center", va="top", fontsize=9, color="0.3")  # fmt: skip
+        ax.text(
+            0.5,
+            0.92,
+            "no MPC: LQR on the wheel torques",
+            transform=ax.transAxes,
+            ha="center",
+            va="top",
+            fontsize=9,
+            color="0.3",
+        )
     ax = axes.flat[5]
     torque = run.diagnostics.get("torque")
     if torque is not None:
         torque = np.atleast_2d(torque)
         palette = colormaps["tab10" if torque.shape[1] <= 10 else "tab20"].colors
         columns = torque.shape[1]
-        same = np.array([[np.allclose(torque[:, i], torque[:, j]) for j in range(columns)]
-                         for i in range(columns)])  # fmt: skip
+        same = np.array(
+            [
+                [np.allclose(torque[:, i], torque[:, j]) for j in range(columns)]
+                for i in range(columns)
+            ]
+        )
         for i, name in enumerate(run.actuators[:columns]):
             # an actuator with the torque of an earlier one (a planar robot's two wheels) is
             # dashed over the earlier one's wider line, so both stay visible
             copy = same[i, :i].any()
             width = 2.2 if same[i, i + 1 :].any() else 0.9
-            ax.plot(run.diagnostics["t"], torque[:, i], "--" if copy else "-", lw=width,
-                    color=palette[i % len(palette)], label=name)  # fmt: skip
+            ax.plot(
+                run.diagnostics["t"],
+                torque[:, i],
+                "--" if copy else "-",
+                lw=width,
+                color=palette[i % len(palette)],
+                label=name,
+            )
         ax.legend(fontsize=7, ncol=2, loc="best")
     ax.set_ylabel("joint torques (N m)")
     ax.set_title("every actuator", fontsize=9)
@@ -515,8 +559,7 @@ def snapshots_figure(run: Run, path: Path) -> Path:
         for j, segments in enumerate(snap.ghosts):
             alpha = 0.25 + 0.5 * (j + 1) / (len(snap.ghosts) + 1)
             for segment in segments:
-                ax.plot(*segment.T, "-", color="0.15", lw=1.2, alpha=alpha,
-                        solid_capstyle="round")  # fmt: skip
+                ax.plot(*segment.T, "-", color="0.15", lw=1.2, alpha=alpha, solid_capstyle="round")
         ax.plot(*snap.trail.T, "-", color="tab:blue", lw=1.0, alpha=0.45)
         ax.plot(*np.stack([snap.axle, snap.com]).T, "-", color="tab:blue", lw=1.0)
         ax.plot(*snap.com, "o", ms=7, mfc="tab:blue", mec="white", mew=1.0)
@@ -573,8 +616,7 @@ def comparison_figure(runs: list[Run], path: Path) -> Path:
         ax.set_visible(False)
     outcomes = "; ".join(f"{r.controller}: {_outcome(r)}" for r in runs)
     note = " (dotted: cup lost)" if "cup_on_tray" in runs[0].info else ""
-    fig.suptitle(f"{runs[0].env_id}: controllers side by side{note}\n{outcomes}",
-                 fontsize=10)  # fmt: skip
+    fig.suptitle(f"{runs[0].env_id}: controllers side by side{note}\n{outcomes}", fontsize=10)
     fig.savefig(path, dpi=DPI)
     return path
 

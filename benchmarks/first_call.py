@@ -1,5 +1,5 @@
 """The first plan and the first MPC step of a new process: compilation, or loading it from JAX's
-persistent cache (issue 6). Planar WIPM with Krang's ``lambda(q)``, goal 2 m.
+persistent cache. Planar WIPM with Krang's ``lambda(q)``, goal 2 m.
 
     WIP_GYM_JAX_CACHE=$(mktemp -d) python -m benchmarks.first_call   # empty cache: compiles
 
@@ -13,12 +13,12 @@ import time
 import numpy as np
 
 from benchmarks.ddp_bench import GOALS, krang_params
-from controllers.mpc import ModelPredictiveController
-from controllers.planning import plan_to_goal
+from controllers.high_level.mpc import ModelPredictiveController
+from controllers.high_level.planning import plan_to_goal
 
 
 def main() -> None:
-    from controllers import jax_setup
+    from controllers.optimizer import jax_setup
 
     jax_setup.configure()  # the solvers' JAX settings, before JAX starts
     params, theta0 = krang_params()

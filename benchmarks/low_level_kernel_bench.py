@@ -1,4 +1,4 @@
-"""The low level's kernel (``controllers.low_level_kernel``) in NumPy against the same arithmetic
+"""The low level's kernel (``controllers.low_level.kernel``) in NumPy against the same arithmetic
 as a jitted JAX function, on the inputs of a real ``unified`` closed loop on KrangTray-v0.
 
     python -m benchmarks.low_level_kernel_bench [--steps 300] [--repeats 5]
@@ -37,7 +37,7 @@ import numpy as np
 import wip_gym  # noqa: F401
 from benchmarks.yardstick import reference_step_us
 from controllers.hierarchical import HierarchicalController
-from controllers.low_level_kernel import KernelLayout
+from controllers.low_level.kernel import KernelLayout
 
 Inputs = tuple[np.ndarray, ...]
 
@@ -53,8 +53,12 @@ def record_inputs(steps: int) -> tuple[KernelLayout, Any, list[Inputs]]:
     inputs: list[Inputs] = []
     for _ in range(steps):
         action = policy(obs)
-        inputs.append(tuple(np.array(a) for a in (robot.A, robot.h, qp._J, qp._target,
-                                                  qp._bias, qp._w, robot.q, robot.nu)))  # fmt: skip
+        inputs.append(
+            tuple(
+                np.array(a)
+                for a in (robot.A, robot.h, qp._J, qp._target, qp._bias, qp._w, robot.q, robot.nu)
+            )
+        )
         obs, *_ = env.step(action)
     env.close()
     return qp.kernel.layout, robot.layout, inputs
@@ -72,8 +76,7 @@ def jax_kernel(layout: KernelLayout) -> Callable[..., Any]:
     index = jnp.asarray(layout.limit_indices)
     C_limit = jnp.zeros((len(columns), n)).at[jnp.arange(len(columns)), columns].set(1.0)
 
-    def kernel(A: Any, h: Any, J: Any, target: Any, jdot_nu: Any, w: Any, q: Any, nu: Any
-               ) -> Any:  # fmt: skip
+    def kernel(A: Any, h: Any, J: Any, target: Any, jdot_nu: Any, w: Any, q: Any, nu: Any) -> Any:
         a_xx, a_xq, h_x, h_q = A[0, 0], A[1:, 0], h[0], h[1:]
         A_star = A[1:, 1:] - jnp.outer(a_xq, a_xq) / a_xx
         beta = 1.0 / (1.0 + a_xq[k] / (r * a_xx))
@@ -91,10 +94,12 @@ def jax_kernel(layout: KernelLayout) -> Callable[..., Any]:
         offset = M @ Ph
         drift = q[index] + nu[index] * layout.limit_horizon
         scale_limit = 2.0 / layout.limit_horizon**2
-        lower = jnp.concatenate([layout.torque_low - offset,
-                                 (layout.limit_min - drift) * scale_limit])  # fmt: skip
-        upper = jnp.concatenate([layout.torque_high - offset,
-                                 (layout.limit_max - drift) * scale_limit])  # fmt: skip
+        lower = jnp.concatenate(
+            [layout.torque_low - offset, (layout.limit_min - drift) * scale_limit]
+        )
+        upper = jnp.concatenate(
+            [layout.torque_high - offset, (layout.limit_max - drift) * scale_limit]
+        )
         x = cho_solve(cho_factor(H), -g)
         Cx = C @ x
         feasible = jnp.all(Cx >= lower) & jnp.all(Cx <= upper)
@@ -107,8 +112,8 @@ def before_kernel(layout: KernelLayout, robot_layout: Any) -> Callable[..., Any]
     """The pre-kernel sequence of calls for the same five steps."""
     from types import SimpleNamespace  # noqa: PLC0415
 
-    from controllers.isolated_dynamics import isolated_dynamics  # noqa: PLC0415
-    from controllers.task_qp import feasible_unconstrained_minimiser  # noqa: PLC0415
+    from controllers.low_level.isolated_dynamics import isolated_dynamics  # noqa: PLC0415
+    from controllers.low_level.task_qp import feasible_unconstrained_minimiser  # noqa: PLC0415
 
     M = layout.actuator_map
     n = layout.n_min - 1
@@ -117,8 +122,7 @@ def before_kernel(layout: KernelLayout, robot_layout: Any) -> Callable[..., Any]
     reg = layout.regularization * np.eye(n)
     index, horizon = layout.limit_indices, layout.limit_horizon
 
-    def kernel(A: Any, h: Any, J: Any, target: Any, jdot_nu: Any, w: Any, q: Any, nu: Any
-               ) -> Any:  # fmt: skip
+    def kernel(A: Any, h: Any, J: Any, target: Any, jdot_nu: Any, w: Any, q: Any, nu: Any) -> Any:
         iso = isolated_dynamics(SimpleNamespace(layout=robot_layout, A=A, h=h))  # type: ignore[arg-type]
         T = w[:, None] * (J @ iso.E)
         b = w * (target - jdot_nu - J @ iso.e)
@@ -127,10 +131,12 @@ def before_kernel(layout: KernelLayout, robot_layout: Any) -> Callable[..., Any]
         C = np.vstack([M @ iso.calA, C_limit])
         offset = M @ iso.Ph
         drift = q[index] + nu[index] * horizon
-        lower = np.concatenate([layout.torque_low - offset,
-                                2.0 * (layout.limit_min - drift) / horizon**2])  # fmt: skip
-        upper = np.concatenate([layout.torque_high - offset,
-                                2.0 * (layout.limit_max - drift) / horizon**2])  # fmt: skip
+        lower = np.concatenate(
+            [layout.torque_low - offset, 2.0 * (layout.limit_min - drift) / horizon**2]
+        )
+        upper = np.concatenate(
+            [layout.torque_high - offset, 2.0 * (layout.limit_max - drift) / horizon**2]
+        )
         return feasible_unconstrained_minimiser(H, g, C, lower, upper)
 
     return kernel
@@ -150,7 +156,7 @@ def compare(steps: int, repeats: int) -> dict[str, float]:
     """Median microseconds per call of each variant (module docstring) and the unit."""
     import jax  # noqa: PLC0415
 
-    from controllers.low_level_kernel import LowLevelKernel  # noqa: PLC0415
+    from controllers.low_level.kernel import LowLevelKernel  # noqa: PLC0415
 
     layout, robot_layout, inputs = record_inputs(steps)
     before = before_kernel(layout, robot_layout)
@@ -193,7 +199,7 @@ def compare(steps: int, repeats: int) -> dict[str, float]:
 
 
 def main() -> None:
-    from controllers import jax_setup
+    from controllers.optimizer import jax_setup
 
     jax_setup.configure()  # the solvers' JAX settings, before JAX starts
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])

@@ -113,8 +113,9 @@ class EpisodeMetrics:
                 self._cup_tilt.append(tilt)
 
     @staticmethod
-    def _cup_tilt_of(info: Mapping[str, Any], observation: Mapping[str, Any] | None
-                     ) -> float | None:  # fmt: skip
+    def _cup_tilt_of(
+        info: Mapping[str, Any], observation: Mapping[str, Any] | None
+    ) -> float | None:
         if "cup_tilt_deg" in info:
             return float(info["cup_tilt_deg"])
         if observation is not None and "cup_pose" in observation:
@@ -198,10 +199,17 @@ class EpisodeMetrics:
 
     def _cup_metrics(self) -> dict[str, Any]:
         keys = (
-            "cup_kept", "cup_lost_at_s", "tray_kept", "max_tray_tilt_deg", "max_cup_friction_use",
-            "cup_friction_use_p99", "slipping_time_s", "cup_slip_distance_m",
-            "tray_slip_distance_m", "max_cup_tilt_deg",
-        )  # fmt: skip
+            "cup_kept",
+            "cup_lost_at_s",
+            "tray_kept",
+            "max_tray_tilt_deg",
+            "max_cup_friction_use",
+            "cup_friction_use_p99",
+            "slipping_time_s",
+            "cup_slip_distance_m",
+            "tray_slip_distance_m",
+            "max_cup_tilt_deg",
+        )
         if not self.has_cup:
             return dict.fromkeys(keys)
         dt = self.dt

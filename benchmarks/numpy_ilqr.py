@@ -1,7 +1,7 @@
 """A plain NumPy iLQR, the peer the ``wip-bench solvers`` benchmark compares the JAX DDP with.
 
-It solves the same problem as ``controllers.ddp`` with ``second_order=False`` (iLQR) and the
-same algorithm, step for step, so that both take the same iterations and reach the same
+It solves the same problem as ``controllers.optimizer.ddp`` with ``second_order=False`` (iLQR) and
+the same algorithm, step for step, so that both take the same iterations and reach the same
 optimum: the backward pass (Riccati recursion with Levenberg-Marquardt regularisation on
 ``Q_uu`` only, Tassa 2012's improved value update), the same ``mu`` schedule, a line search
 over the same step sizes (tried one at a time from the largest, stopping at the first
@@ -29,7 +29,7 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 from numpy.typing import NDArray
 
-from controllers.ddp import DDPConfig, trajectory_cost
+from controllers.optimizer.ddp import DDPConfig, trajectory_cost
 
 __all__ = ["NumpyILQR", "NumpyILQRResult"]
 
@@ -39,7 +39,8 @@ PyTree = Any
 
 @dataclass(frozen=True)
 class NumpyILQRResult:
-    """Solver output (NumPy), the fields of ``controllers.ddp.DDPResult`` the benchmark uses.
+    """Solver output (NumPy), the fields of ``controllers.optimizer.ddp.DDPResult`` the benchmark
+    uses.
 
     Attributes:
         X: (N+1, n) states. U: (N, m) controls. K: (N, m, n) gains. k: (N, m) feedforward.
@@ -69,8 +70,8 @@ class _Backward:
 
 class NumpyILQR:
     """iLQR in NumPy loops for ``dynamics(x, u, params)``, ``running(x, u, ref)``,
-    ``terminal(x, ref)`` (the ``controllers.ddp`` conventions; ``refs`` leaves have a leading
-    axis of ``N + 1``). Call as ``solver(x0, U_init, params, refs)``.
+    ``terminal(x, ref)`` (the ``controllers.optimizer.ddp`` conventions; ``refs`` leaves have a
+    leading axis of ``N + 1``). Call as ``solver(x0, U_init, params, refs)``.
 
     The JAX helpers are compiled on first use for each horizon (as with the JAX solver).
     """

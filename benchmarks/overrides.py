@@ -263,7 +263,7 @@ def config_settings(config: Any, prefix: str) -> dict[str, Setting]:
 
 
 def _plan_class() -> type:
-    from controllers.planning import PlanConfig
+    from controllers.high_level.planning import PlanConfig
 
     return PlanConfig
 

@@ -1,5 +1,5 @@
 """``wip-bench profile``: where the time of one closed-loop episode goes, per control step
-(issue 6), against the simulator's own floor measured in the same run.
+against the simulator's own floor measured in the same run.
 
     wip-bench profile --env KrangTray-v0 --controller unified [--duration 5] [--seed 0]
                       [--json PATH]
@@ -85,9 +85,18 @@ from benchmarks.yardstick import ReferenceStep, reference_step_samples
 
 PARTS = ("robot_model", "qp_assembly", "qp_solve", "high_level")
 ROWS = (
-    "mujoco_step", "robot_model", "qp_assembly", "qp_solve", "high_level", "python_overhead",
-    "control", "low_level", "env_step", "env_overhead", "loop",
-)  # fmt: skip
+    "mujoco_step",
+    "robot_model",
+    "qp_assembly",
+    "qp_solve",
+    "high_level",
+    "python_overhead",
+    "control",
+    "low_level",
+    "env_step",
+    "env_overhead",
+    "loop",
+)
 
 
 class _Timer:
@@ -154,8 +163,9 @@ def _paths(iterations: np.ndarray | None) -> dict[str, int] | None:
     return {"shortcut": int(np.sum(iterations == 0)), "proxqp": int(np.sum(iterations > 0))}
 
 
-def profile_episode(env_id: str, controller: str, duration: float = 5.0, seed: int = 0
-                    ) -> dict[str, Any]:  # fmt: skip
+def profile_episode(
+    env_id: str, controller: str, duration: float = 5.0, seed: int = 0
+) -> dict[str, Any]:
     """Run one instrumented episode; return the JSON-ready profile (module docstring)."""
     if duration <= 0:
         raise ValueError(f"duration must be positive, got {duration}")
@@ -205,8 +215,9 @@ def profile_episode(env_id: str, controller: str, duration: float = 5.0, seed: i
             break
     env.close()
     k = n + 1
-    reference = float(np.median(np.concatenate([reference_before, interleaved[:k],
-                                                reference_step_samples()])))  # fmt: skip
+    reference = float(
+        np.median(np.concatenate([reference_before, interleaved[:k], reference_step_samples()]))
+    )
     control, env_step, floor = control[:k], env_step[:k], floor[:k]
     parts = {name: values[:k] for name, values in parts.items()}
     present = {name: name in timers for name in ("robot_model", "qp_assembly", "high_level")}
@@ -247,7 +258,7 @@ def profile_episode(env_id: str, controller: str, duration: float = 5.0, seed: i
         "per_step_us": per_step,
         "per_step_units": {
             name: _in_units(stats, reference * 1e6) for name, stats in per_step.items()
-        },  # fmt: skip
+        },
         "control_time_units": {key: value * 1e-3 / reference for key, value in control_ms.items()},
         "qp_iterations": _iterations(iterations),
         "qp_paths": _paths(iterations),
@@ -282,9 +293,11 @@ def format_table(result: dict[str, Any]) -> str:
         if stats is None:
             lines.append(f"| {name} | - | - | - | - | - |")
             continue
-        lines.append(f"| {name} | {stats['mean']:.1f} | {stats['median']:.1f} | "
-                     f"{stats['mean'] / unit:.2f} | {stats['median'] / unit:.2f} | "
-                     f"{stats['mean'] / floor:.2f} |")  # fmt: skip
+        lines.append(
+            f"| {name} | {stats['mean']:.1f} | {stats['median']:.1f} | "
+            f"{stats['mean'] / unit:.2f} | {stats['median'] / unit:.2f} | "
+            f"{stats['mean'] / floor:.2f} |"
+        )
     lines += [
         "",
         f"control time (policy __call__): mean {result['control_time_ms']['mean']:.3f} ms, "
@@ -298,17 +311,20 @@ def format_table(result: dict[str, Any]) -> str:
         f"{result['sim_only_real_time_factor']:.1f})",
     ]
     if result["qp_iterations"] is not None:
-        lines.append(f"QP: {result['qp_paths']['shortcut']} steps by the unconstrained shortcut, "
-                     f"{result['qp_paths']['proxqp']} by ProxQP (iterations: mean "
-                     f"{result['qp_iterations']['mean']:.2f}, max "
-                     f"{result['qp_iterations']['max']})")  # fmt: skip
+        lines.append(
+            f"QP: {result['qp_paths']['shortcut']} steps by the unconstrained shortcut, "
+            f"{result['qp_paths']['proxqp']} by ProxQP (iterations: mean "
+            f"{result['qp_iterations']['mean']:.2f}, max "
+            f"{result['qp_iterations']['max']})"
+        )
     return "\n".join(lines)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--env", required=True, help="env id, e.g. KrangTray-v0")
-    parser.add_argument("--controller", required=True,
-                        help=f"one of {', '.join(controller_names())}")  # fmt: skip
+    parser.add_argument(
+        "--controller", required=True, help=f"one of {', '.join(controller_names())}"
+    )
     parser.add_argument("--duration", type=float, default=5.0, help="episode length (s)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--json", type=Path, default=None, help="write the profile here")

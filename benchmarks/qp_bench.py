@@ -1,5 +1,5 @@
 """The task-QP half of ``wip-bench solvers``: our ProxQP path against OSQP, DAQP, quadprog and
-SLSQP on the QPs of a real closed loop (issue 6 item 1).
+SLSQP on the QPs of a real closed loop.
 
 For each env (``planar``: ``PlanarTray-v0``, ``krang``: ``KrangTray-v0``) the ``unified``
 controller runs a short episode and every control step's QP is recorded
@@ -65,8 +65,9 @@ def _quiet_stdout() -> Iterator[None]:
         os.close(saved)
 
 
-def _run_solver(solver: QPSolver, recording: Recording, references: list[np.ndarray],
-                passes: int, label: str) -> dict[str, Any]:  # fmt: skip
+def _run_solver(
+    solver: QPSolver, recording: Recording, references: list[np.ndarray], passes: int, label: str
+) -> dict[str, Any]:
     times: list[float] = []
     errors: list[float] = []
     failures: list[str] = []
@@ -116,7 +117,7 @@ def bench_env(key: str, config: QPBenchConfig) -> dict[str, Any]:
     solvers = {
         solver.name: _run_solver(
             solver, recording, references, config.passes, f"{key} QP {solver.name}"
-        )  # fmt: skip
+        )
         for solver in all_solvers()
     }
     return {

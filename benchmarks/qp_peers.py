@@ -1,9 +1,9 @@
-"""The task-QP solvers ``wip-bench solvers`` compares, behind one interface (issue 6 item 1).
+"""The task-QP solvers ``wip-bench solvers`` compares, behind one interface.
 
 Every solver takes the recorded sequence (:mod:`benchmarks.qp_recording`) in order, one QP
 per control step, ``min 0.5 x'Hx + g'x  s.t.  lower <= C x <= upper``:
 
-* ``proxqp`` (ours): ``controllers.task_qp``'s path exactly: one dense ProxQP object, no
+* ``proxqp`` (ours): ``controllers.low_level.task_qp``'s path exactly: one dense ProxQP object, no
   preconditioner, ``eps_abs`` and the iteration cap of ``QPSettings``, ``eps_rel = 0``, warm
   started from the previous result after the first solve; each step ``update`` + ``solve``;
   the ratios are against this path;
@@ -40,7 +40,7 @@ from numpy.typing import NDArray
 from scipy.optimize import minimize
 
 from benchmarks.qp_recording import RecordedQP
-from controllers.task_qp import QPSettings, feasible_unconstrained_minimiser, start_proxqp
+from controllers.low_level.task_qp import QPSettings, feasible_unconstrained_minimiser, start_proxqp
 
 FloatArray = NDArray[np.float64]
 SOLUTION_TOLERANCE = 1e-6
@@ -67,7 +67,7 @@ class QPSolver(ABC):
 
 
 class ProxQPOurs(QPSolver):
-    """``controllers.task_qp.TaskQP.solve``'s ProxQP configuration (module docstring)."""
+    """``controllers.low_level.task_qp.TaskQP.solve``'s ProxQP configuration (module docstring)."""
 
     name = "proxqp"
 
@@ -249,8 +249,14 @@ class SLSQPSolver(QPSolver):
 
 def all_solvers() -> list[QPSolver]:
     """Ours first, then the peers."""
-    return [ProxQPOurs(), ControllerPath(), OSQPSolver(), DAQPSolver(), QuadprogSolver(),
-            SLSQPSolver()]  # fmt: skip
+    return [
+        ProxQPOurs(),
+        ControllerPath(),
+        OSQPSolver(),
+        DAQPSolver(),
+        QuadprogSolver(),
+        SLSQPSolver(),
+    ]
 
 
 def reference_solution(qp: RecordedQP) -> tuple[FloatArray, dict[str, float]]:

@@ -1,12 +1,12 @@
-"""Record the task QPs of a real closed loop of the ``unified`` controller (issue 6 item 1).
+"""Record the task QPs of a real closed loop of the ``unified`` controller.
 
-The QP is the one ``controllers.task_qp.TaskQP.solve`` hands ProxQP,
+The QP is the one ``controllers.low_level.task_qp.TaskQP.solve`` hands ProxQP,
 
     min 0.5 qdd' H qdd + g' qdd   s.t.   lower <= C qdd <= upper,
 
 ``H = T'T + eps I``, ``g = -T'b`` (the stacked weighted tasks; paper eq. ``iso3`` and the task
-rows of ``controllers.tasks``), ``C`` the actuator-torque rows and the joint-limit rows. It is
-captured from the benchmark side by wrapping the controller's ``qp.assemble`` on the instance
+rows of ``controllers.low_level.tasks``), ``C`` the actuator-torque rows and the joint-limit rows.
+It is captured from the benchmark side by wrapping the controller's ``qp.assemble`` on the instance
 (the controller's code is not touched): every control step's arrays are copied as they are
 handed to ProxQP.
 """

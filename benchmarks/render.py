@@ -217,8 +217,10 @@ class VideoJobs:
             if self.options.grid:
                 # panels decoded from the controllers' videos when they exist: not drawn twice
                 each, last = self.options.each, self._with_grid
-                panels = [str(video_file(self.out, c)) if each and c != last else None
-                          for c in controllers]  # fmt: skip
+                panels = [
+                    str(video_file(self.out, c)) if each and c != last else None
+                    for c in controllers
+                ]
                 own = [str(video_file(self.out, c)) if c == last else None for c in controllers]
                 recordings = [str(recording_file(self.out, c)) for c in controllers]
                 grid = str(self.out / GRID_FILE)

@@ -1,5 +1,5 @@
 """``wip-bench solvers``: our solvers against the peers a user would pick instead, on the same
-problems, in one process, on this machine (issue 6 item 1).
+problems, in one process, on this machine.
 
 * DDP on the WIPM (:mod:`benchmarks.ddp_bench`): ours vs crocoddyl (the WIPM as a Python action
   model) vs a NumPy iLQR, the N = 2000 offline plan and the N = 100 warm-started MPC step, on
@@ -26,7 +26,7 @@ JSON (``--json PATH``), beyond the details of each half (``ddp``, ``qp``):
   Krang-v0 at its reset state), the median of its timings before and after the DDP half and
   after every timed MPC step (the same load as the steps);
   ``mpc_step_units``: ``{planar|3d: {median, p99}}``, our MPC step in that unit;
-* ``targets``: issue 6's solver targets and the MPC's in units, each ``{figure, limit, met}``
+* ``targets``: the solver speed targets and the MPC's in units, each ``{figure, limit, met}``
   (:func:`targets`).
 
     wip-bench solvers [--quick] [--json PATH] [--mpc-steps K]
@@ -111,7 +111,7 @@ def _target(figure: float | None, limit: float, below: bool = True) -> dict[str,
 
 
 def targets(summary: dict[str, Any]) -> dict[str, Any]:
-    """Issue 6's solver targets (item 4; benchmarks, not tests) against this run's medians: the
+    """The solver speed targets (benchmarks, not tests) against this run's medians: the
     offline plan under 10 ms and 1.5 ms per iteration, the MPC step under 0.3 ms, crocoddyl
     at least 10x slower per solve, the Krang task QP under 40 us and within 2x of the fastest
     peer that agrees."""
@@ -150,12 +150,16 @@ def targets(summary: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def summarise(ddp: dict[str, Any], qp: dict[str, Any], unit_us: float | None = None
-              ) -> dict[str, Any]:  # fmt: skip
+def summarise(
+    ddp: dict[str, Any], qp: dict[str, Any], unit_us: float | None = None
+) -> dict[str, Any]:
     """The top-level schema (module docstring) from the two halves' details and the unit."""
     out: dict[str, Any] = {}
-    for key, field in (("ddp_plan_ms", "plan_ms"), ("ddp_iter_ms", "iter_ms"),
-                       ("mpc_step_ms", "mpc_step_ms")):  # fmt: skip
+    for key, field in (
+        ("ddp_plan_ms", "plan_ms"),
+        ("ddp_iter_ms", "iter_ms"),
+        ("mpc_step_ms", "mpc_step_ms"),
+    ):
         out[key] = {
             p: {s: {q: ddp[p]["solvers"][s][field][q] for q in ("median", "p99")} for s in SOLVERS}
             for p in PROBLEMS
@@ -298,7 +302,7 @@ def format_table(results: dict[str, Any]) -> str:
             + ", ".join(
                 f"{p} median {units[p]['median']:.1f} units, p99 {units[p]['p99']:.1f}"
                 for p in PROBLEMS
-            )  # fmt: skip
+            )
         )
     for p in PROBLEMS:
         checks = ddp[p]["optimum_check"]
@@ -337,7 +341,7 @@ def format_table(results: dict[str, Any]) -> str:
     )
     lines.append("")
     lines.append(
-        "Targets (issue 6 item 4): "
+        "Targets: "
         + "; ".join(
             f"{key} {_f(t['figure'], '.3g')}: "
             + {True: "met", False: "NOT met", None: "n/a"}[t["met"]]

@@ -5,8 +5,8 @@
 The names below are imported on first use (PEP 562), so ``import controllers`` alone does not
 import JAX, and no import changes JAX's settings: the solvers' settings (float64, XLA's loop
 option, the compilation cache) are applied by one explicit call,
-``controllers.jax_setup.configure()``, before JAX starts (wip-bench, the sweep's workers and the
-tests make it); without it the first DDP solver warns what that costs.
+``controllers.optimizer.jax_setup.configure()``, before JAX starts (wip-bench, the sweep's workers
+and the tests make it); without it the first DDP solver warns what that costs.
 """
 
 from __future__ import annotations
@@ -15,28 +15,28 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from controllers.decoupled import (
+    from controllers.baselines.decoupled import (
         DecoupledConfig,
         DecoupledController,
         DecoupledLQRConfig,
         DecoupledLQRController,
     )
-    from controllers.decoupled_mpc import DecoupledMPCConfig, DecoupledMPCController
+    from controllers.baselines.decoupled_mpc import DecoupledMPCConfig, DecoupledMPCController
     from controllers.hierarchical import HierarchicalConfig, HierarchicalController
-    from controllers.planning import PlanConfig
+    from controllers.high_level.planning import PlanConfig
     from controllers.policy import Policy, PolicyBase, TaskInfo
     from controllers.registry import controller_names, default_config, make_policy, register
 
 _EXPORTS = {
-    "DecoupledConfig": "controllers.decoupled",
-    "DecoupledController": "controllers.decoupled",
-    "DecoupledLQRConfig": "controllers.decoupled",
-    "DecoupledLQRController": "controllers.decoupled",
-    "DecoupledMPCConfig": "controllers.decoupled_mpc",
-    "DecoupledMPCController": "controllers.decoupled_mpc",
+    "DecoupledConfig": "controllers.baselines.decoupled",
+    "DecoupledController": "controllers.baselines.decoupled",
+    "DecoupledLQRConfig": "controllers.baselines.decoupled",
+    "DecoupledLQRController": "controllers.baselines.decoupled",
+    "DecoupledMPCConfig": "controllers.baselines.decoupled_mpc",
+    "DecoupledMPCController": "controllers.baselines.decoupled_mpc",
     "HierarchicalConfig": "controllers.hierarchical",
     "HierarchicalController": "controllers.hierarchical",
-    "PlanConfig": "controllers.planning",
+    "PlanConfig": "controllers.high_level.planning",
     "Policy": "controllers.policy",
     "PolicyBase": "controllers.policy",
     "TaskInfo": "controllers.policy",

@@ -1,22 +1,22 @@
 """The paper's hierarchical whole-body controller (``unified`` / ``unified-waiter``).
 
-High level (``controllers.high_level``): the offline DDP plan at reset, MPC every 10 ms on the
-WIPM with ``lambda(q)`` from the current state, giving ``thdd_ref`` (and the spin). Low level,
-every control step (1 ms): the task QP on the isolated manipulator dynamics (eq. ``iso3``;
-``controllers.task_qp``) with the tasks of the paper's results section: ``theta`` (toward the
-MPC's predicted ``theta``, ``thetad``, interpolated inside the 10 ms, with its ``thdd`` as
-feed-forward), the end effector's position and orientation in the axle frame at their reset
-values, posture regularisation, and in 3-D the heading from the MPC (a heading task toward its
-predicted ``psi``, or, as the paper does, its ``tau_0`` applied: ``spin_source``; the preset
-``HierarchicalConfig.paper()`` is the authors' configuration). Torques reach the wheels
+High level (``controllers.high_level.receding_horizon``): the offline DDP plan at reset, MPC every
+10 ms on the WIPM with ``lambda(q)`` from the current state, giving ``thdd_ref`` (and the spin).
+Low level, every control step (1 ms): the task QP on the isolated manipulator dynamics (eq.
+``iso3``; ``controllers.low_level.task_qp``) with the tasks of the paper's results section:
+``theta`` (toward the MPC's predicted ``theta``, ``thetad``, interpolated inside the 10 ms, with
+its ``thdd`` as feed-forward), the end effector's position and orientation in the axle frame at
+their reset values, posture regularisation, and in 3-D the heading from the MPC (a heading task
+toward its predicted ``psi``, or, as the paper does, its ``tau_0`` applied: ``spin_source``; the
+preset ``HierarchicalConfig.paper()`` is the authors' configuration). Torques reach the wheels
 through the tested ``(tau_0, tau_1) -> (tau_L, tau_R)`` map. The whole body, wheels included,
 balances and drives while the hand holds its task.
 
-Tray modes (DESIGN 4): ``level`` (the paper: the end effector keeps its reset orientation in
-the axle frame, so a level tray stays level) and ``specific_force`` (beyond the paper, ERRATA 5:
-the tray's up-normal follows ``a_ref - g``, ``g = (0, 0, -9.81)``, ``a_ref`` the horizontal
-acceleration of the axle the MPC predicts (centripetal part included), the tilt bounded by
-``max_tray_tilt_deg``: a waiter's tray, whose cup feels no tangential force in steady
+Tray modes (docs/DESIGN.md §4): ``level`` (the paper: the end effector keeps its reset orientation
+in the axle frame, so a level tray stays level) and ``specific_force`` (beyond the paper,
+docs/ERRATA.md §5: the tray's up-normal follows ``a_ref - g``, ``g = (0, 0, -9.81)``, ``a_ref`` the
+horizontal acceleration of the axle the MPC predicts (centripetal part included), the tilt bounded
+by ``max_tray_tilt_deg``: a waiter's tray, whose cup feels no tangential force in steady
 acceleration).
 """
 
@@ -30,12 +30,11 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
-from controllers.disturbance_tasks import DisturbanceRejectingTask, ObserverSettings
-from controllers.high_level import HighLevel, HighLevelConfig
-from controllers.planning import Plan, PlanConfig
-from controllers.policy import ModelChoice, PolicyBase, TaskInfo, plan_counters
-from controllers.task_qp import QPSettings, TaskQP
-from controllers.tasks import (
+from controllers.high_level.planning import Plan, PlanConfig
+from controllers.high_level.receding_horizon import HighLevel, HighLevelConfig
+from controllers.low_level.disturbance_tasks import DisturbanceRejectingTask, ObserverSettings
+from controllers.low_level.task_qp import QPSettings, TaskQP
+from controllers.low_level.tasks import (
     FrameOrientationTask,
     FramePositionTask,
     PostureTask,
@@ -44,7 +43,8 @@ from controllers.tasks import (
     ThetaTask,
     site_in_axle_frame,
 )
-from controllers.wipm_problem import wipm_state
+from controllers.policy import ModelChoice, PolicyBase, TaskInfo, plan_counters
+from controllers.simplified.wipm_problem import wipm_state
 from wip_gym.robot_model import RobotModel
 from wip_gym.wheel_torques import generalized_to_wheel_matrix
 
@@ -54,7 +54,7 @@ GRAVITY = 9.81
 
 @dataclass(frozen=True)
 class HierarchicalConfig:
-    """Settings of the hierarchical controller; the authors' values (krang_facts 4.3).
+    """Settings of the hierarchical controller; the authors' values (docs/AUTHORS_CONFIG.md §4.3).
 
     Attributes:
         model: ``nominal`` or ``oracle``.
@@ -84,9 +84,9 @@ class HierarchicalConfig:
             KvSpeedReg 10, weights base pitch 1, waist 10, torso 10, arms 1); None (default):
             off.
         hand_observer_bandwidth: ``w`` (rad/s) of the estimate of the unmodelled acceleration
-            of the end-effector tasks (``controllers.disturbance_tasks``; not in the paper,
-            whose nominal inverse dynamics let an unmodelled payload tip the tray); None turns
-            it off. 50 rad/s: well above the slow pole of the authors' PD gains (about
+            of the end-effector tasks (``controllers.low_level.disturbance_tasks``; not in the
+            paper, whose nominal inverse dynamics let an unmodelled payload tip the tray); None
+            turns it off. 50 rad/s: well above the slow pole of the authors' PD gains (about
             3 rad/s for both Kp 750 / Kv 250 and Kp 150 / Kv 50), under the 1 kHz step's
             Nyquist rate by a factor of 60.
         hand_observer_position_bound, hand_observer_orientation_bound: anti-windup clamps of
@@ -266,13 +266,26 @@ class HierarchicalController(PolicyBase):
         self._orientation_reset: list[Array] = []
         for site in self._sites:
             position, rotation, _, _ = site_in_axle_frame(robot, site)
-            position_task = FramePositionTask(site, position, cfg.ee_position_weight, cfg.ee_kp,
-                                              cfg.ee_kv, name=f"position_{site}")  # fmt: skip
-            orientation = FrameOrientationTask(site, rotation.copy(), cfg.ee_orientation_weight,
-                                               cfg.orientation_kp, cfg.orientation_kv,
-                                               name=f"orientation_{site}")  # fmt: skip
-            tasks += [self._observed(position_task, cfg.hand_observer_position_bound),
-                      self._observed(orientation, cfg.hand_observer_orientation_bound)]  # fmt: skip
+            position_task = FramePositionTask(
+                site,
+                position,
+                cfg.ee_position_weight,
+                cfg.ee_kp,
+                cfg.ee_kv,
+                name=f"position_{site}",
+            )
+            orientation = FrameOrientationTask(
+                site,
+                rotation.copy(),
+                cfg.ee_orientation_weight,
+                cfg.orientation_kp,
+                cfg.orientation_kv,
+                name=f"orientation_{site}",
+            )
+            tasks += [
+                self._observed(position_task, cfg.hand_observer_position_bound),
+                self._observed(orientation, cfg.hand_observer_orientation_bound),
+            ]
             self.orientation_tasks.append(orientation)
             self._orientation_reset.append(rotation.copy())
         columns = np.arange(lay.index_q1 + 1, lay.n_min)
@@ -283,8 +296,15 @@ class HierarchicalController(PolicyBase):
         # the two ignores below: tasks.py annotates PostureTask.columns as float64, they are
         # indices (an int array); to go when that annotation is fixed
         if len(columns):
-            tasks.append(PostureTask(robot.q[columns].copy(), posture_weights, cfg.posture_kp,
-                                     cfg.posture_kv, columns=columns))  # fmt: skip
+            tasks.append(
+                PostureTask(
+                    robot.q[columns].copy(),
+                    posture_weights,
+                    cfg.posture_kp,
+                    cfg.posture_kv,
+                    columns=columns,
+                )
+            )
         if cfg.speed_regularization_kv is not None:
             # -Kv qd on the base pitch and every body joint: a posture task without stiffness
             base_pitch = AUTHORS_JOINT_WEIGHTS["base"][1]
@@ -314,8 +334,9 @@ class HierarchicalController(PolicyBase):
         bandwidth = self.config.hand_observer_bandwidth
         if bandwidth is None:
             return task
-        return DisturbanceRejectingTask(task, ObserverSettings(self.task.control_dt, bandwidth,
-                                                               bound))  # fmt: skip
+        return DisturbanceRejectingTask(
+            task, ObserverSettings(self.task.control_dt, bandwidth, bound)
+        )
 
     def _set_references(self, robot: RobotModel) -> None:
         ref = self.high_level.reference(robot)
@@ -372,15 +393,24 @@ class HierarchicalController(PolicyBase):
             actuators[wr] += shift[1]
         action = self.finish(actuators)
         self._recorder.record(
-            t=self._step * self.task.control_dt, wipm_state=wipm_state(robot),
+            t=self._step * self.task.control_dt,
+            wipm_state=wipm_state(robot),
             wipm_reference=plan.state(self._ref.mpc_index),
-            theta_d=self._ref.theta, thetad_d=self._ref.thetad, thdd_ref=self._ref.thdd,
-            tau_0=self._ref.tau_0, torque=action, clip_excess=self._clip.last_excess,
-            qp_solved=solution.solved, qp_iterations=solution.iterations,
-            qp_failures=self.qp.failures, mpc_rejected=self.high_level.rejections,
-            theta_error=robot.theta - self._ref.theta, mpc_time=mpc_time, qp_time=qp_time,
+            theta_d=self._ref.theta,
+            thetad_d=self._ref.thetad,
+            thdd_ref=self._ref.thdd,
+            tau_0=self._ref.tau_0,
+            torque=action,
+            clip_excess=self._clip.last_excess,
+            qp_solved=solution.solved,
+            qp_iterations=solution.iterations,
+            qp_failures=self.qp.failures,
+            mpc_rejected=self.high_level.rejections,
+            theta_error=robot.theta - self._ref.theta,
+            mpc_time=mpc_time,
+            qp_time=qp_time,
             compute_time=time.perf_counter() - start,
-        )  # fmt: skip
+        )
         self._step += 1
         return action
 

@@ -1,4 +1,4 @@
-"""The policy protocol every wip-gym controller follows (issue 3, DESIGN 7).
+"""The policy protocol every wip-gym controller follows (docs/DESIGN.md §7).
 
     policy = Controller.for_env(env, config=None)   # reads the task, builds the nominal model
     policy.reset(observation, info)                  # all slow work: linearisation, planning

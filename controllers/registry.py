@@ -57,16 +57,18 @@ def _load(target: Any) -> Any:
 
 _REGISTRY: dict[str, Registration] = {
     "decoupled": Registration(
-        "controllers.decoupled:DecoupledController", "controllers.decoupled:DecoupledConfig", {}
+        "controllers.baselines.decoupled:DecoupledController",
+        "controllers.baselines.decoupled:DecoupledConfig",
+        {},
     ),
     "decoupled-lqr": Registration(
-        "controllers.decoupled:DecoupledLQRController",
-        "controllers.decoupled:DecoupledLQRConfig",
+        "controllers.baselines.decoupled:DecoupledLQRController",
+        "controllers.baselines.decoupled:DecoupledLQRConfig",
         {},
     ),
     "decoupled-mpc": Registration(
-        "controllers.decoupled_mpc:DecoupledMPCController",
-        "controllers.decoupled_mpc:DecoupledMPCConfig",
+        "controllers.baselines.decoupled_mpc:DecoupledMPCController",
+        "controllers.baselines.decoupled_mpc:DecoupledMPCConfig",
         {},
     ),
     "unified": Registration(

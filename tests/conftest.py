@@ -7,7 +7,7 @@ from collections.abc import Callable
 import mujoco
 import pytest
 
-from controllers import jax_setup
+from controllers.optimizer import jax_setup
 from wip_gym.assets import mjcf_path
 
 # the suite is an entry point: the solvers' JAX settings, before any test starts JAX

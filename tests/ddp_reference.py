@@ -1,5 +1,5 @@
 """Reference outputs of the offline plan and the MPC (the correctness guard of the DDP's speed
-work, issue 6): the same problems solved by the code being tested, compared with the outputs of
+work): the same problems solved by the code being tested, compared with the outputs of
 the code before that work, stored in ``tests/data/ddp_reference.npz``.
 
 The WIPM parameters are stored with the outputs (Krang's ``lambda(q)`` at its initial pose when
@@ -14,9 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from controllers.mpc import ModelPredictiveController
-from controllers.planning import Plan, PlanConfig, plan_to_goal
-from controllers.wipm import WIPMParams
+from controllers.high_level.mpc import ModelPredictiveController
+from controllers.high_level.planning import Plan, PlanConfig, plan_to_goal
+from controllers.simplified.wipm import WIPMParams
 
 PATH = Path(__file__).parent / "data" / "ddp_reference.npz"
 GOALS = {"planar": (2.0, 0.0), "3d": (2.0, 1.0)}
@@ -52,8 +52,13 @@ def compute(params: WIPMParams, theta0: float) -> dict[str, np.ndarray]:
     out: dict[str, np.ndarray] = {}
     for problem, goal in GOALS.items():
         planar = problem == "planar"
-        plan = plan_to_goal(initial_state(problem, theta0), params, np.array(goal),
-                            planar=planar, config=PlanConfig())  # fmt: skip
+        plan = plan_to_goal(
+            initial_state(problem, theta0),
+            params,
+            np.array(goal),
+            planar=planar,
+            config=PlanConfig(),
+        )
         out[f"{problem}_plan_states"] = plan.states
         out[f"{problem}_plan_controls"] = plan.controls
         out[f"{problem}_plan_cost"] = np.array(plan.cost)
@@ -80,7 +85,7 @@ def _krang() -> tuple[WIPMParams, float]:
 
 
 def main() -> None:
-    from controllers import jax_setup
+    from controllers.optimizer import jax_setup
 
     jax_setup.configure()  # the solvers' JAX settings, before JAX starts
     params, theta0 = _krang()

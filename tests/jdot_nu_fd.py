@@ -1,5 +1,5 @@
 """``Jdot nu`` of tasks by a central finite difference: the controller's former fallback for a
-task without an exact ``jdot_nu`` (``controllers.motion_probe``), kept here as the tests'
+task without an exact ``jdot_nu`` (``controllers.low_level.motion_probe``), kept here as the tests'
 independent reference for the exact one."""
 
 from __future__ import annotations
@@ -15,8 +15,7 @@ from wip_gym.robot_model import RobotModel
 Array = NDArray[np.float64]
 
 
-def central_difference_jdot_nu(robot: RobotModel, tasks: Sequence[Any], eps: float = 1e-6
-                               ) -> Array:  # fmt: skip
+def central_difference_jdot_nu(robot: RobotModel, tasks: Sequence[Any], eps: float = 1e-6) -> Array:
     """d/dt of the stacked ``J(q) nu`` at fixed ``nu``: the difference of ``J nu`` between the
     states ``(q +- eps nu, nu)`` on the floor (kinematics of a second model), over ``2 eps``."""
     probe = RobotModel(robot.model)

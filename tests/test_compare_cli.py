@@ -57,8 +57,17 @@ def test_summary_schema_and_episode_lines(tmp_path: Path) -> None:
     assert summary["env"] == "wip_gym/PlanarTray-v0"
     assert summary["overrides"] == {"env.reset_noise_scale": 0.02} and summary["preset"] is None
     scenario = summary["scenario"]
-    for key in ("goal", "cup_friction", "payload_mass", "push_force", "duration_s", "seed",
-                "tray_attachment", "frame_skip", "terminate_on_cup_loss"):  # fmt: skip
+    for key in (
+        "goal",
+        "cup_friction",
+        "payload_mass",
+        "push_force",
+        "duration_s",
+        "seed",
+        "tray_attachment",
+        "frame_skip",
+        "terminate_on_cup_loss",
+    ):
         assert key in scenario, key
     assert scenario["cup_friction"] == 0.3 and scenario["reset_noise_scale"] == 0.02
     assert scenario["seeds"] == [5, 6]
@@ -168,8 +177,18 @@ def test_list_keys_prints_every_key_with_type_and_default(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "out"
-    main(["compare", "--env", "KrangTray-v0", "--controllers", "decoupled,unified",
-          "--list-keys", "--out", str(out)])  # fmt: skip
+    main(
+        [
+            "compare",
+            "--env",
+            "KrangTray-v0",
+            "--controllers",
+            "decoupled,unified",
+            "--list-keys",
+            "--out",
+            str(out),
+        ]
+    )
     rows = {
         line.split()[0]: line.split(None, 1)[1] for line in capsys.readouterr().out.splitlines()
     }
@@ -191,9 +210,18 @@ def test_preset_paper_runs_and_records_its_settings(tmp_path: Path) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # settings the preset cannot apply until env/ctrl land
         summary = run(
-            tmp_path, "--env", "PlanarTray-v0", "--controllers", "decoupled", "--preset",
-            "paper", "--duration", "0.3", "--cup-friction", "0.4",
-        )  # fmt: skip
+            tmp_path,
+            "--env",
+            "PlanarTray-v0",
+            "--controllers",
+            "decoupled",
+            "--preset",
+            "paper",
+            "--duration",
+            "0.3",
+            "--cup-friction",
+            "0.4",
+        )
     scenario = summary["scenario"]
     assert summary["preset"] == "paper" and scenario["preset"] == "paper"
     assert scenario["goal"] == [5.0, 0.0]  # the preset's 5 m straight

@@ -32,18 +32,42 @@ from wip_gym.scene import (
 
 # every field of mjOption: a test model copies all of them from a compiled wip-gym model
 OPTION_FIELDS = (
-    "timestep", "integrator", "cone", "impratio", "solver", "iterations", "tolerance",
-    "ls_iterations", "ls_tolerance", "noslip_iterations", "noslip_tolerance", "ccd_iterations",
-    "ccd_tolerance", "sdf_iterations", "sdf_initpoints", "sleep_tolerance", "jacobian",
-    "enableflags", "disableflags", "disableactuator", "gravity", "wind", "magnetic", "density",
-    "viscosity", "o_margin", "o_solref", "o_solimp", "o_friction",
-)  # fmt: skip
+    "timestep",
+    "integrator",
+    "cone",
+    "impratio",
+    "solver",
+    "iterations",
+    "tolerance",
+    "ls_iterations",
+    "ls_tolerance",
+    "noslip_iterations",
+    "noslip_tolerance",
+    "ccd_iterations",
+    "ccd_tolerance",
+    "sdf_iterations",
+    "sdf_initpoints",
+    "sleep_tolerance",
+    "jacobian",
+    "enableflags",
+    "disableflags",
+    "disableactuator",
+    "gravity",
+    "wind",
+    "magnetic",
+    "density",
+    "viscosity",
+    "o_margin",
+    "o_solref",
+    "o_solimp",
+    "o_friction",
+)
 
 CHASSIS_MASS = 50.0  # kg, carried by the wheel (slides x and z only, no pitch)
 WHEEL_TORQUE = 20.0  # N m
 DRIVE_TIME = 2.0  # s
 SLIP_SETTLE_TIME = 0.5  # s: slip is measured over the last 1.5 s of the drive
-MAX_SLIP = 0.01  # m/s: the bound
+MAX_SLIP = 0.01  # m/s: the bound a wheel may slip at
 # common.xml's nearly hard wheel contact: MuJoCo's default contact settings slip about 1.3e-3 m/s
 # here, ours about 1.3e-5 m/s, so this bound tells them apart
 SETTINGS_SLIP = 1e-4  # m/s

@@ -17,10 +17,10 @@ from numpy.typing import NDArray
 
 import wip_gym  # noqa: F401
 from controllers import HierarchicalConfig, HierarchicalController, PlanConfig, PolicyBase
-from controllers.decoupled import DecoupledConfig, DecoupledLQRConfig
-from controllers.decoupled_mpc import DecoupledMPCConfig
+from controllers.baselines.decoupled import DecoupledConfig, DecoupledLQRConfig
+from controllers.baselines.decoupled_mpc import DecoupledMPCConfig
 from controllers.hierarchical import authors_joint_weights
-from controllers.planning import plan_to_goal
+from controllers.high_level.planning import plan_to_goal
 from controllers.policy import ClipCounter, ModelChoice, Policy, make_robot
 from controllers.registry import (
     _REGISTRY,
@@ -29,8 +29,8 @@ from controllers.registry import (
     make_policy,
     register,
 )
-from controllers.wipm import params_from_lambda
-from controllers.wipm_problem import wipm_state
+from controllers.simplified.wipm import params_from_lambda
+from controllers.simplified.wipm_problem import wipm_state
 from wip_gym.wheel_torques import wheel_to_generalized
 
 NAMES = ["decoupled", "decoupled-lqr", "decoupled-mpc", "unified", "unified-waiter"]

@@ -1,4 +1,4 @@
-"""Tests of controllers/ddp.py: autodiff derivatives, exactness on LQ problems (against an
+"""Tests of controllers/optimizer/ddp.py: autodiff derivatives, exactness on LQ problems (against an
 independent numpy Riccati recursion), DDP vs iLQR on the planar wheeled inverted pendulum,
 warm start, compiled-function reuse, regularisation of an indefinite Q_uu and input checks.
 """
@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from controllers.ddp import (
+from controllers.optimizer.ddp import (
     DDPConfig,
     DDPResult,
     DDPSolver,
@@ -21,12 +21,12 @@ from controllers.ddp import (
 )
 
 # Planar wheeled inverted pendulum, x = [theta, thetad, x, xd], u = [thetadd] (the 2-D model of
-# krang_facts section 2.7 with the brief's coefficients), explicit Euler as the authors did.
+# docs/AUTHORS_CONFIG.md §2.7 with the brief's coefficients), explicit Euler as the authors did.
 WIP_ALPHA, WIP_BETA, WIP_R, WIP_G = 1.5, 0.7, 0.25, 9.81
 DT = 0.01
-# Q is the authors' 2-D DDP weight (krang_facts 2.7). Their R = 0.01 and Qf = 1e4 make the
-# Hessian of J(U) nearly singular (smallest eigenvalue ~5e-5 against J ~ 60): a cost converged to
-# 1e-12 then pins U only to ~3e-4. R = 1 and Qf = 1e3 keep it at ~1e-2, so "same optimum" can be
+# Q is the authors' 2-D DDP weight (docs/AUTHORS_CONFIG.md §2.7). Their R = 0.01 and Qf = 1e4 make
+# the Hessian of J(U) nearly singular (smallest eigenvalue ~5e-5 against J ~ 60): a cost converged
+# to 1e-12 then pins U only to ~3e-4. R = 1 and Qf = 1e3 keep it at ~1e-2, so "same optimum" can be
 # checked to 1e-5 in U.
 WIP_Q = np.diag([1.0, 0.1, 0.1, 0.1])
 WIP_RW = 1.0

@@ -1,4 +1,4 @@
-"""Correctness guards of the DDP's speed work (issue 6): the offline plan and the MPC give the
+"""Correctness guards of the DDP's speed work: the offline plan and the MPC give the
 results recorded before it (tests/data/ddp_reference.npz, see tests/ddp_reference.py), the
 closed-form running-cost derivatives equal autodiff's, the MPC step is compiled once, and the
 persistent compilation cache works from an empty directory."""
@@ -14,8 +14,8 @@ import jax
 import numpy as np
 import pytest
 
-from controllers.mpc import ModelPredictiveController, MPCConfig, mpc_problem
-from controllers.planning import PlanConfig, plan_to_goal, planning_problem
+from controllers.high_level.mpc import ModelPredictiveController, MPCConfig, mpc_problem
+from controllers.high_level.planning import PlanConfig, plan_to_goal, planning_problem
 from tests import ddp_reference
 
 REPO = Path(__file__).resolve().parents[1]
@@ -44,9 +44,12 @@ def test_plan_and_mpc_equal_the_recorded_reference(
         expected = reference[key].astype(float)
         scale = max(float(np.max(np.abs(expected))), 1.0)
         np.testing.assert_allclose(
-            np.asarray(computed[key], dtype=float), expected, rtol=0.0, atol=1e-9 * scale,
+            np.asarray(computed[key], dtype=float),
+            expected,
+            rtol=0.0,
+            atol=1e-9 * scale,
             err_msg=key,
-        )  # fmt: skip
+        )
 
 
 def _random_points(problem, rng: np.random.Generator, count: int) -> list[tuple]:
@@ -113,7 +116,7 @@ def test_mpc_step_is_traced_once(reference: dict[str, np.ndarray]) -> None:
 
 _CACHE_SCRIPT = """
 import numpy as np, jax.numpy as jnp
-from controllers.ddp import make_ddp_solver, DDPConfig
+from controllers.optimizer.ddp import make_ddp_solver, DDPConfig
 def dynamics(x, u, p):
     return x + 0.1 * jnp.array([x[1], u[0] - p * jnp.sin(x[0])])
 def running(x, u, r):
@@ -131,8 +134,15 @@ def test_compilation_cache_starts_from_an_empty_directory(tmp_path: Path) -> Non
     env = os.environ | {"WIP_GYM_JAX_CACHE": str(cache)}
     costs = []
     for _ in range(2):  # the first process fills the cache, the second reads it
-        done = subprocess.run([sys.executable, "-c", _CACHE_SCRIPT], cwd=REPO, env=env,
-                              capture_output=True, text=True, check=True, timeout=300)  # fmt: skip
+        done = subprocess.run(
+            [sys.executable, "-c", _CACHE_SCRIPT],
+            cwd=REPO,
+            env=env,
+            capture_output=True,
+            text=True,
+            check=True,
+            timeout=300,
+        )
         costs.append(float(done.stdout.strip().splitlines()[-1]))
         assert cache.is_dir() and any(cache.iterdir())
     assert np.isfinite(costs[0]) and costs[0] == costs[1]

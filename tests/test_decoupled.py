@@ -9,16 +9,16 @@ import numpy as np
 import pytest
 
 import wip_gym  # noqa: F401
-from controllers.decoupled import (
+from controllers.baselines.decoupled import (
     BAL_LO_AMPS,
     DecoupledConfig,
     DecoupledController,
     DecoupledLQRConfig,
     DecoupledLQRController,
 )
-from controllers.lqr import dlqr, zero_order_hold
-from controllers.reference import GoalReference, MinimumJerk
-from controllers.wipm import linearize, params_from_lambda, planar_torque_dynamics
+from controllers.baselines.lqr import dlqr, zero_order_hold
+from controllers.baselines.minimum_jerk import GoalReference, MinimumJerk
+from controllers.simplified.wipm import linearize, params_from_lambda, planar_torque_dynamics
 
 
 def test_minimum_jerk_profile() -> None:

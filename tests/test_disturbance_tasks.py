@@ -1,4 +1,4 @@
-"""The disturbance-rejecting task wrapper on a plant whose model is wrong (issue 5)."""
+"""The disturbance-rejecting task wrapper on a plant whose model is wrong."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pytest
 
-from controllers.disturbance_tasks import DisturbanceRejectingTask, ObserverSettings
+from controllers.low_level.disturbance_tasks import DisturbanceRejectingTask, ObserverSettings
 
 DT = 1e-3
 

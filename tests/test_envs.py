@@ -196,8 +196,13 @@ def test_step_measures_match_the_robot_model(env_id: str) -> None:
         base._measure()
         info = base._info(fallen=False)
         robot.update(qpos, qvel, dynamics=False)
-        for key, value in (("theta", robot.theta), ("thetad", robot.thetad), ("x", q[0]),
-                           ("xd", nu[0]), ("axle_position", robot.axle_position)):  # fmt: skip
+        for key, value in (
+            ("theta", robot.theta),
+            ("thetad", robot.thetad),
+            ("x", q[0]),
+            ("xd", nu[0]),
+            ("axle_position", robot.axle_position),
+        ):
             np.testing.assert_allclose(info[key], value, atol=1e-9, err_msg=key)
         if not lay.planar:
             np.testing.assert_allclose(info["psi"], q[1], atol=1e-9)

@@ -13,7 +13,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 BUILD_A_SOLVER = """
 import jax.numpy as jnp
-from controllers.ddp import make_ddp_solver
+from controllers.optimizer.ddp import make_ddp_solver
 make_ddp_solver(lambda x, u, p: x, lambda x, u, r: jnp.sum(x**2), lambda x, r: jnp.sum(x**2))
 """
 
@@ -36,7 +36,8 @@ def test_importing_the_controllers_changes_no_jax_setting() -> None:
         """
         import os
         import jax
-        import controllers, controllers.ddp, controllers.wipm, controllers.planning
+        import controllers, controllers.optimizer.ddp, controllers.simplified.wipm
+        import controllers.high_level.planning
         import controllers.hierarchical, controllers.registry
         flags = os.environ.get("XLA_FLAGS", "")
         print(jax.config.jax_enable_x64, "xla_backend_extra_options" in flags)
@@ -49,12 +50,12 @@ def test_a_program_with_other_jax_settings_is_warned_with_the_cost() -> None:
     out = _run("import jax.numpy as jnp\njnp.zeros(3).sum()  # JAX already runs\n" + BUILD_A_SOLVER)
     assert "wip-gym's JAX settings are not applied" in out.stderr
     assert "float32" in out.stderr and "10x slower" in out.stderr
-    assert "controllers.jax_setup.configure()" in out.stderr
+    assert "controllers.optimizer.jax_setup.configure()" in out.stderr
 
 
 def test_the_explicit_call_applies_the_settings_and_silences_the_warning() -> None:
     out = _run(
-        "import os, jax\nfrom controllers import jax_setup\njax_setup.configure()\n"
+        "import os, jax\nfrom controllers.optimizer import jax_setup\njax_setup.configure()\n"
         + BUILD_A_SOLVER
         + "print(jax.config.jax_enable_x64, jax_setup.SMALL_LOOP_OPTION in os.environ['XLA_FLAGS'])"
     )

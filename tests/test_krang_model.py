@@ -1,4 +1,4 @@
-"""Checks of assets/mjcf/krang.xml against the KrangOld numbers of reference/krang_facts.md.
+"""Checks of assets/mjcf/krang.xml against the KrangOld numbers of docs/AUTHORS_CONFIG.md.
 
 The model drops the kinect (0.705 kg) and the four gripper plates (0.0001 kg each), so the
 derived facts (which include the kinect) are matched within what the kinect explains; a copy of
@@ -22,7 +22,7 @@ ACTUATED = ["wheel_left", "wheel_right", "waist", "torso", *ARM_JOINTS]
 ARM_TORQUES = [370.0, 370.0, 175.0, 175.0, 40.0, 40.0, 9.5]
 TORQUE_LIMITS = [150.0, 150.0, 740.0, 370.0, *ARM_TORQUES, *ARM_TORQUES]
 
-# krang_facts.md 1.2 / 1.6 (derived numbers include the kinect).
+# docs/AUTHORS_CONFIG.md §1.2, §1.6 (derived numbers include the kinect).
 FACTS_TOTAL_MASS = 162.863
 KINECT_MASS = 0.705
 PLATE_MASS = 0.0001
@@ -39,18 +39,31 @@ HOME_JOINTS = {
     **dict(
         zip(
             ARM_JOINTS,
-            [-1.36631, -0.495357, 0.969689, -1.55801, -0.421576, -1.27307, -1.35663,
-             1.2217, 0.606397, -0.91889, 1.50091, 0.516969, 1.31059, 1.26479],
+            [
+                -1.36631,
+                -0.495357,
+                0.969689,
+                -1.55801,
+                -0.421576,
+                -1.27307,
+                -1.35663,
+                1.2217,
+                0.606397,
+                -0.91889,
+                1.50091,
+                0.516969,
+                1.31059,
+                1.26479,
+            ],
             strict=True,
         )
     ),
-}  # fmt: skip
+}
 
 
 @pytest.fixture(scope="module")
 def model(scene_model) -> mujoco.MjModel:
     return scene_model("krang")
-
 
 
 def base_pitch(data: mujoco.MjData) -> float:
@@ -85,9 +98,14 @@ def with_kinect() -> mujoco.MjModel:
     angle = 3.1416 - 0.0575697
     quat = [math.cos(angle / 2), math.sin(angle / 2), 0.0, 0.0]
     spec.body("torso").add_body(
-        name="kinect", pos=[-0.001, 0.1805, -0.112], quat=quat, mass=KINECT_MASS,
-        ipos=[0.0, -0.04, -0.028], inertia=[0.01, 0.01, 0.01], explicitinertial=True,
-    )  # fmt: skip
+        name="kinect",
+        pos=[-0.001, 0.1805, -0.112],
+        quat=quat,
+        mass=KINECT_MASS,
+        ipos=[0.0, -0.04, -0.028],
+        inertia=[0.01, 0.01, 0.01],
+        explicitinertial=True,
+    )
     return spec.compile()
 
 

@@ -1,7 +1,7 @@
-"""The low level's one-call kernel (``controllers.low_level_kernel``) against the pieces it
-fuses, computed here the plain way: eq. ``iso3`` by ``controllers.isolated_dynamics``, the task
-rows by matrix products with ``E`` and ``e``, the QP by ``T^T T``, the constraints row by row,
-the unconstrained minimiser by ``numpy.linalg.solve``; on random states of both robots."""
+"""The low level's one-call kernel (``controllers.low_level.kernel``) against the pieces it
+fuses, computed here the plain way: eq. ``iso3`` by ``controllers.low_level.isolated_dynamics``,
+the task rows by matrix products with ``E`` and ``e``, the QP by ``T^T T``, the constraints row by
+row, the unconstrained minimiser by ``numpy.linalg.solve``; on random states of both robots."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from test_wbc import _limits, _load, _realistic_tasks, _set_state
 
-from controllers.isolated_dynamics import isolated_dynamics
-from controllers.task_qp import QPSettings, TaskQP
+from controllers.low_level.isolated_dynamics import isolated_dynamics
+from controllers.low_level.task_qp import QPSettings, TaskQP
 from wip_gym.robot_model import RobotModel
 
 
@@ -32,8 +32,12 @@ def test_kernel_equals_the_plain_computation(name: str) -> None:
         H, g, C, lower, upper = qp.assemble(robot, None, tasks)  # iso3 inside the kernel
         kernel = qp.kernel
         iso = isolated_dynamics(robot)
-        for ours, plain in ((kernel.calA, iso.calA), (kernel.Ph, iso.Ph), (kernel.E, iso.E),
-                            (kernel.e, iso.e)):  # fmt: skip
+        for ours, plain in (
+            (kernel.calA, iso.calA),
+            (kernel.Ph, iso.Ph),
+            (kernel.E, iso.E),
+            (kernel.e, iso.e),
+        ):
             _close(ours, plain)
         J = np.vstack([task.jacobian(robot) for task in tasks])
         target = np.concatenate([task.reference_acceleration(robot) for task in tasks])
@@ -52,8 +56,9 @@ def test_kernel_equals_the_plain_computation(name: str) -> None:
         for row, column in enumerate(np.argmax(C[m:], axis=1)):
             index = column + 1  # x is not a QP variable
             drift = robot.q[index] + robot.nu[index] * h
-            limits = robot.model.jnt_range[robot.model.dof_jntid[robot.layout.body_dof[
-                index - robot.layout.index_q1 - 1]]]  # fmt: skip
+            limits = robot.model.jnt_range[
+                robot.model.dof_jntid[robot.layout.body_dof[index - robot.layout.index_q1 - 1]]
+            ]
             _close(lower[m + row], 2.0 * (limits[0] - drift) / h**2)
             _close(upper[m + row], 2.0 * (limits[1] - drift) / h**2)
         x = np.linalg.solve(H, -g)

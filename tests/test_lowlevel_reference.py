@@ -1,4 +1,4 @@
-"""Guards for the low level's speed changes (issue 6): the code reproduces the reference data
+"""Guards for the low level's speed changes: the code reproduces the reference data
 recorded by ``tools/record_lowlevel_reference.py`` before any of them.
 
 * Main guard, on recorded inputs: the task QP assembled from a recorded observation and task
@@ -11,7 +11,7 @@ recorded by ``tools/record_lowlevel_reference.py`` before any of them.
   into 1e-3 m/s of its velocity within ten steps (its contacts switch), so no tolerance would
   be honest there; the cases with the cup are guarded on recorded inputs.
 
-The hand tasks' disturbance observer (``controllers.disturbance_tasks``) came after the
+The hand tasks' disturbance observer (``controllers.low_level.disturbance_tasks``) came after the
 recording and carries a state of its own, so both guards run with it off
 (``hand_observer_bandwidth=None``); it has tests of its own.
 """
@@ -27,8 +27,8 @@ import pytest
 
 import wip_gym  # noqa: F401
 from controllers.hierarchical import HierarchicalConfig, HierarchicalController
-from controllers.isolated_dynamics import isolated_dynamics
-from controllers.task_qp import TaskQP
+from controllers.low_level.isolated_dynamics import isolated_dynamics
+from controllers.low_level.task_qp import TaskQP
 
 DATA = Path(__file__).parent / "data"
 CASES = {

@@ -85,7 +85,7 @@ def test_env_keys_take_precedence_when_present() -> None:
             cup_upright=True,
             cup_on_plate=True,
             tray_on_hand=True,
-        )  # fmt: skip
+        )
     )
     metrics.update(
         info(
@@ -95,7 +95,7 @@ def test_env_keys_take_precedence_when_present() -> None:
             cup_upright=True,
             cup_on_plate=False,
             tray_on_hand=False,
-        )  # fmt: skip
+        )
     )
     result = metrics.result()
     assert result["tray_slip_distance_m"] == pytest.approx(0.007)
@@ -113,8 +113,9 @@ def test_time_at_the_actuator_limit_and_goal_metrics() -> None:
         ([0.0, -5.0], 0.04, 0.01),  # at the lower bound
         ([9.0, 4.0], 0.03, 0.01),
     ):
-        metrics.update({"goal_distance": distance, "xd": -speed, "fallen": False},
-                       None, np.array(action), 1e-4)  # fmt: skip
+        metrics.update(
+            {"goal_distance": distance, "xd": -speed, "fallen": False}, None, np.array(action), 1e-4
+        )
     result = metrics.result()
     assert result["time_at_actuator_limit_s"] == pytest.approx(2 * DT)
     assert result["time_to_goal_s"] == pytest.approx(2 * DT)  # within 5 cm and slow from step 2

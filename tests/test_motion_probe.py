@@ -1,5 +1,5 @@
-"""The exact ``Jdot nu`` of the tasks (``controllers.motion_probe``) against the central finite
-difference it replaced (issue 6), on states that turn, pitch and move every joint."""
+"""The exact ``Jdot nu`` of the tasks (``controllers.low_level.motion_probe``) against the central
+finite difference it replaced, on states that turn, pitch and move every joint."""
 
 from __future__ import annotations
 

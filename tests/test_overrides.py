@@ -60,8 +60,14 @@ def test_values_are_checked_against_the_annotated_types() -> None:
     assert coerce(3, float, "k") == 3.0 and type(coerce(3, float, "k")) is float
     assert coerce([2, 1], float | tuple[float, float], "env.goal") == (2.0, 1.0)
     assert coerce(None, float | None, "k") is None
-    for value, hint in ((True, float), ("abc", float), (2.5, int), ([1, 2, 3], tuple[float, float]),
-                        (1, bool), (float("nan"), float)):  # fmt: skip
+    for value, hint in (
+        (True, float),
+        ("abc", float),
+        (2.5, int),
+        ([1, 2, 3], tuple[float, float]),
+        (1, bool),
+        (float("nan"), float),
+    ):
         with pytest.raises(OverrideError, match="the.key"):
             coerce(value, hint, "the.key")
 
@@ -83,8 +89,9 @@ def test_a_plan_key_reaches_every_plan_of_every_controller() -> None:
 
 
 def test_a_controller_key_changes_only_that_controller() -> None:
-    spec = resolve_run(PLANAR, ["unified", "unified-waiter"],
-                       overrides={"unified.high_level.mpc.horizon_s": 0.5})  # fmt: skip
+    spec = resolve_run(
+        PLANAR, ["unified", "unified-waiter"], overrides={"unified.high_level.mpc.horizon_s": 0.5}
+    )
     assert spec.configs["unified"].high_level.mpc.horizon_s == 0.5
     assert spec.configs["unified-waiter"].high_level.mpc.horizon_s != 0.5
 
@@ -95,9 +102,13 @@ def test_precedence_defaults_preset_named_flags_then_set() -> None:
         preset_only = resolve_run(PLANAR, ["decoupled"], "paper")
         flagged = resolve_run(PLANAR, ["decoupled"], "paper", {"goal": 3.0}, {"model": "oracle"})
         overridden = resolve_run(
-            PLANAR, ["decoupled"], "paper", {"goal": 3.0}, {"model": "oracle"},
+            PLANAR,
+            ["decoupled"],
+            "paper",
+            {"goal": 3.0},
+            {"model": "oracle"},
             {"env.goal": 4.0, "decoupled.model": "nominal"},
-        )  # fmt: skip
+        )
     assert "goal" not in resolve_run(PLANAR, ["decoupled"]).env_kwargs  # the env's default
     assert preset_only.env_kwargs["goal"] == 5.0
     assert flagged.env_kwargs["goal"] == 3.0 and flagged.configs["decoupled"].model == "oracle"
@@ -126,14 +137,21 @@ def test_bad_keys_and_values_name_the_key(key: str, value: object, message: str)
 
 
 def test_sweeps_may_share_keys_of_controllers_not_in_the_run() -> None:
-    spec = resolve_run(PLANAR, ["decoupled"], overrides={"unified.theta_kp": 1.0},
-                       ignore_other_controllers=True)  # fmt: skip
+    spec = resolve_run(
+        PLANAR, ["decoupled"], overrides={"unified.theta_kp": 1.0}, ignore_other_controllers=True
+    )
     assert list(spec.configs) == ["decoupled"]
 
 
 def test_valid_settings_list_env_plan_and_controller_keys() -> None:
     spec = resolve_run(KRANG, ["decoupled", "unified"])
     keys = valid_settings(KRANG, spec.configs)
-    assert {"env.goal", "plan.a_max", "plan.ddp.max_iterations", "decoupled.posture_frequency_hz",
-            "unified.ee_position_weight", "unified.high_level.plan.a_max"} <= set(keys)  # fmt: skip
+    assert {
+        "env.goal",
+        "plan.a_max",
+        "plan.ddp.max_iterations",
+        "decoupled.posture_frequency_hz",
+        "unified.ee_position_weight",
+        "unified.high_level.plan.a_max",
+    } <= set(keys)
     assert keys["unified.ee_position_weight"].default == spec.configs["unified"].ee_position_weight

@@ -1,5 +1,5 @@
 """A plain (non-editable) install of the wheel into a fresh virtual environment makes every
-environment: the MJCF assets travel inside the wheel (issue 2)."""
+environment: the MJCF assets travel inside the wheel."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """The planar7 robot (assets/mjcf/planar7.xml): sizes, limits, the home pose and a short drop.
 
-The numbers checked here are the design targets of planar7.xml (DESIGN 5: Krang's scale, about
-160 kg, body CoM about 0.3 m above the axle in the tray-carrying pose).
+The numbers checked here are the design targets of planar7.xml (docs/DESIGN.md §5: Krang's scale,
+about 160 kg, body CoM about 0.3 m above the axle in the tray-carrying pose).
 """
 
 from __future__ import annotations
@@ -48,7 +48,6 @@ WHEEL_RADIUS = 0.25
 @pytest.fixture(scope="module")
 def model(scene_model) -> mujoco.MjModel:
     return scene_model("planar7")
-
 
 
 def body_com_in_axle_frame(model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:

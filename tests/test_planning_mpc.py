@@ -1,4 +1,4 @@
-"""The offline plan, the MPC and the ``decoupled-mpc`` policy (issue 4)."""
+"""The offline plan, the MPC and the ``decoupled-mpc`` policy."""
 
 from __future__ import annotations
 
@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 
 import wip_gym  # noqa: F401
-from controllers.decoupled import DecoupledLQRController
-from controllers.decoupled_mpc import DecoupledMPCController
-from controllers.mpc import ModelPredictiveController
-from controllers.planning import PlanConfig, plan_to_goal
+from controllers.baselines.decoupled import DecoupledLQRController
+from controllers.baselines.decoupled_mpc import DecoupledMPCController
+from controllers.high_level.mpc import ModelPredictiveController
+from controllers.high_level.planning import PlanConfig, plan_to_goal
 from controllers.policy import make_robot
-from controllers.wipm import params_from_lambda, planar_dynamics
-from controllers.wipm_problem import wipm_state
+from controllers.simplified.wipm import params_from_lambda, planar_dynamics
+from controllers.simplified.wipm_problem import wipm_state
 
 
 def robot_state(env_id: str, **kwargs):

@@ -1,4 +1,4 @@
-"""``wip-bench profile`` (issue 6): runs, writes the documented JSON schema, and attributes time
+"""``wip-bench profile``: runs, writes the documented JSON schema, and attributes time
 where it was spent: a known delay put into one part shows up in that part and no other, and the
 unit (``benchmarks.yardstick``) agrees with a bare ``mj_step`` of Krang-v0 timed by the test. No
 upper bounds on absolute times (the figures depend on the machine and its load)."""
@@ -24,12 +24,29 @@ from benchmarks.scenario import Scenario
 from benchmarks.yardstick import REFERENCE_ENV, reference_step_us
 
 TOP_KEYS = {
-    "env", "controller", "seed", "model", "duration_s", "steps", "control_dt_s", "frame_skip",
-    "setup_s", "reference_step_us", "control_time_ms", "control_time_units", "per_step_us",
-    "per_step_units", "qp_iterations", "qp_paths", "control_over_mujoco_step",
-    "low_level_over_mujoco_step", "real_time_factor", "sim_only_real_time_factor", "fell",
+    "env",
+    "controller",
+    "seed",
+    "model",
+    "duration_s",
+    "steps",
+    "control_dt_s",
+    "frame_skip",
+    "setup_s",
+    "reference_step_us",
+    "control_time_ms",
+    "control_time_units",
+    "per_step_us",
+    "per_step_units",
+    "qp_iterations",
+    "qp_paths",
+    "control_over_mujoco_step",
+    "low_level_over_mujoco_step",
+    "real_time_factor",
+    "sim_only_real_time_factor",
+    "fell",
     "machine",
-}  # fmt: skip
+}
 DELAY_S = 1e-3  # many times the noise of perf_counter, a few times a whole control step
 
 

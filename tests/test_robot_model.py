@@ -1,6 +1,6 @@
 """Minimal-coordinate dynamics (paper eq. ``dyn``) against MuJoCo, for every robot.
 
-Two levels (issue 2): (1) MuJoCo's rigid-body dynamics with the rolling constraints imposed
+Two levels: (1) MuJoCo's rigid-body dynamics with the rolling constraints imposed
 exactly (a KKT solve, tests/dynamics_reference.py): round-off; (2) ``mj_forward`` with the wheels
 rolling on the floor through MuJoCo's soft contacts: the contact's softness.
 """

@@ -29,9 +29,13 @@ def test_every_controller_carries_the_cup_on_both_tray_envs(
     assert m["steps"] == round(DURATION_S / 0.001), m  # neither a fall nor a lost cup ended it
     assert m["fell"] is False and m["cup_kept"] is True and m["tray_kept"] is True
     for key in (
-        "max_cup_friction_use", "slipping_time_s", "cup_slip_distance_m",
-        "tray_slip_distance_m", "max_tray_tilt_deg", "time_at_actuator_limit_s",
-    ):  # fmt: skip
+        "max_cup_friction_use",
+        "slipping_time_s",
+        "cup_slip_distance_m",
+        "tray_slip_distance_m",
+        "max_tray_tilt_deg",
+        "time_at_actuator_limit_s",
+    ):
         assert math.isfinite(m[key]) and m[key] >= 0.0, key
     if controller.startswith("unified"):  # the paper's controller: no slip at all
         assert m["max_cup_friction_use"] < 1.0 and m["slipping_time_s"] == 0.0

@@ -1,4 +1,4 @@
-"""``wip-bench solvers`` (issue 6 item 1): the CLI runs, writes the JSON schema, and every
+"""``wip-bench solvers``: the CLI runs, writes the JSON schema, and every
 peer reaches our optimum: crocoddyl and the NumPy iLQR on the WIPM (converged costs within 1e-6
 relative), the QP peers on recorded task QPs (solutions within 1e-6). No timing assertions."""
 
@@ -23,9 +23,9 @@ from benchmarks.ddp_bench import (
 from benchmarks.numpy_ilqr import NumpyILQR
 from benchmarks.qp_peers import all_solvers, reference_solution, solution_error
 from benchmarks.qp_recording import RecordedQP
-from controllers.mpc import MPCConfig, mpc_problem
-from controllers.planning import PlanConfig, planning_problem
-from controllers.wipm_problem import ddp_solver_for, refs_for
+from controllers.high_level.mpc import MPCConfig, mpc_problem
+from controllers.high_level.planning import PlanConfig, planning_problem
+from controllers.simplified.wipm_problem import ddp_solver_for, refs_for
 
 PROBLEMS = ("planar", "3d")
 DDP_SOLVERS = ("ours", "crocoddyl", "numpy_ilqr")
@@ -72,17 +72,26 @@ def test_quick_run_schema_and_agreement(tmp_path: Path, capsys: pytest.CaptureFi
     assert set(results["ratios_controller_path"]) == {
         f"qp_{s}_{env}" for s in QP_SOLVERS[2:] for env in QP_ENVS
     }
-    for key in ("qp_krang_under_40us", "qp_krang_within_2x_fastest_peer", "plan_under_10ms_3d",
-                "qp_krang_under_40us_controller_path"):  # fmt: skip
+    for key in (
+        "qp_krang_under_40us",
+        "qp_krang_within_2x_fastest_peer",
+        "plan_under_10ms_3d",
+        "qp_krang_under_40us_controller_path",
+    ):
         assert set(results["targets"][key]) == {"figure", "limit", "met"}, key
     unit = results["reference_step_us"]
     assert math.isfinite(unit) and unit > 0
     for p in PROBLEMS:
         units = results["mpc_step_units"][p]
-        assert units["median"] == pytest.approx(results["mpc_step_ms"][p]["ours"]["median"] * 1e3
-                                                / unit)  # fmt: skip
-    for key in ("mpc_step_under_15_units_3d", "mpc_step_under_8_units_planar",
-                "mpc_step_p99_under_2x_median_3d", "plan_under_50ms_3d"):  # fmt: skip
+        assert units["median"] == pytest.approx(
+            results["mpc_step_ms"][p]["ours"]["median"] * 1e3 / unit
+        )
+    for key in (
+        "mpc_step_under_15_units_3d",
+        "mpc_step_under_8_units_planar",
+        "mpc_step_p99_under_2x_median_3d",
+        "plan_under_50ms_3d",
+    ):
         assert set(results["targets"][key]) == {"figure", "limit", "met"}, key
     # the optimum checks: every DDP solver converged to the same cost
     for p in PROBLEMS:

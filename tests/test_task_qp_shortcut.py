@@ -1,4 +1,4 @@
-"""The task QP's shortcut (issue 6): the unconstrained minimiser, taken only when it satisfies
+"""The task QP's shortcut: the unconstrained minimiser, taken only when it satisfies
 every constraint, is ProxQP's answer; a binding constraint still goes to ProxQP."""
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from test_wbc import _limits, _load, _realistic_tasks, _set_state
 
-from controllers.isolated_dynamics import isolated_dynamics
-from controllers.task_qp import QPSettings, TaskQP
+from controllers.low_level.isolated_dynamics import isolated_dynamics
+from controllers.low_level.task_qp import QPSettings, TaskQP
 from wip_gym.robot_model import RobotModel
 
 DATA = Path(__file__).parent / "data"

@@ -1,4 +1,4 @@
-"""The hierarchical (unified) controller closed loop: the cup carried to the goal (issue 5)."""
+"""The hierarchical (unified) controller closed loop: the cup carried to the goal."""
 
 from __future__ import annotations
 
@@ -39,8 +39,9 @@ def run(env_id: str, goal, mode: str, seconds: float, **env_kwargs) -> dict:
 
 @pytest.fixture(scope="module")
 def planar_runs() -> dict[str, dict]:
-    return {mode: run("wip_gym/PlanarTray-v0", 2.0, mode, 9.0)
-            for mode in ("level", "specific_force")}  # fmt: skip
+    return {
+        mode: run("wip_gym/PlanarTray-v0", 2.0, mode, 9.0) for mode in ("level", "specific_force")
+    }
 
 
 @pytest.mark.parametrize("mode", ["level", "specific_force"])

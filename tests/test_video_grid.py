@@ -59,8 +59,20 @@ def test_compare_writes_a_labelled_grid_and_render_redraws_it(tmp_path: Path) ->
         assert len(_frames(tmp_path / f"video_{name}.mp4")) == len(grid)
 
     again = tmp_path / "tray"
-    main(["render", str(tmp_path), "--camera", "tray", "--video", "grid", "--size", size,
-          "--out", str(again)])  # fmt: skip
+    main(
+        [
+            "render",
+            str(tmp_path),
+            "--camera",
+            "tray",
+            "--video",
+            "grid",
+            "--size",
+            size,
+            "--out",
+            str(again),
+        ]
+    )
     redrawn = _frames(again / "video_grid.mp4")
     assert len(redrawn) == len(grid) and redrawn[0].shape == grid[0].shape
     assert np.abs(redrawn[0].astype(int) - grid[0].astype(int)).mean() > 10  # another view

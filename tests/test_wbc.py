@@ -1,5 +1,6 @@
 """The whole-body controller's low level: the isolated manipulator dynamics (eq. ``iso3``,
-ERRATA 4) and the task QP (``controllers.task_qp``), for ``planar7`` and ``krang``.
+docs/ERRATA.md §4) and the task QP (``controllers.low_level.task_qp``), for ``planar7`` and
+``krang``.
 
 The isolated dynamics are checked against MuJoCo independently of ``RobotModel``'s ``A``,
 ``h``: the exact rolling-constrained dynamics by KKT (tests/dynamics_reference.py) and
@@ -18,9 +19,9 @@ import pytest
 from dynamics_reference import constrained_accelerations, random_minimal_state
 from numpy.typing import NDArray
 
-from controllers.isolated_dynamics import isolated_dynamics
-from controllers.task_qp import QPSettings, QPSolution, TaskQP, actuator_map
-from controllers.tasks import (
+from controllers.low_level.isolated_dynamics import isolated_dynamics
+from controllers.low_level.task_qp import QPSettings, QPSolution, TaskQP, actuator_map
+from controllers.low_level.tasks import (
     FrameOrientationTask,
     FramePositionTask,
     PostureTask,
@@ -86,12 +87,14 @@ def _realistic_tasks(robot: RobotModel) -> list[Task]:
     ]
     if not lay.planar:
         tasks.append(SpinTask(10.0, 50.0, 20.0, psi_d=robot.psi + 0.05))
-    tasks.append(FramePositionTask(site, position + np.array([0.01, 0.0, -0.01]), 10.0, 750.0,
-                                   250.0))  # fmt: skip
+    tasks.append(
+        FramePositionTask(site, position + np.array([0.01, 0.0, -0.01]), 10.0, 750.0, 250.0)
+    )
     tasks.append(FrameOrientationTask(site, rotation.copy(), 10.0, 150.0, 50.0))
     columns = np.arange(lay.index_q1 + 1, lay.n_min)
-    tasks.append(PostureTask(robot.q[columns].copy(), np.ones(len(columns)), 10.0, 20.0,
-                             columns=columns))  # fmt: skip
+    tasks.append(
+        PostureTask(robot.q[columns].copy(), np.ones(len(columns)), 10.0, 20.0, columns=columns)
+    )
     return tasks
 
 
@@ -305,8 +308,9 @@ def _second_derivative(
     q, nu = robot.q.copy(), robot.nu.copy()
     values = []
     for t in (-step, 0.0, step):
-        probe.update(*robot.full_state(q + nu * t + 0.5 * nu_dot * t**2, nu + nu_dot * t),
-                     dynamics=False)  # fmt: skip
+        probe.update(
+            *robot.full_state(q + nu * t + 0.5 * nu_dot * t**2, nu + nu_dot * t), dynamics=False
+        )
         values.append(np.atleast_1d(value(probe)).copy())
     return (values[0] - 2.0 * values[1] + values[2]) / step**2
 
@@ -323,11 +327,15 @@ def test_one_task_with_loose_limits_gets_its_reference(
     _set_state(robot, 21)
     position = site_in_axle_frame(robot, site)[0]
     cases: list[tuple[Task, Callable[[RobotModel], Array]]] = [
-        (ThetaTask(theta_weight, 50.0, 100.0, theta_d=robot.theta + 0.01, thdd_d=1.5),
-         lambda r: np.array([r.theta])),
-        (FramePositionTask(site, position + np.array([0.02, 0.0, 0.01]), 10.0, 750.0, 250.0),
-         lambda r: site_in_axle_frame(r, site)[0]),
-    ]  # fmt: skip
+        (
+            ThetaTask(theta_weight, 50.0, 100.0, theta_d=robot.theta + 0.01, thdd_d=1.5),
+            lambda r: np.array([r.theta]),
+        ),
+        (
+            FramePositionTask(site, position + np.array([0.02, 0.0, 0.01]), 10.0, 750.0, 250.0),
+            lambda r: site_in_axle_frame(r, site)[0],
+        ),
+    ]
     for task, value in cases:
         qp = TaskQP(robot, low, high, QPSettings())
         solution = qp.solve(robot, isolated_dynamics(robot), [task])
@@ -337,8 +345,10 @@ def test_one_task_with_loose_limits_gets_its_reference(
         error = np.abs(achieved - reference).max() / max(np.abs(reference).max(), 1.0)
         actual = _second_derivative(robot, solution.nu_dot, value)
         fd_error = np.abs(actual - reference).max() / max(np.abs(reference).max(), 1.0)
-        print(f"{task.name}: |ref| {np.abs(reference).max():.2f}, error {error:.1e}, "
-              f"finite-difference {fd_error:.1e}")  # fmt: skip
+        print(
+            f"{task.name}: |ref| {np.abs(reference).max():.2f}, error {error:.1e}, "
+            f"finite-difference {fd_error:.1e}"
+        )
         assert np.abs(reference).max() > 0.1
         assert error <= 1e-6, (achieved, reference)
         assert fd_error <= 1e-5, (actual, reference)
@@ -363,8 +373,10 @@ def test_tight_torque_limits_hold(robot: RobotModel) -> None:
         assert np.all(tau >= low - 1e-6) and np.all(tau <= high + 1e-6), (tau, low, high)
         slack = np.minimum(tau - low, high - tau)
         assert np.sum(slack < 1e-6) > 0
-        print(f"seed {seed}: {int(np.sum(slack < 1e-6))} of {len(tau)} limits active, "
-              f"worst violation {max(0.0, -slack.min()):.1e}")  # fmt: skip
+        print(
+            f"seed {seed}: {int(np.sum(slack < 1e-6))} of {len(tau)} limits active, "
+            f"worst violation {max(0.0, -slack.min()):.1e}"
+        )
         np.testing.assert_allclose(tau, actuator_map(robot) @ iso.torques(solution.qdd))
 
 

@@ -1,4 +1,4 @@
-"""The WIPM (controllers/wipm.py) against MuJoCo.
+"""The WIPM (controllers/simplified/wipm.py) against MuJoCo.
 
 The ``wip`` robot is one rigid body on two wheels: the WIPM is exact for it. Level 1: MuJoCo's
 rigid-body dynamics with the rolling constraints imposed exactly (a KKT solve,
@@ -21,7 +21,7 @@ from dynamics_reference import (
     sample_contact_states,
 )
 
-from controllers import wipm
+from controllers.simplified import wipm
 from wip_gym.assets import mjcf_path
 from wip_gym.robot_model import RobotModel
 from wip_gym.wheel_torques import generalized_to_wheel, wheel_to_generalized
@@ -119,7 +119,8 @@ def test_spatial_wipm_equals_exact_constrained_dynamics(skewed: bool) -> None:
 
 
 def test_inverse_dynamics_uses_the_wheel_torque_map_of_wip_gym(wip: RobotModel) -> None:
-    """The torque split of inverse_dynamics is wip_gym.wheel_torques' (ERRATA 3 convention)."""
+    """The torque split of inverse_dynamics is wip_gym.wheel_torques' (docs/ERRATA.md §3
+    convention)."""
     rng = np.random.default_rng(11)
     q, nu = random_minimal_state(wip, rng)
     wip.update(*wip.full_state(q, nu))
@@ -169,8 +170,8 @@ def planar_samples(wip: RobotModel) -> list[tuple]:
 
 
 def test_planar_wipm_equals_exact_constrained_dynamics(planar_samples: list[tuple]) -> None:
-    """ERRATA 1's zero dynamics (u = MuJoCo's thdd) give MuJoCo's xdd, and the two rows with the
-    torque give (thdd, xdd) from tau_w, both to round-off."""
+    """docs/ERRATA.md §1's zero dynamics (u = MuJoCo's thdd) give MuJoCo's xdd, and the two rows
+    with the torque give (thdd, xdd) from tau_w, both to round-off."""
     worst_zero, worst_torque = 0.0, 0.0
     for s, tau_w, params, (xdd, thdd) in planar_samples:
         scale = np.hypot(xdd, thdd)
@@ -189,7 +190,8 @@ def test_planar_wipm_equals_exact_constrained_dynamics(planar_samples: list[tupl
 
 
 def test_paper_printed_planar_form_is_wrong(planar_samples: list[tuple]) -> None:
-    """The printed eq. WIPdyn misses MuJoCo's xdd by orders of magnitude more than ERRATA 1's."""
+    """The printed eq. WIPdyn misses MuJoCo's xdd by orders of magnitude more than
+    docs/ERRATA.md §1's."""
     printed, corrected = [], []
     for s, _, params, (xdd, thdd) in planar_samples:
         scale = max(abs(xdd), 1.0)

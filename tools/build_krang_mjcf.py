@@ -1,7 +1,7 @@
 """Generate ``assets/mjcf/krang.xml``: Golem Krang (19 DOF, kinect dropped) for wip-gym.
 
-Every number comes from KrangOld.urdf as summarised in ``reference/krang_facts.md`` (sections
-1.2-1.6: masses, CoM offsets, inertias, joint origins/axes/limits, collision boxes, torque limits,
+Every number comes from KrangOld.urdf as summarised in docs/AUTHORS_CONFIG.md §1.2-1.6
+(masses, CoM offsets, inertias, joint origins/axes/limits, collision boxes, torque limits,
 initial pose) and from the URDF's collision-box origins. The URDF's own rounded angles (3.1416,
 3.14, 1.5708, 4.7124) are kept verbatim, so the kinematics are those DART simulated.
 
@@ -41,7 +41,7 @@ MJCF_DIR = REPO / "assets" / "mjcf"
 OUT_PATH = MJCF_DIR / "krang.xml"
 
 # --------------------------------------------------------------------------------------------
-# Numbers (krang_facts.md 1.2-1.6, KrangOld.urdf)
+# Numbers (docs/AUTHORS_CONFIG.md §1.2-1.6, KrangOld.urdf)
 # --------------------------------------------------------------------------------------------
 
 #: Rotation taking URDF Base-frame vectors to our base frame (columns: URDF x, y, z axes).
@@ -60,7 +60,7 @@ WHEEL_MASS = 4.66
 #: URDF wheel inertia ixx iyy izz = 0.102019 0.0832724 0.086493 (axle = URDF x). In our axes:
 #: x <- URDF z, y <- URDF x (axial), z <- URDF y. Products (<= 0.0071) dropped: a round wheel.
 WHEEL_DIAGINERTIA: Vec3 = (0.086493, 0.102019, 0.0832724)
-WHEEL_TORQUE_LIMIT = 150.0  # per wheel: |tauL + tauR| <= 300 (krang_facts 1.5)
+WHEEL_TORQUE_LIMIT = 150.0  # per wheel: |tauL + tauR| <= 300 (docs/AUTHORS_CONFIG.md §1.5)
 
 #: Home pose (13b defaultInit.txt first line); waist -4.2976 reduced mod 2 pi.
 HOME_WAIST = 1.98558
@@ -81,7 +81,8 @@ WAIST_TORQUE = 740.0
 TORSO_TORQUE = 370.0
 ARM_TORQUES: tuple[float, ...] = (370.0, 370.0, 175.0, 175.0, 40.0, 40.0, 9.5)
 
-#: Tray frame (krang_facts 5.3): left-gripper pose x R_local, then this offset in that frame.
+#: Tray frame (docs/AUTHORS_CONFIG.md §5.3): left-gripper pose x R_local, then this offset in
+#: that frame.
 TRAY_R_LOCAL = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 TRAY_OFFSET = np.array([0.0, -0.286303, 0.04])
 
@@ -119,25 +120,49 @@ class Link:
 
 # URDF Base link (placed by base_link's fixed rotation; no joint).
 BASE_LINK = Link(
-    body="base_link", joint=None, xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), axis=(1.0, 0.0, 0.0),
-    limits=(0.0, 0.0), mass=75.767, com=(-0.000628, 0.001940, 0.076721),
+    body="base_link",
+    joint=None,
+    xyz=(0.0, 0.0, 0.0),
+    rpy=(0.0, 0.0, 0.0),
+    axis=(1.0, 0.0, 0.0),
+    limits=(0.0, 0.0),
+    mass=75.767,
+    com=(-0.000628, 0.001940, 0.076721),
     inertia=(2.9427, 2.4034, 1.2335, 0.0001, 0.0037, -0.0113),
-    box=(0.7165, 0.71048, 0.32860), box_xyz=(0.00225, 0.2097395, 0.0063), material="dark",
-)  # fmt: skip
+    box=(0.7165, 0.71048, 0.32860),
+    box_xyz=(0.00225, 0.2097395, 0.0063),
+    material="dark",
+)
 
 SPINE = Link(
-    body="spine", joint="waist", xyz=(0.026, 0.499, -0.091), rpy=(0.0, 0.0, 0.0),
-    axis=(-1.0, 0.0, 0.0), limits=(0.0, 2.7), mass=14.006, com=(-0.051222, 0.000345, 0.080526),
+    body="spine",
+    joint="waist",
+    xyz=(0.026, 0.499, -0.091),
+    rpy=(0.0, 0.0, 0.0),
+    axis=(-1.0, 0.0, 0.0),
+    limits=(0.0, 2.7),
+    mass=14.006,
+    com=(-0.051222, 0.000345, 0.080526),
     inertia=(0.5601, 0.53, 0.2328, 0.0003, 0.1548, -0.006),
-    box=(0.2340, 0.59430, 0.24097), box_xyz=(-0.026, 0.230150, 0.053887), material="body",
-)  # fmt: skip
+    box=(0.2340, 0.59430, 0.24097),
+    box_xyz=(-0.026, 0.230150, 0.053887),
+    material="body",
+)
 
 TORSO = Link(
-    body="torso", joint="torso", xyz=(-0.0285, 0.584, 0.1088), rpy=(0.0, 3.1416, 0.0),
-    axis=(0.0, -1.0, 0.0), limits=(-0.8, 0.8), mass=6.533, com=(0.0, 0.076445, -0.005972),
+    body="torso",
+    joint="torso",
+    xyz=(-0.0285, 0.584, 0.1088),
+    rpy=(0.0, 3.1416, 0.0),
+    axis=(0.0, -1.0, 0.0),
+    limits=(-0.8, 0.8),
+    mass=6.533,
+    com=(0.0, 0.076445, -0.005972),
     inertia=(0.1003, 0.0214, 0.0987, 0.0, 0.0, 0.0),
-    box=(0.2815, 0.23, 0.22611), box_xyz=(0.0012875, 0.0582, -0.0280530), material="body",
-)  # fmt: skip
+    box=(0.2815, 0.23, 0.22611),
+    box_xyz=(0.0012875, 0.0582, -0.0280530),
+    material="body",
+)
 
 # Arm link numbers shared by both arms: mass, CoM, inertia, collision box (size, origin).
 _ARM_INERTIAL: tuple[tuple[float, Vec3, tuple[float, float, float, float, float, float]], ...] = (
@@ -159,9 +184,14 @@ _ARM_BOXES: tuple[tuple[Vec3, Vec3], ...] = (
     ((0.08, 0.112, 0.2025), (0.0, 0.0, 0.0)),  # gripper origin differs per side (below)
 )
 _ARM_AXES: tuple[Vec3, ...] = (
-    (0.0, -1.0, 0.0), (-1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (-1.0, 0.0, 0.0),
-    (0.0, -1.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 0.0, -1.0),
-)  # fmt: skip
+    (0.0, -1.0, 0.0),
+    (-1.0, 0.0, 0.0),
+    (0.0, -1.0, 0.0),
+    (-1.0, 0.0, 0.0),
+    (0.0, -1.0, 0.0),
+    (-1.0, 0.0, 0.0),
+    (0.0, 0.0, -1.0),
+)
 _ARM_XYZ: tuple[Vec3, ...] = (
     (0.0, 0.0, 0.0),
     (0.0, -0.328, 0.0),
@@ -219,7 +249,7 @@ def arm_links(side: str) -> list[Link]:
                 box=box,
                 box_xyz=box_xyz,
                 box_rpy=box_rpy,
-                material="dark" if i == 6 else "link",
+                material="gripper" if i == 6 else "link",
             )
         )
     return links
@@ -275,7 +305,7 @@ HEADER = """<!--
   GENERATED by tools/build_krang_mjcf.py: do not edit, change the generator and rerun it.
 
   Source: KrangOld.urdf, the model the paper's simulation (13b) loads, via
-  reference/krang_facts.md 1.2-1.6 (masses, CoM offsets, inertias about the CoM in link axes,
+  docs/AUTHORS_CONFIG.md §1.2-1.6 (masses, CoM offsets, inertias about the CoM in link axes,
   joint origins/axes/limits, collision boxes) plus the URDF's collision-box origins. The URDF's
   rounded angles (3.1416, 3.14, 1.5708, 4.7124) are kept as written.
   Choices:
@@ -295,7 +325,8 @@ HEADER = """<!--
   Keyframe `home`: the paper's initial pose; the base pitch (about +y, positive leans forward;
   it equals 13b's qBase) puts the body CoM (all but the wheels) over the axle: {pitch:.6f} rad.
   Sites: `ee` / `ee_right` = left / right gripper body origins (the controller's EE frames);
-  `tray_mount` = the demo's tray frame origin (krang_facts 5.3) in the left-gripper frame.
+  `tray_mount` = the demo's tray frame origin (docs/AUTHORS_CONFIG.md §5.3) in the left-gripper
+  frame.
 -->
 """
 
@@ -336,7 +367,8 @@ def _arm_xml(side: str, indent: str, tray_pos: np.ndarray) -> str:
     if side == "left":
         extra = (
             f'{sub}<site name="ee" pos="0 0 0" size="0.02"/>\n'
-            f"{sub}<!-- tray frame origin (krang_facts 5.3): R_local @ (0, -0.286303, 0.04) -->\n"
+            f"{sub}<!-- tray frame origin (docs/AUTHORS_CONFIG.md §5.3): "
+            "R_local @ (0, -0.286303, 0.04) -->\n"
             f'{sub}<site name="tray_mount" pos="{fmt(tray_pos)}" size="0.015"/>'
         )
     else:

@@ -29,7 +29,7 @@ import numpy as np
 MJCF = Path(__file__).resolve().parents[1] / "assets" / "mjcf" / "planar7.xml"
 
 # The chosen pose (rad; signs: positive leans a link forward, see planar7.xml):
-SPINE = 1.9  # waist folded forward (Krang's tray pose: 1.986, krang_facts 1.6)
+SPINE = 1.9  # waist folded forward (Krang's tray pose: 1.986, docs/AUTHORS_CONFIG.md §1.6)
 TORSO = -0.55  # torso tipped back on the spine so it leans only ~0.4 rad forward
 SHOULDER = -0.45  # upper arm hanging nearly straight down, slightly forward
 FOREARM_PITCH = -1.35  # forearm absolute pitch: 0.22 rad below horizontal (-pi/2), forward

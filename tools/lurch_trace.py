@@ -25,8 +25,15 @@ from benchmarks.rollout import rollout
 from benchmarks.scenario import resolve_env_id
 
 
-def trace(env_id: str, controller: str, goal: float, friction: float, seconds: float,
-          overrides: dict[str, Any], preset: str | None = None) -> dict:  # fmt: skip
+def trace(
+    env_id: str,
+    controller: str,
+    goal: float,
+    friction: float,
+    seconds: float,
+    overrides: dict[str, Any],
+    preset: str | None = None,
+) -> dict:
     """One episode (seed 0) of ``controller``; the lurch's numbers and the time series."""
     spec = resolve_run(
         env_id, [controller], preset, {"goal": goal, "cup_friction": friction}, {}, overrides
@@ -35,8 +42,15 @@ def trace(env_id: str, controller: str, goal: float, friction: float, seconds: f
 
     def record(env: Any, info: dict[str, Any], step_index: int) -> None:
         if step_index > 0:
-            rows.append((step_index * env.unwrapped.dt, info["x"], info["xd"],
-                         info["cup_friction_use"], info["tray_tilt_deg"]))  # fmt: skip
+            rows.append(
+                (
+                    step_index * env.unwrapped.dt,
+                    info["x"],
+                    info["xd"],
+                    info["cup_friction_use"],
+                    info["tray_tilt_deg"],
+                )
+            )
 
     episode = rollout(
         env_id, spec.env_kwargs, controller, spec.configs[controller], 0, seconds, on_step=record
@@ -75,13 +89,15 @@ def print_series(series: np.ndarray, start: float, stop: float, every: float) ->
     step = max(1, int(round(every / dt)))
     for i in range(0, len(t), step):
         if start <= t[i] <= stop + 1e-9:
-            print(f"| {t[i]:.2f} | {x[i]:.3f} | {xd[i]:.2f} | {a[i]:.2f} | "
-                  f"{np.degrees(np.arctan(a[i] / 9.81)):.1f} | {tilt[i]:.1f} | "
-                  f"{friction_use[i]:.2f} |")  # fmt: skip
+            print(
+                f"| {t[i]:.2f} | {x[i]:.3f} | {xd[i]:.2f} | {a[i]:.2f} | "
+                f"{np.degrees(np.arctan(a[i] / 9.81)):.1f} | {tilt[i]:.1f} | "
+                f"{friction_use[i]:.2f} |"
+            )
 
 
 def main() -> None:
-    from controllers import jax_setup
+    from controllers.optimizer import jax_setup
 
     jax_setup.configure()  # the solvers' JAX settings, before JAX starts
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -94,33 +110,55 @@ def main() -> None:
     parser.add_argument("--q-position", type=float, help="plan.q_position")
     parser.add_argument("--theta-max", type=float, help="plan.theta_max, rad")
     parser.add_argument("--preset", help="a wip-bench compare preset (paper)")
-    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                        dest="overrides", help="a wip-bench compare --set key")  # fmt: skip
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        dest="overrides",
+        help="a wip-bench compare --set key",
+    )
     parser.add_argument("--trace", default="", help="controllers whose time series to print")
     parser.add_argument("--window", default="0:2", help="START:STOP s of the time series")
     parser.add_argument("--every", type=float, default=0.05, help="s between rows")
     args = parser.parse_args()
     env_id = resolve_env_id(args.env)
-    overrides = {f"plan.{name}": value for name, value in (
-        ("a_max", args.a_max), ("q_position", args.q_position), ("theta_max", args.theta_max),
-    ) if value is not None}  # fmt: skip
+    overrides = {
+        f"plan.{name}": value
+        for name, value in (
+            ("a_max", args.a_max),
+            ("q_position", args.q_position),
+            ("theta_max", args.theta_max),
+        )
+        if value is not None
+    }
     overrides.update(parse_assignment(text) for text in args.overrides)
-    header = ("controller", "plan peak a", "roll back cm", "lurch ends s", "lurch: friction (at s)",
-              "lurch: tilt deg", "after: friction", "after: tilt deg", "peak xd",
-              "cup kept")  # fmt: skip
+    header = (
+        "controller",
+        "plan peak a",
+        "roll back cm",
+        "lurch ends s",
+        "lurch: friction (at s)",
+        "lurch: tilt deg",
+        "after: friction",
+        "after: tilt deg",
+        "peak xd",
+        "cup kept",
+    )
     print("| " + " | ".join(header) + " |")
     print("|" + "---|" * len(header))
     for name in args.controllers.split(","):
-        r = trace(env_id, name, args.goal, args.cup_friction, args.duration, overrides,
-                  args.preset)  # fmt: skip
+        r = trace(env_id, name, args.goal, args.cup_friction, args.duration, overrides, args.preset)
         if r["plan_violations"]:
             print(f"plan violations: {r['plan_violations']}")
-        print(f"| {name} | {r['plan_peak_a']:.2f} | {r['roll_back_cm']:.1f} | "
-              f"{r['lurch_end_s']:.2f} | "
-              f"{r['lurch_friction']:.2f} ({r['lurch_friction_at_s']:.2f}) | "
-              f"{r['lurch_tilt_deg']:.1f} | {r['rest_friction']:.2f} | {r['rest_tilt_deg']:.1f} | "
-              f"{r['peak_speed']:.2f} | {'yes' if r['cup_kept'] else 'no'} |",
-              flush=True)  # fmt: skip
+        print(
+            f"| {name} | {r['plan_peak_a']:.2f} | {r['roll_back_cm']:.1f} | "
+            f"{r['lurch_end_s']:.2f} | "
+            f"{r['lurch_friction']:.2f} ({r['lurch_friction_at_s']:.2f}) | "
+            f"{r['lurch_tilt_deg']:.1f} | {r['rest_friction']:.2f} | {r['rest_tilt_deg']:.1f} | "
+            f"{r['peak_speed']:.2f} | {'yes' if r['cup_kept'] else 'no'} |",
+            flush=True,
+        )
         if name in args.trace.split(","):
             start, stop = (float(v) for v in args.window.split(":"))
             print(f"\n{name}:")

@@ -1,4 +1,4 @@
-"""Record the low level's reference data for the speed-change guards (issue 6).
+"""Record the low level's reference data for the speed-change guards.
 
 For each case (env, controller mode) it runs ``steps`` closed-loop control steps from a fixed
 seed and stores in ``tests/data/lowlevel_<case>.npz``:
@@ -47,9 +47,21 @@ def record(case: str, steps: int, every: int) -> dict[str, np.ndarray]:
     policy.reset(obs, info)
     samples: dict[str, list[np.ndarray]] = {
         k: []
-        for k in ("obs_qpos", "obs_qvel", "theta_ref", "spin_ref", "orientation_targets",
-                  "H", "g", "C", "lower", "upper", "x", "step")
-    }  # fmt: skip
+        for k in (
+            "obs_qpos",
+            "obs_qvel",
+            "theta_ref",
+            "spin_ref",
+            "orientation_targets",
+            "H",
+            "g",
+            "C",
+            "lower",
+            "upper",
+            "x",
+            "step",
+        )
+    }
     solve = policy.qp.solve
     state = {"step": 0, "obs": obs}
 
@@ -89,13 +101,14 @@ def record(case: str, steps: int, every: int) -> dict[str, np.ndarray]:
         qvel.append(env.unwrapped.data.qvel.copy())
     env.close()
     out = {k: np.array(v) for k, v in samples.items()}
-    out.update(qpos=np.array(qpos), qvel=np.array(qvel), actions=np.array(actions),
-               seed=np.array(SEED))  # fmt: skip
+    out.update(
+        qpos=np.array(qpos), qvel=np.array(qvel), actions=np.array(actions), seed=np.array(SEED)
+    )
     return out
 
 
 def main() -> None:
-    from controllers import jax_setup
+    from controllers.optimizer import jax_setup
 
     jax_setup.configure()  # the solvers' JAX settings, before JAX starts
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])

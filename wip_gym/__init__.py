@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import os
 
-# Offscreen rendering when there is no display (DESIGN 6); MuJoCo reads this when imported.
+# Offscreen rendering when there is no display (docs/DESIGN.md §6); MuJoCo reads this when imported.
 if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
     os.environ.setdefault("MUJOCO_GL", "egl")
 

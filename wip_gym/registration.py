@@ -1,10 +1,10 @@
-"""Gymnasium registration of the wip-gym environments (DESIGN 6)."""
+"""Gymnasium registration of the wip-gym environments (docs/DESIGN.md §6)."""
 
 from __future__ import annotations
 
 import gymnasium
 
-# 25 s at the 1 ms control step: the plan horizon (20 s) plus 5 s to settle (issue 3).
+# 25 s at the 1 ms control step: the plan horizon (20 s) plus 5 s to settle.
 EPISODE_SECONDS = 25.0
 CONTROL_DT = 0.001
 

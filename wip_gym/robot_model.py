@@ -2,7 +2,7 @@
 
 A WIP humanoid on flat ground keeps its wheels rolling without slip (and, in 3-D, without side
 slip), its axle at the wheel radius and its axle level. What is left are the minimal coordinates
-(DESIGN 4):
+(docs/DESIGN.md §4):
 
 * 3-D: ``q = [x, psi, q1, q2, ..., qn]``, velocities ``nu = [xd, psid, q1d, ..., qnd]``;
 * planar: ``q = [x, q1, ..., qn]``, ``nu = [xd, q1d, ..., qnd]``;
@@ -18,7 +18,7 @@ joints. MuJoCo's velocities are ``qvel = J_tf nu`` (the paper's transform Jacobi
 with ``M`` MuJoCo's mass matrix, ``c`` its bias (Coriolis, centrifugal, gravity), ``f_passive``
 its passive forces (joint damping: the paper's friction ``Gamma_fric``) and ``S`` the actuator
 map. The same update gives the body CoM in the axle frame, ``theta``, ``thetad`` and the WIPM
-parameters ``lambda(q)`` (paper section "Simplified Model"; ERRATA 1 for what they mean).
+parameters ``lambda(q)`` (paper section "Simplified Model"; docs/ERRATA.md §1 for what they mean).
 
 ``RobotModel`` owns an ``MjData``; :meth:`RobotModel.update` computes everything for one state,
 once per control step, and the properties read the cache.
@@ -192,7 +192,7 @@ class RobotLayout:
 @dataclass(frozen=True)
 class WIPMParameters:
     """``lambda(q)``: the simplified model's parameters at one state (paper section
-    "Simplified Model", with the meanings of ERRATA 1).
+    "Simplified Model", with the meanings of docs/ERRATA.md §1).
 
     Attributes:
         body_mass: ``M``, the mass of everything but the wheels (kg).

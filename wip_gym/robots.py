@@ -17,7 +17,7 @@ class RobotSpec:
         name: short name (``wip``, ``planar7``, ``krang``).
         scene_file: MJCF scene (robot + floor + lights + goal marker) in ``assets/mjcf``.
         planar: True when the base moves in the x-z plane only (slide x, slide z, pitch hinge).
-        push_body: body at whose CoM pushes act (DESIGN 6: the torso's CoM).
+        push_body: body at whose CoM pushes act (docs/DESIGN.md §6: the torso's CoM).
         tray_capable: True when the robot has an ``ee`` and ``tray_mount`` site for tray tasks.
     """
 

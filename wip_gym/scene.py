@@ -6,7 +6,7 @@ cup on it whose friction against the tray is set on an explicit contact pair (Mu
 combines two geoms' friction by taking the larger, so a cup setting alone would change
 nothing). Those depend on the task's parameters, so they are added here.
 
-Sizes and masses (DESIGN 5, from the authors' demo, docs/AUTHORS_CONFIG.md §5.3): tray
+Sizes and masses (docs/DESIGN.md §5, from the authors' demo, docs/AUTHORS_CONFIG.md §5.3): tray
 0.30 x 0.20 m, 0.2 kg (rim included); cup radius 0.031 m, height 0.08 m, 0.05 kg; tray-cup
 friction 0.3; the authors' rim is 5 mm high and 5 mm thick.
 
@@ -88,7 +88,7 @@ class SceneOptions:
         tray_friction: friction of the tray-support contact pairs (free tray only).
         payload_mass: mass (kg) of a payload body welded to the hand (``ee`` site).
         wheel_torque_limit: each wheel motor's torque limit (N m); 150 as in the authors'
-            simulation, 63.6 for Krang's hardware (reference/krang_facts.md 1.5).
+            simulation, 63.6 for Krang's hardware (docs/AUTHORS_CONFIG.md §1.5).
     """
 
     robot: str

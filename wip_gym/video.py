@@ -1,4 +1,4 @@
-"""Record an episode and write it to mp4, offscreen (DESIGN 6).
+"""Record an episode and write it to mp4, offscreen (docs/DESIGN.md §6).
 
 The episode is recorded at the video rate (``wip_gym.recording``) and rendered afterwards
 (``wip_gym.replay``), so rendering never runs inside the control loop.
@@ -74,7 +74,7 @@ def record_episode(
 
 
 def main(argv: list[str] | None = None) -> None:
-    from controllers import jax_setup
+    from controllers.optimizer import jax_setup
 
     jax_setup.configure()  # the solvers' JAX settings, before JAX starts
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])

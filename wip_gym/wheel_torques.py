@@ -1,4 +1,5 @@
-"""The wheel-torque map ``(tau_L, tau_R) <-> (tau_0, tau_1)`` (paper eq. ``tau01``, ERRATA 3).
+"""The wheel-torque map ``(tau_L, tau_R) <-> (tau_0, tau_1)`` (paper eq. ``tau01``,
+docs/ERRATA.md §3).
 
 Convention (one, used everywhere in wip-gym): ``tau_0`` is the **generalised force on the
 heading** ``psi`` and ``tau_1`` the generalised force the wheel motors put on the base pitch

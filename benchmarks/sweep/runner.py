@@ -44,10 +44,10 @@ EpisodeFn = Callable[[Mapping[str, Any]], dict[str, Any]]
 
 
 def worker_env_vars() -> dict[str, str]:
-    """The environment of a sweep worker: the JAX settings of ``controllers.jax_setup`` (x64,
-    XLA's small-while-loop threshold) before JAX starts, and one thread each for XLA, BLAS and
+    """The environment of a sweep worker: the JAX settings of ``controllers.optimizer.jax_setup``
+    (x64, XLA's small-while-loop threshold) before JAX starts, and one thread each for XLA, BLAS and
     OpenMP (one CPU per episode)."""
-    from controllers import jax_setup
+    from controllers.optimizer import jax_setup
 
     flags = os.environ.get("XLA_FLAGS", "")
     if "xla_backend_extra_options" not in flags:
@@ -93,7 +93,7 @@ def _run_task(
     job: Mapping[str, Any], episode_fn: EpisodeFn | None, timeout_s: float
 ) -> dict[str, Any]:
     from benchmarks.sweep.worker import execute
-    from controllers import jax_setup
+    from controllers.optimizer import jax_setup
 
     jax_setup.configure()  # before the episode's first JAX computation (idempotent)
     if episode_fn is None:

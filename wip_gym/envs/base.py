@@ -1,4 +1,4 @@
-"""The common Gymnasium environment of every wip-gym robot and task (DESIGN 6).
+"""The common Gymnasium environment of every wip-gym robot and task (docs/DESIGN.md §6).
 
 Subclasses (``wip_gym/envs/tasks.py``) fix the robot and whether there is a tray and a cup; the
 class docstrings there hold the tables of spaces, rewards and arguments.

@@ -92,7 +92,8 @@ _COMMON = """
     | argument | default | meaning |
     |---|---|---|
     | `goal` | 2.0 | goal x, or `(X, Y)` in 3-D |
-    | `cup_friction` | 0.3 | tray-cup friction (explicit contact pairs, plate and rim; DESIGN 5) |
+    | `cup_friction` | 0.3 | tray-cup friction (explicit contact pairs, plate and rim;
+        docs/DESIGN.md §5) |
     | `tray_attachment` | `"welded"` | tray tasks: `"welded"` to the hand, or `"free"`: a free body resting on the hand (see the task's description) |
     | `tray_rim` | 0.0 | tray tasks: rim height in m on the plate's edge (5 mm thick walls), 0 for none; the authors' tray: 0.005 (docs/AUTHORS_CONFIG.md §5.3) |
     | `tray_friction` | 0.3 | tray tasks: friction of the free tray's contact pairs with its supports (the authors' 0.3) |

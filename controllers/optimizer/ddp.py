@@ -8,7 +8,7 @@ Minimise over the control sequence ``U = (u_0, ..., u_{N-1})`` the cost
     x_{k+1} = dynamics(x_k, u_k, params),  x_0 given.
 
 ``dynamics`` is *discrete* (the caller wraps a continuous model, e.g. explicit Euler
-``x + dt * f(x, u, params)`` as the authors did, krang_facts section 3.1). ``refs`` is an array
+``x + dt * f(x, u, params)`` as the authors did, docs/AUTHORS_CONFIG.md §3.1). ``refs`` is an array
 or pytree whose leaves have a leading axis of length ``N + 1``: ``running`` sees ``refs[k]`` for
 ``k < N`` and ``terminal`` sees ``refs[N]``. A ``dt`` factor on the running cost is the caller's
 business (put it inside ``running``).
@@ -65,7 +65,7 @@ with ``c = DDPConfig.line_search_c`` (default 1e-4, an Armijo-type test on the e
 reduction; Tassa 2012 accepts any positive ratio, the authors accept any cost decrease and
 otherwise the last alpha).
 
-Regularisation schedule (the authors' 46 ``ddp.hpp``, krang_facts section 3.1), with ``f =
+Regularisation schedule (the authors' 46 ``ddp.hpp``, docs/AUTHORS_CONFIG.md §3.1), with ``f =
 mu_factor`` and ``dmu`` starting at 1:
 
     increase (failed backward pass or failed line search):                        (8)
@@ -99,10 +99,10 @@ previous (shifted) controls as ``U_init`` (warm start). ``DDPSolver.solve`` (als
 the one-shot form; it caches solvers by ``(dynamics, running, terminal, config)`` identity.
 
 Float64 (``jax_enable_x64``) is needed by DDP's convergence tests and the Riccati recursion:
-``controllers.jax_setup.configure()`` switches it on (an explicit call of the program's entry
-point); a solver built without it warns once (``jax_setup.check``).
+``controllers.optimizer.jax_setup.configure()`` switches it on (an explicit call of the program's
+entry point); a solver built without it warns once (``jax_setup.check``).
 
-Speed (issue 6; ``controllers.jax_setup``). Every loop (the rollouts, the backward scan with the
+Speed (``controllers.optimizer.jax_setup``). Every loop (the rollouts, the backward scan with the
 derivatives of each step computed inside it, the stage costs, the line search) is written so
 that XLA:CPU compiles it into one kernel: the small products as broadcast sums (``_mv``,
 ``_mm``, ...) and ``Q_uu``'s Cholesky factor entry by entry (``_cholesky_solve``), since a
@@ -126,7 +126,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from controllers import jax_setup
+from controllers.optimizer import jax_setup
 
 __all__ = [
     "DDPConfig",
@@ -154,7 +154,7 @@ def _default_alphas() -> tuple[float, ...]:
 
 @dataclass(frozen=True)
 class DDPConfig:
-    """Solver settings. Defaults and the authors' values (krang_facts section 3).
+    """Solver settings. Defaults and the authors' values (docs/AUTHORS_CONFIG.md §3).
 
     Attributes:
         max_iterations: Iteration budget (one iteration = line search + backward pass, see the
@@ -576,8 +576,7 @@ class DDPSolver:
             X = jnp.concatenate([x0[None], xs], axis=0)
             return X, us, jnp.sum(stages) + term(X[-1], _last(refs))
 
-        def forward(X: Array, U: Array, bp: _Backward, alpha: Array
-                    ) -> tuple[Array, Array, Array]:  # fmt: skip
+        def forward(X: Array, U: Array, bp: _Backward, alpha: Array) -> tuple[Array, Array, Array]:
             """(6) and the new trajectory's cost, its stage costs in the same loop (the running
             cost shares the dynamics' arithmetic: one loop instead of two)."""
 

@@ -4,12 +4,12 @@ From the robot's minimal dynamics ``(A, h)`` (paper eq. ``dyn``), the stacked ta
 Jacobians ``J`` over ``nu``, reference accelerations ``xdd*``, ``Jdot nu`` and weights ``w``)
 and the joint state, one call of :meth:`LowLevelKernel.run` computes, into preallocated buffers:
 
-1. the isolated dynamics, eq. ``iso3`` (``controllers.isolated_dynamics``, same arithmetic):
-   ``calA``, ``Ph`` and ``nu_dot = E qdd + e``;
-2. the task QP's rows ``T = w (J E)``, ``b = w (xdd* - Jdot nu - J e)`` (``controllers.task_qp``):
-   with ``x`` the first minimal coordinate, ``E``'s rows below ``x`` are the identity, so
-   ``J E = J[:, 1:] + J[:, :1] E[0]`` and ``J e = J[:, 0] e[0]`` (no matrix product);
-3. ``H = T^T T + eps I``, ``g = -T^T b``;
+1. the isolated dynamics, eq. ``iso3`` (``controllers.low_level.isolated_dynamics``, same
+   arithmetic): ``calA``, ``Ph`` and ``nu_dot = E qdd + e``;
+2. the task QP's rows ``T = w (J E)``, ``b = w (xdd* - Jdot nu - J e)``
+   (``controllers.low_level.task_qp``): with ``x`` the first minimal coordinate, ``E``'s rows below
+   ``x`` are the identity, so ``J E = J[:, 1:] + J[:, :1] E[0]`` and ``J e = J[:, 0] e[0]`` (no
+matrix product); 3. ``H = T^T T + eps I``, ``g = -T^T b``;
 4. the constraint rows: actuator torques ``tau_min - M_act Ph <= M_act calA qdd <= tau_max -
    M_act Ph`` and the joint-limit acceleration bounds ``2 (q_lim - q - qd h) / h^2``;
 5. the unconstrained minimiser ``H qdd = -g`` (LAPACK ``dposv``) and whether it meets every
@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.linalg.lapack import dposv
 
-from controllers.isolated_dynamics import IsolatedDynamics
+from controllers.low_level.isolated_dynamics import IsolatedDynamics
 
 Array = NDArray[np.float64]
 
@@ -93,8 +93,18 @@ class LowLevelKernel:
         self._diagonal = np.arange(n)
         self._limit_square = layout.limit_horizon**2
 
-    def run(self, A: Array, h: Array, J: Array, target: Array, jdot_nu: Array, w: Array,
-            q: Array, nu: Array, iso: IsolatedDynamics | None = None) -> bool:  # fmt: skip
+    def run(
+        self,
+        A: Array,
+        h: Array,
+        J: Array,
+        target: Array,
+        jdot_nu: Array,
+        w: Array,
+        q: Array,
+        nu: Array,
+        iso: IsolatedDynamics | None = None,
+    ) -> bool:
         """Fill every buffer for this state; True when the unconstrained minimiser ``x`` meets
         every constraint (it is then the QP's optimum). With ``iso`` given, its ``calA``,
         ``Ph``, ``E``, ``e`` are used instead of step 1."""
@@ -108,7 +118,8 @@ class LowLevelKernel:
         return self._rows_and_solve(J, target, jdot_nu, w, q, nu)
 
     def _isolated_dynamics(self, A: Array, h: Array) -> None:
-        """Step 1: eq. iso3 (``controllers.isolated_dynamics``, operation for operation)."""
+        """Step 1: eq. iso3 (``controllers.low_level.isolated_dynamics``, operation for
+        operation)."""
         lay = self.layout
         k, r = lay.index_q1, lay.wheel_radius
         a_xx = float(A[0, 0])
@@ -130,8 +141,9 @@ class LowLevelKernel:
         np.divide(-calA[k] / r - a_xq, a_xx, out=E0)
         self.e[0] = (-float(Ph[k]) / r - h_x) / a_xx
 
-    def _rows_and_solve(self, J: Array, target: Array, jdot_nu: Array, w: Array, q: Array,
-                        nu: Array) -> bool:  # fmt: skip
+    def _rows_and_solve(
+        self, J: Array, target: Array, jdot_nu: Array, w: Array, q: Array, nu: Array
+    ) -> bool:
         """Steps 2 to 5."""
         lay = self.layout
         E0, e0, calA, Ph = self.E[0], float(self.e[0]), self.calA, self.Ph

@@ -1,8 +1,9 @@
-"""The whole-body task QP on the isolated manipulator dynamics, solved by ProxQP (issue 5).
+"""The whole-body task QP on the isolated manipulator dynamics, solved by ProxQP.
 
 Decision variable ``qdd`` (every minimal acceleration but ``xdd``). Cost
-``0.5 ||T qdd - b||^2 + 0.5 eps ||qdd||^2`` stacked from weighted tasks (``controllers.tasks``;
-``T`` is the paper's task matrix, renamed: ``P`` is eq. ``iso3``'s, ERRATA 2). Constraints:
+``0.5 ||T qdd - b||^2 + 0.5 eps ||qdd||^2`` stacked from weighted tasks
+(``controllers.low_level.tasks``; ``T`` is the paper's task matrix, renamed: ``P`` is eq.
+``iso3``'s, docs/ERRATA.md §2). Constraints:
 
 * every actuator's torque within its limits, ``tau_min <= M_act (calA qdd + P h) <= tau_max``,
   where ``M_act`` maps ``Gamma`` to the actuators: the wheels through the tested
@@ -20,7 +21,7 @@ that is most steps (no torque or joint limit active); ProxQP, warm-started, take
 (``proxqp_calls`` counts them).
 
 Per step: the tasks fill the stacked rows (``J``, ``xdd*``, ``Jdot nu``, ``w``); then one call of
-``controllers.low_level_kernel`` computes eq. ``iso3`` (unless the caller passes it), ``T``,
+``controllers.low_level.kernel`` computes eq. ``iso3`` (unless the caller passes it), ``T``,
 ``b``, ``H``, ``g``, the constraint rows and the unconstrained minimiser with its feasibility.
 Weights are per row, so a task may weight each of its rows differently (per axis, per joint).
 """
@@ -35,10 +36,10 @@ import proxsuite
 from numpy.typing import NDArray
 from scipy.linalg.lapack import dposv
 
-from controllers.isolated_dynamics import IsolatedDynamics
-from controllers.low_level_kernel import KernelLayout, LowLevelKernel
-from controllers.motion_probe import MotionProbe
-from controllers.tasks import Task
+from controllers.low_level.isolated_dynamics import IsolatedDynamics
+from controllers.low_level.kernel import KernelLayout, LowLevelKernel
+from controllers.low_level.motion_probe import MotionProbe
+from controllers.low_level.tasks import Task
 from wip_gym.robot_model import RobotModel
 from wip_gym.wheel_torques import generalized_to_wheel_matrix
 
@@ -94,8 +95,9 @@ def actuator_map(robot: RobotModel) -> Array:
     return M
 
 
-def feasible_unconstrained_minimiser(H: Array, g: Array, C: Array, lower: Array, upper: Array
-                                     ) -> Array | None:  # fmt: skip
+def feasible_unconstrained_minimiser(
+    H: Array, g: Array, C: Array, lower: Array, upper: Array
+) -> Array | None:
     """``x = -H^-1 g`` (one LAPACK Cholesky solve; ``H`` is symmetric positive definite, being
     regularised) when it meets every constraint: then it is the convex QP's exact optimum.
     None otherwise (the QP needs a solver)."""
@@ -106,8 +108,9 @@ def feasible_unconstrained_minimiser(H: Array, g: Array, C: Array, lower: Array,
     return x if (Cx >= lower).all() and (Cx <= upper).all() else None
 
 
-def start_proxqp(H: Array, g: Array, C: Array, lower: Array, upper: Array,
-                 settings: QPSettings) -> proxsuite.proxqp.dense.QP:  # fmt: skip
+def start_proxqp(
+    H: Array, g: Array, C: Array, lower: Array, upper: Array, settings: QPSettings
+) -> proxsuite.proxqp.dense.QP:
     """A dense ProxQP object for this QP, configured as ``settings`` says, solved once, and
     set to warm start every later ``update`` + ``solve`` from the previous result."""
     qp = proxsuite.proxqp.dense.QP(len(g), 0, len(C))
@@ -143,9 +146,11 @@ class TaskQP:
                 limited.append((k + 1 + j, lay.index_q1 + 1 + j, *m.jnt_range[joint]))
         self.n = lay.n_min - 1
         # the joint-limit rows, vectorised: qdd column, minimal index, range
-        columns, indices, q_min, q_max = (np.array(v) for v in zip(*limited, strict=True)) if (
-            limited) else (np.zeros(0, dtype=int), np.zeros(0, dtype=int), np.zeros(0),
-                           np.zeros(0))  # fmt: skip
+        columns, indices, q_min, q_max = (
+            (np.array(v) for v in zip(*limited, strict=True))
+            if (limited)
+            else (np.zeros(0, dtype=int), np.zeros(0, dtype=int), np.zeros(0), np.zeros(0))
+        )
         self._limit_columns = columns.astype(int)
         self._limit_index = indices.astype(int)
         self._limit_min, self._limit_max = q_min.astype(float), q_max.astype(float)
@@ -167,14 +172,23 @@ class TaskQP:
         self._target = np.zeros(rows)
         self._w = np.zeros(rows)
         self._bias = np.zeros(rows)
-        self.kernel = LowLevelKernel(KernelLayout(
-            n_min=n_min, index_q1=self._index_q1, wheel_radius=self._wheel_radius,
-            actuator_map=self.M_act, torque_low=self.torque_low, torque_high=self.torque_high,
-            limit_columns=self._limit_columns, limit_indices=self._limit_index,
-            limit_min=self._limit_min, limit_max=self._limit_max,
-            limit_horizon=self.settings.limit_horizon,
-            regularization=self.settings.regularization, rows=rows,
-        ))  # fmt: skip
+        self.kernel = LowLevelKernel(
+            KernelLayout(
+                n_min=n_min,
+                index_q1=self._index_q1,
+                wheel_radius=self._wheel_radius,
+                actuator_map=self.M_act,
+                torque_low=self.torque_low,
+                torque_high=self.torque_high,
+                limit_columns=self._limit_columns,
+                limit_indices=self._limit_index,
+                limit_min=self._limit_min,
+                limit_max=self._limit_max,
+                limit_horizon=self.settings.limit_horizon,
+                regularization=self.settings.regularization,
+                rows=rows,
+            )
+        )
 
     def _snapshot(self, robot: RobotModel, tasks: Sequence[Task]) -> None:
         """The stacked tasks' ``J``, reference accelerations, weights and ``Jdot nu`` into
@@ -182,9 +196,13 @@ class TaskQP:
         blocks = [task.jacobian(robot) for task in tasks]
         rows = sum(len(block) for block in blocks)
         J = self._J
-        if (J is None or self._rows != rows or J.shape[1] != blocks[0].shape[1]
-                or self.kernel.layout.torque_low is not self.torque_low
-                or self.kernel.layout.torque_high is not self.torque_high):  # fmt: skip
+        if (
+            J is None
+            or self._rows != rows
+            or J.shape[1] != blocks[0].shape[1]
+            or self.kernel.layout.torque_low is not self.torque_low
+            or self.kernel.layout.torque_high is not self.torque_high
+        ):
             self._buffers(rows, blocks[0].shape[1])
             J = self._J
         target, w = self._target, self._w
@@ -197,47 +215,53 @@ class TaskQP:
             start = stop
         self._jdot_nu(robot, tasks, out=self._bias)
 
-    def _run_kernel(self, robot: RobotModel, iso: IsolatedDynamics | None,
-                    tasks: Sequence[Task]) -> bool:  # fmt: skip
+    def _run_kernel(
+        self, robot: RobotModel, iso: IsolatedDynamics | None, tasks: Sequence[Task]
+    ) -> bool:
         self._snapshot(robot, tasks)
         A, h = (robot.A, robot.h) if iso is None else (None, None)
-        return self.kernel.run(A, h, self._J, self._target, self._bias, self._w, robot.q,
-                               robot.nu, iso)  # fmt: skip
+        return self.kernel.run(
+            A, h, self._J, self._target, self._bias, self._w, robot.q, robot.nu, iso
+        )
 
-    def task_rows(self, robot: RobotModel, iso: IsolatedDynamics | None,
-                  tasks: Sequence[Task]) -> tuple[Array, Array]:  # fmt: skip
+    def task_rows(
+        self, robot: RobotModel, iso: IsolatedDynamics | None, tasks: Sequence[Task]
+    ) -> tuple[Array, Array]:
         """``T`` and ``b`` of the stacked weighted tasks (the kernel's buffers: overwritten by
         the next call, copy to keep). ``iso`` None: eq. iso3 from ``robot`` in the kernel."""
         self._run_kernel(robot, iso, tasks)
         return self.kernel.T, self.kernel.b
 
-    def _jdot_nu(self, robot: RobotModel, tasks: Sequence[Task], out: Array | None = None
-                 ) -> Array:  # fmt: skip
+    def _jdot_nu(self, robot: RobotModel, tasks: Sequence[Task], out: Array | None = None) -> Array:
         """``Jdot nu`` = d/dt of ``J(q) nu`` at fixed ``nu``, exact from each task's
-        ``jdot_nu`` (``controllers.motion_probe``). Written into ``out`` when given."""
+        ``jdot_nu`` (``controllers.low_level.motion_probe``). Written into ``out`` when given."""
         self.motion.update(robot)
         parts = []
         for task in tasks:
             exact = getattr(task, "jdot_nu", None)
             if exact is None:
-                raise ValueError(f"task {getattr(task, 'name', task)!r} has no jdot_nu(probe): "
-                                 "every task of the QP needs its exact Jdot nu")  # fmt: skip
+                raise ValueError(
+                    f"task {getattr(task, 'name', task)!r} has no jdot_nu(probe): "
+                    "every task of the QP needs its exact Jdot nu"
+                )
             parts.append(exact(self.motion))
         return np.concatenate(parts, out=out)
 
-    def assemble(self, robot: RobotModel, iso: IsolatedDynamics | None, tasks: Sequence[Task]
-                 ) -> tuple[Array, Array, Array, Array, Array]:  # fmt: skip
+    def assemble(
+        self, robot: RobotModel, iso: IsolatedDynamics | None, tasks: Sequence[Task]
+    ) -> tuple[Array, Array, Array, Array, Array]:
         """The QP ``min 0.5 qdd' H qdd + g' qdd  s.t.  lower <= C qdd <= upper`` of this state,
         as ``(H, g, C, lower, upper)`` (what ``solve`` hands ProxQP; the benchmark's peers
-        solve the same arrays), by one call of the kernel (``controllers.low_level_kernel``),
+        solve the same arrays), by one call of the kernel (``controllers.low_level.kernel``),
         which also tries the unconstrained minimiser. They are the kernel's buffers,
         overwritten by the next call: copy to keep. ``iso`` None: eq. iso3 in the kernel."""
         self._feasible = self._run_kernel(robot, iso, tasks)
         k = self.kernel
         return k.H, k.g, k.C, k.lower, k.upper
 
-    def solve(self, robot: RobotModel, iso: IsolatedDynamics | None, tasks: Sequence[Task]
-              ) -> QPSolution:  # fmt: skip
+    def solve(
+        self, robot: RobotModel, iso: IsolatedDynamics | None, tasks: Sequence[Task]
+    ) -> QPSolution:
         """The task QP of this state (``iso`` None: eq. iso3 computed in the kernel from
         ``robot``). ``proxqp_calls`` counts the steps ProxQP solved."""
         H, g, C, lower, upper = self.assemble(robot, iso, tasks)
@@ -259,14 +283,25 @@ class TaskQP:
         if self._last_actuators is None:
             raise RuntimeError("the first task QP was not solved: no feasible torques yet")
         nan = np.full(self.n, np.nan)
-        return QPSolution(qdd=nan, nu_dot=np.full(self.n + 1, np.nan), generalized=nan.copy(),
-                          actuators=self._last_actuators, solved=False,
-                          iterations=iterations)  # fmt: skip
+        return QPSolution(
+            qdd=nan,
+            nu_dot=np.full(self.n + 1, np.nan),
+            generalized=nan.copy(),
+            actuators=self._last_actuators,
+            solved=False,
+            iterations=iterations,
+        )
 
     def _solution(self, qdd: Array, iterations: int) -> QPSolution:
         k = self.kernel
         generalized = k.calA @ qdd + k.Ph
         actuators = self.M_act @ generalized
         self._last_actuators = actuators
-        return QPSolution(qdd=qdd, nu_dot=k.E @ qdd + k.e, generalized=generalized,
-                          actuators=actuators, solved=True, iterations=iterations)  # fmt: skip
+        return QPSolution(
+            qdd=qdd,
+            nu_dot=k.E @ qdd + k.e,
+            generalized=generalized,
+            actuators=actuators,
+            solved=True,
+            iterations=iterations,
+        )

@@ -3,10 +3,10 @@
 The same high level as the unified controller (offline DDP plan, MPC on the WIPM) drives the
 wheels through the WIPM's inverse dynamics: the MPC's ``thdd`` (and ``tau_0``), with the same
 feedback on ``theta`` toward the MPC's prediction that the unified controller's theta task uses,
-become wheel torques (``controllers.wipm.inverse_dynamics``). The authors locked every
+become wheel torques (``controllers.simplified.wipm.inverse_dynamics``). The authors locked every
 upper-body joint; here the upper body is held as close to locked as the torque limits allow:
 computed torque with the base's expected acceleration as feed-forward plus a stiff joint PD
-(``controllers.posture``), and the largest joint deviation it allowed is reported
+(``controllers.low_level.posture``), and the largest joint deviation it allowed is reported
 (``counters["max_joint_deviation_rad"]``). Only the execution of the plan differs from the
 unified controller.
 """
@@ -21,17 +21,17 @@ import jax
 import numpy as np
 from numpy.typing import NDArray
 
-from controllers.high_level import HighLevel, HighLevelConfig
-from controllers.planning import Plan, PlanConfig
+from controllers.high_level.planning import Plan, PlanConfig
+from controllers.high_level.receding_horizon import HighLevel, HighLevelConfig
+from controllers.low_level.posture import PostureHold
 from controllers.policy import ModelChoice, PolicyBase, TaskInfo, plan_counters
-from controllers.posture import PostureHold
-from controllers.wipm import (
+from controllers.simplified.wipm import (
     inverse_dynamics,
     planar_dynamics,
     planar_inverse_dynamics,
     spatial_dynamics,
 )
-from controllers.wipm_problem import wipm_state
+from controllers.simplified.wipm_problem import wipm_state
 from wip_gym.robot_model import RobotModel
 
 Array = NDArray[np.float64]
@@ -108,8 +108,11 @@ class DecoupledMPCController(PolicyBase):
         robot, lay, cfg = self.robot, self.robot.layout, self.config
         robot.update(observation["qpos"], observation["qvel"])
         ref = self.high_level.reference(robot)
-        thdd = (ref.thdd + cfg.kp_theta * (ref.theta - robot.theta)
-                + cfg.kv_theta * (ref.thetad - robot.thetad))  # fmt: skip
+        thdd = (
+            ref.thdd
+            + cfg.kp_theta * (ref.theta - robot.theta)
+            + cfg.kv_theta * (ref.thetad - robot.thetad)
+        )
         state = wipm_state(robot)
         params = self.high_level.params
         # the base's expected acceleration (the joints held, q1dd = thdd): the computed
@@ -128,14 +131,21 @@ class DecoupledMPCController(PolicyBase):
         applied = self.finish(self.assemble(wheels, self._posture.torques(robot, base)))
         last = self.high_level.last_solution
         self._recorder.record(
-            t=self._step * self.task.control_dt, wipm_state=state,
+            t=self._step * self.task.control_dt,
+            wipm_state=state,
             wipm_reference=plan.state(ref.mpc_index),
-            theta_d=ref.theta, thetad_d=ref.thetad, thdd_ref=ref.thdd, tau_0=ref.tau_0,
-            thdd_command=thdd, torque=applied, clip_excess=self._clip.last_excess,
+            theta_d=ref.theta,
+            thetad_d=ref.thetad,
+            thdd_ref=ref.thdd,
+            tau_0=ref.tau_0,
+            thdd_command=thdd,
+            torque=applied,
+            clip_excess=self._clip.last_excess,
             joint_deviation=self._posture.last_deviation,
-            mpc_rejected=self.high_level.rejections, mpc_cost=last.cost,
+            mpc_rejected=self.high_level.rejections,
+            mpc_cost=last.cost,
             compute_time=time.perf_counter() - start,
-        )  # fmt: skip
+        )
         self._step += 1
         return applied
 

@@ -1,5 +1,5 @@
 """Model predictive control on the WIPM, tracking the offline plan (paper section "Receding
-Horizon Control"; issue 4).
+Horizon Control").
 
 Every ``dt`` (10 ms) over ``horizon_s`` (the paper's 1 s; the authors' code used 0.1 s), from
 the current WIPM state with ``lambda(q)`` updated at every step (as the paper says; the
@@ -19,15 +19,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from controllers.ddp import DDPConfig, rollout
-from controllers.planning import Plan
-from controllers.wipm import WIPMParams
-from controllers.wipm_problem import Weights, WIPMProblem, ddp_solver_for
+from controllers.high_level.planning import Plan
+from controllers.optimizer.ddp import DDPConfig, rollout
+from controllers.simplified.wipm import WIPMParams
+from controllers.simplified.wipm_problem import Weights, WIPMProblem, ddp_solver_for
 
 
 @dataclass(frozen=True)
 class MPCConfig:
-    """MPC settings; the authors' values (krang_facts 3.3) for comparison.
+    """MPC settings; the authors' values (docs/AUTHORS_CONFIG.md §3.3) for comparison.
 
     Attributes:
         horizon_s, dt: 1 s at 10 ms (paper: 1 s; authors' code: 10 steps = 0.1 s at 10 ms).
@@ -74,13 +74,28 @@ def mpc_problem(planar: bool, config: MPCConfig, a_max: float, theta_max: float)
         q_terminal = (c.q_terminal, c.q_terminal_speed, c.q_terminal, c.q_terminal_speed)
         r = (c.r_control,)
     else:
-        q = (0.0, c.q_heading, c.q_theta, c.q_speed, c.q_speed, c.q_thetad, c.q_position,
-             c.q_position)  # fmt: skip
-        q_terminal = (0.0, c.q_terminal, c.q_terminal, c.q_terminal_speed, c.q_terminal_speed,
-                      c.q_terminal_speed, c.q_terminal, c.q_terminal)  # fmt: skip
+        q = (
+            0.0,
+            c.q_heading,
+            c.q_theta,
+            c.q_speed,
+            c.q_speed,
+            c.q_thetad,
+            c.q_position,
+            c.q_position,
+        )
+        q_terminal = (
+            0.0,
+            c.q_terminal,
+            c.q_terminal,
+            c.q_terminal_speed,
+            c.q_terminal_speed,
+            c.q_terminal_speed,
+            c.q_terminal,
+            c.q_terminal,
+        )
         r = (c.r_control, c.r_control)
-    weights = Weights(q=q, r=r, r_rate=(), q_terminal=q_terminal, a_max=a_max,
-                      theta_max=theta_max)  # fmt: skip
+    weights = Weights(q=q, r=r, r_rate=(), q_terminal=q_terminal, a_max=a_max, theta_max=theta_max)
     return WIPMProblem(planar=planar, dt=c.dt, weights=weights, rate_input=False)
 
 
@@ -129,13 +144,18 @@ class _CompiledStep:
         window = jax.lax.dynamic_slice_in_dim(plan_states, index, H + 1)
         plan_warm = jax.lax.dynamic_slice_in_dim(plan_controls, index, H)
         warm = jnp.where(first, plan_warm, warm)
-        per_step = jax.tree.map(lambda leaf: jnp.broadcast_to(leaf, (H + 1, *jnp.shape(leaf))),
-                                params)  # fmt: skip
+        per_step = jax.tree.map(
+            lambda leaf: jnp.broadcast_to(leaf, (H + 1, *jnp.shape(leaf))), params
+        )
         result = self.solver.jitted(state, warm, params, (window, per_step))
         X, U, cost = result.X, result.U, result.cost
         initial = result.cost_history[0]
-        accepted = (jnp.all(jnp.isfinite(X)) & jnp.all(jnp.isfinite(U)) & jnp.isfinite(cost)
-                    & (cost <= initial * (1 + 1e-12) + 1e-12))  # fmt: skip
+        accepted = (
+            jnp.all(jnp.isfinite(X))
+            & jnp.all(jnp.isfinite(U))
+            & jnp.isfinite(cost)
+            & (cost <= initial * (1 + 1e-12) + 1e-12)
+        )
         X, U, cost = jax.lax.cond(
             accepted,
             lambda: (X, U, cost),
@@ -144,8 +164,9 @@ class _CompiledStep:
         # warm start of the next step: shifted by one, the plan's control past the end
         tail = jax.lax.dynamic_slice_in_dim(plan_controls, index + H, 1)
         next_warm = jnp.concatenate([U[1:], tail], axis=0)
-        packed = jnp.concatenate([X.ravel(), U.ravel(), jnp.stack([cost, initial]),
-                                  accepted.astype(X.dtype)[None]])  # fmt: skip
+        packed = jnp.concatenate(
+            [X.ravel(), U.ravel(), jnp.stack([cost, initial]), accepted.astype(X.dtype)[None]]
+        )
         return packed, next_warm
 
 
@@ -205,5 +226,10 @@ class ModelPredictiveController:
         accepted = bool(out[-1])
         if not accepted:
             self.rejected += 1
-        return MPCStep(control=U[0].copy(), predicted_states=X, predicted_controls=U,
-                       cost=float(out[-3]), accepted=accepted)  # fmt: skip
+        return MPCStep(
+            control=U[0].copy(),
+            predicted_states=X,
+            predicted_controls=U,
+            cost=float(out[-3]),
+            accepted=accepted,
+        )

@@ -1,9 +1,9 @@
 """Process-wide JAX settings of the controllers' solvers, applied by ONE explicit call:
-``controllers.jax_setup.configure()``, before JAX starts (its first computation). wip-gym's entry
-points make it (``wip-bench``, the sweep's workers, the test suite's ``conftest.py``, the tools);
-importing ``controllers`` changes nothing in the process. A program that uses the controllers
-without it (or whose JAX already runs with other settings) gets one warning from :func:`check`,
-when the first DDP solver is built, saying what it costs.
+``controllers.optimizer.jax_setup.configure()``, before JAX starts (its first computation).
+wip-gym's entry points make it (``wip-bench``, the sweep's workers, the test suite's
+``conftest.py``, the tools); importing ``controllers`` changes nothing in the process. A program
+that uses the controllers without it (or whose JAX already runs with other settings) gets one
+warning from :func:`check`, when the first DDP solver is built, saying what it costs.
 
 * float64 (``jax_enable_x64``): DDP's convergence tests and the Riccati recursion need it.
 * XLA:CPU's "small while loop" threshold, raised (``xla_cpu_small_while_loop_byte_threshold``,
@@ -114,8 +114,8 @@ def check() -> None:
         warnings.warn(
             "wip-gym's JAX settings are not applied: "
             + "; ".join(missing)
-            + ". Call controllers.jax_setup.configure() before JAX starts (wip-bench, the "
-            "sweep's workers and the tests do).",
+            + ". Call controllers.optimizer.jax_setup.configure() before JAX starts "
+            "(wip-bench, the sweep's workers and the tests do).",
             RuntimeWarning,
             stacklevel=3,
         )

@@ -30,8 +30,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from controllers.ddp import DDPConfig, DDPSolver, RunningDerivatives, make_ddp_solver
-from controllers.wipm import WIPMParams, planar_dynamics, spatial_dynamics
+from controllers.optimizer.ddp import DDPConfig, DDPSolver, RunningDerivatives, make_ddp_solver
+from controllers.simplified.wipm import WIPMParams, planar_dynamics, spatial_dynamics
 from wip_gym.robot_model import RobotModel
 
 Array = jax.Array
@@ -65,7 +65,7 @@ class Weights:
 
 @dataclass(frozen=True)
 class WIPMProblem:
-    """Discrete dynamics and costs for ``controllers.ddp`` (pure JAX functions)."""
+    """Discrete dynamics and costs for ``controllers.optimizer.ddp`` (pure JAX functions)."""
 
     planar: bool
     dt: float

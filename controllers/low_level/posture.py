@@ -1,6 +1,6 @@
 """Holding the upper body at a posture: joint PD with gravity (bias) compensation.
 
-The baselines' upper body (reference/krang_facts.md 5.2: the real robot held its arms by the
+The baselines' upper body (docs/AUTHORS_CONFIG.md §5.2: the real robot held its arms by the
 Schunk modules' position control; the authors' simulation locked them): ``tau_j = h_j -
 Kp (q_j - q_j0) - Kd qd_j`` on every body joint above the base pitch, with ``h`` the
 minimal-coordinate bias (gravity, Coriolis, friction) and gains set from each joint's inertia

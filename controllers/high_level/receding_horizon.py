@@ -1,5 +1,5 @@
-"""The high-level controller (DESIGN 3): the offline plan at reset, MPC every ``mpc_dt``, and
-what the low level reads between two MPC steps.
+"""The high-level controller (docs/DESIGN.md §3): the offline plan at reset, MPC every ``mpc_dt``,
+and what the low level reads between two MPC steps.
 
 Between MPC steps the low level tracks the *current MPC solution's* predicted ``theta`` and
 ``thetad``, interpolated linearly inside the 10 ms, with the MPC's ``thdd`` as feed-forward;
@@ -12,10 +12,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from controllers.mpc import ModelPredictiveController, MPCConfig, MPCStep
-from controllers.planning import Plan, PlanConfig, plan_to_goal
-from controllers.wipm import params_from_lambda
-from controllers.wipm_problem import wipm_state
+from controllers.high_level.mpc import ModelPredictiveController, MPCConfig, MPCStep
+from controllers.high_level.planning import Plan, PlanConfig, plan_to_goal
+from controllers.simplified.wipm import params_from_lambda
+from controllers.simplified.wipm_problem import wipm_state
 from wip_gym.robot_model import RobotModel
 
 
@@ -48,8 +48,9 @@ class HighLevel:
         self.config = config
         ratio = config.mpc.dt / control_dt
         if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
-            raise ValueError(f"mpc dt {config.mpc.dt} is not a whole number of control steps "
-                             f"of {control_dt}")  # fmt: skip
+            raise ValueError(
+                f"mpc dt {config.mpc.dt} is not a whole number of control steps of {control_dt}"
+            )
         self.steps_per_mpc = int(round(ratio))
         self.control_dt = control_dt
         self.plan: Plan | None = None
@@ -61,8 +62,14 @@ class HighLevel:
         compile) its first step. ``robot`` must be updated with dynamics."""
         self.params = params_from_lambda(robot.wipm_parameters())
         state = wipm_state(robot)
-        self.plan = plan_to_goal(state, self.params, goal_xy, planar=robot.layout.planar,
-                                 cup_friction=cup_friction, config=self.config.plan)  # fmt: skip
+        self.plan = plan_to_goal(
+            state,
+            self.params,
+            goal_xy,
+            planar=robot.layout.planar,
+            cup_friction=cup_friction,
+            config=self.config.plan,
+        )
         # one solve now compiles the MPC (reset does the slow work); then start afresh
         ModelPredictiveController(self.plan, self.config.mpc).step(0, state, self.params)
         self.mpc = ModelPredictiveController(self.plan, self.config.mpc)

@@ -5,12 +5,12 @@ Each task is a small object (mink's style): ``jacobian(robot)`` over the minimal
 
     xdd* = xdd_d - Kp (x - x_d) - Kv (xd - xd_d)
 
-The QP (``controllers.task_qp``) turns them into rows ``w J E qdd = w (xdd* - Jdot nu - J e)``
-(``nu_dot = E qdd + e`` from the isolated dynamics), with ``Jdot nu`` from each task's
-``jdot_nu(probe)``: exact, from the drift accelerations of ``controllers.motion_probe`` (a task
-without it gets a central finite difference of ``J nu`` along the motion). Frames: end-effector
-targets live in the axle frame (origin at the axle midpoint, x along the heading, z up; DESIGN 4,
-ERRATA 5).
+The QP (``controllers.low_level.task_qp``) turns them into rows ``w J E qdd = w (xdd* - Jdot nu - J
+e)`` (``nu_dot = E qdd + e`` from the isolated dynamics), with ``Jdot nu`` from each task's
+``jdot_nu(probe)``: exact, from the drift accelerations of ``controllers.low_level.motion_probe``
+(a task without it gets a central finite difference of ``J nu`` along the motion). Frames:
+end-effector targets live in the axle frame (origin at the axle midpoint, x along the heading, z up;
+docs/DESIGN.md §4, docs/ERRATA.md §5).
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
-from controllers.motion_probe import MotionProbe
+from controllers.low_level.motion_probe import MotionProbe
 from wip_gym.robot_model import RobotModel
 
 Array = NDArray[np.float64]
@@ -112,8 +112,13 @@ class ThetaTask:
         return np.array([robot.theta - self.theta_d])
 
     def reference_acceleration(self, robot: RobotModel) -> Array:
-        return np.array([self.thdd_d - self.kp * (robot.theta - self.theta_d)
-                         - self.kv * (robot.thetad - self.thetad_d)])  # fmt: skip
+        return np.array(
+            [
+                self.thdd_d
+                - self.kp * (robot.theta - self.theta_d)
+                - self.kv * (robot.thetad - self.thetad_d)
+            ]
+        )
 
     def weights(self) -> Array:
         return np.array([self.weight])
@@ -127,8 +132,9 @@ class ThetaTask:
         if D <= 1e-18:
             return np.zeros(1)
         thetad = (Z * c_d[0] - X * c_d[2]) / D
-        return np.array([(Z * c_dd[0] - X * c_dd[2]) / D
-                         - 2.0 * thetad * (X * c_d[0] + Z * c_d[2]) / D])  # fmt: skip
+        return np.array(
+            [(Z * c_dd[0] - X * c_dd[2]) / D - 2.0 * thetad * (X * c_d[0] + Z * c_d[2]) / D]
+        )
 
 
 @dataclass
@@ -153,8 +159,9 @@ class SpinTask:
 
     def reference_acceleration(self, robot: RobotModel) -> Array:
         psid = robot.nu[robot.layout.index_psi]
-        return np.array([self.psidd_d - self.kp * (robot.psi - self.psi_d)
-                         - self.kv * (psid - self.psid_d)])  # fmt: skip
+        return np.array(
+            [self.psidd_d - self.kp * (robot.psi - self.psi_d) - self.kv * (psid - self.psid_d)]
+        )
 
     def weights(self) -> Array:
         return np.array([self.weight])

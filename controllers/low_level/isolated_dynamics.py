@@ -1,4 +1,4 @@
-"""The isolated manipulator dynamics: paper eq. ``iso3`` (ERRATA 4).
+"""The isolated manipulator dynamics: paper eq. ``iso3`` (docs/ERRATA.md §4).
 
 Eliminating ``xdd`` from the ``x`` row of ``A nu_dot + h = B ctrl`` leaves the body's own
 equations
@@ -9,8 +9,8 @@ with ``q`` every minimal coordinate but ``x`` (3-D: ``[psi, q1, ..., qn]``: ``ps
 driven by ``tau_0``; planar ``[q1, ..., qn]``), ``Gamma`` the generalised forces on ``q``
 (``tau_0``, ``tau_1`` = the wheels' reaction on the base pitch, the joint torques),
 ``A*_qq = A_qq - a_xq a_xq^T / a_xx``, ``Bm = a_xq e_q1^T / (R a_xx)`` (called ``B`` in the
-paper, a second meaning: ERRATA 2), ``alpha = a_xq[q1] / (R a_xx)``, ``beta = 1 / (1 + alpha)``
-(Sherman-Morrison: no matrix is inverted). ``xdd`` follows from the ``x`` row:
+paper, a second meaning: docs/ERRATA.md §2), ``alpha = a_xq[q1] / (R a_xx)``, ``beta = 1 / (1 +
+alpha)`` (Sherman-Morrison: no matrix is inverted). ``xdd`` follows from the ``x`` row:
 
     xdd = (-tau_1 / R - a_xq^T qdd - h_x) / a_xx
 

@@ -1,7 +1,7 @@
 """Disturbance rejection for a low-level task: an estimate of its unmodelled acceleration.
 
 The task QP computes torques by inverse dynamics of the *nominal* model (eq. ``iso3``), so an
-unmodelled load at the hand (a payload, DESIGN 7) shows up as a task-space acceleration the
+unmodelled load at the hand (a payload, docs/DESIGN.md §7) shows up as a task-space acceleration the
 QP did not ask for: the hand's inertia is larger than the model's, and gravity pulls on a
 mass the model does not have. The PD law of the paper,
 
@@ -26,7 +26,7 @@ mismatch ``M_true > M_nominal`` is made up for below the bandwidth ``w``. The re
 holds what the QP could not give the task (its trade-off with the other tasks and the
 torque limits): the estimate then raises the task's priority within the bound.
 
-The wrapper composes with any task of ``controllers.tasks`` (``jacobian``, ``error``,
+The wrapper composes with any task of ``controllers.low_level.tasks`` (``jacobian``, ``error``,
 ``weights``, ``reference_acceleration``, ``name``). The estimate is advanced once per robot
 state (memoised in ``robot.cache``, which every ``RobotModel.update`` clears), so it is called
 once per control step however often the QP asks.
@@ -40,14 +40,14 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from controllers.motion_probe import MotionProbe
+from controllers.low_level.motion_probe import MotionProbe
 from wip_gym.robot_model import RobotModel
 
 Array = NDArray[np.float64]
 
 
 class AccelerationTask(Protocol):
-    """The interface of a task of ``controllers.tasks``."""
+    """The interface of a task of ``controllers.low_level.tasks``."""
 
     name: str
 
@@ -117,15 +117,18 @@ class DisturbanceRejectingTask:
         return self.task.weights()
 
     def jdot_nu(self, probe: MotionProbe) -> Array:
-        """The wrapped task's exact ``Jdot nu`` (``controllers.motion_probe``)."""
+        """The wrapped task's exact ``Jdot nu`` (``controllers.low_level.motion_probe``)."""
         return self.task.jdot_nu(probe)
 
     def reference_acceleration(self, robot: RobotModel) -> Array:
         cached = robot.cache.get(self._key)
         if cached is not None:
             return cached  # type: ignore[return-value]
-        velocity = (self._velocity(robot) if self._velocity is not None
-                    else self.task.jacobian(robot) @ robot.nu).tolist()  # fmt: skip
+        velocity = (
+            self._velocity(robot)
+            if self._velocity is not None
+            else self.task.jacobian(robot) @ robot.nu
+        ).tolist()
         estimate = self.estimate
         if self._previous is not None:
             # per component in Python floats (the same IEEE arithmetic as NumPy's, without a

@@ -1,4 +1,4 @@
-"""Velocities and drift accelerations of task points at the robot's idealised state (issue 6).
+"""Velocities and drift accelerations of task points at the robot's idealised state.
 
 Each task row of the QP needs ``Jdot nu``: the time derivative of ``J(q) nu`` along the motion
 at fixed ``nu`` (paper section "Optimization Based Control": ``xdd = J nu_dot + Jdot nu``). It
@@ -12,7 +12,7 @@ probed), its kinematics and ``mj_comVel``, and with ``nu_dot = 0``
 for a point on a body (the angular part likewise), and for the body's CoM (wheels excluded)
 ``sum m_i a_i`` from ``mj_rnePostConstraint``'s ``cfrc_int`` (the linear part of a subtree's
 net force is ``sum m_i (a_i - g)``, whatever the reference point). The tasks
-(``controllers.tasks``) turn these world quantities into axle-frame drifts.
+(``controllers.low_level.tasks``) turn these world quantities into axle-frame drifts.
 
 Why the idealised state and not the robot's own: the measured state leaves the manifold by
 ~1e-5 rad and ~2e-3 m/s (contact compliance: roll, vertical speed), which the minimal model
@@ -33,13 +33,16 @@ Array = NDArray[np.float64]
 Vec = tuple[float, float, float]
 
 
-def _less_wheels(M: float, c: list[float], m_l: float, lw: list[float], m_r: float,
-                 rw: list[float], mass: float) -> Vec:  # fmt: skip
+def _less_wheels(
+    M: float, c: list[float], m_l: float, lw: list[float], m_r: float, rw: list[float], mass: float
+) -> Vec:
     """``(M c - m_l lw - m_r rw) / mass`` per component (spelled out: a generator costs more
     than the arithmetic)."""
-    return ((M * c[0] - m_l * lw[0] - m_r * rw[0]) / mass,
-            (M * c[1] - m_l * lw[1] - m_r * rw[1]) / mass,
-            (M * c[2] - m_l * lw[2] - m_r * rw[2]) / mass)  # fmt: skip
+    return (
+        (M * c[0] - m_l * lw[0] - m_r * rw[0]) / mass,
+        (M * c[1] - m_l * lw[1] - m_r * rw[1]) / mass,
+        (M * c[2] - m_l * lw[2] - m_r * rw[2]) / mass,
+    )
 
 
 class MotionProbe:
@@ -137,8 +140,11 @@ class MotionProbe:
             base, (wl, wr) = self._base, self._wheels
             M, m_l, m_r = self._subtree_mass[self._rows].tolist()
             mass = M - m_l - m_r
-            (c, lw, rw) = (self._subtree_com[base].tolist(), self._xipos[wl].tolist(),
-                           self._xipos[wr].tolist())  # fmt: skip
+            (c, lw, rw) = (
+                self._subtree_com[base].tolist(),
+                self._xipos[wl].tolist(),
+                self._xipos[wr].tolist(),
+            )
             position = _less_wheels(M, c, m_l, lw, m_r, rw, mass)
             mujoco.mj_subtreeVel(m, d)
             c, lw, rw = self._subtree_linvel[self._rows].tolist()
@@ -148,8 +154,11 @@ class MotionProbe:
             # the linear part of a subtree's net force is sum m_i (a_i - g)
             c, lw, rw = self._cfrc_int[self._rows, 3:].tolist()
             g = self._gravity
-            drift = ((c[0] - lw[0] - rw[0]) / mass + g[0], (c[1] - lw[1] - rw[1]) / mass + g[1],
-                     (c[2] - lw[2] - rw[2]) / mass + g[2])  # fmt: skip
+            drift = (
+                (c[0] - lw[0] - rw[0]) / mass + g[0],
+                (c[1] - lw[1] - rw[1]) / mass + g[1],
+                (c[2] - lw[2] - rw[2]) / mass + g[2],
+            )
             self._memo[key] = (position, velocity, drift)  # type: ignore[assignment]
         return self._memo[key]  # type: ignore[return-value]
 
@@ -158,8 +167,9 @@ class MotionProbe:
         c, s = self._c, self._s
         return (c * v[0] + s * v[1], -s * v[0] + c * v[1], v[2])
 
-    def relative_drift(self, position: Vec, velocity: Vec, acceleration: Vec
-                       ) -> tuple[Vec, Vec, Vec]:  # fmt: skip
+    def relative_drift(
+        self, position: Vec, velocity: Vec, acceleration: Vec
+    ) -> tuple[Vec, Vec, Vec]:
         """A world point's position, velocity and drift acceleration relative to the axle
         midpoint in the axle frame (which turns at ``omega = psid e_z``)::
 
@@ -175,6 +185,9 @@ class MotionProbe:
         )
         w = self.psid
         rel_d = (u[0] + w * rel[1], u[1] - w * rel[0], u[2])
-        rel_dd = (a[0] + 2.0 * w * u[1] - w * w * rel[0],
-                  a[1] - 2.0 * w * u[0] - w * w * rel[1], a[2])  # fmt: skip
+        rel_dd = (
+            a[0] + 2.0 * w * u[1] - w * w * rel[0],
+            a[1] - 2.0 * w * u[0] - w * w * rel[1],
+            a[2],
+        )
         return rel, rel_d, rel_dd

@@ -1,6 +1,6 @@
 """The "traditional" decoupled Krang controllers the paper compares against: the wheels
 balance the whole robot as one inverted pendulum, the upper body is held at its posture by
-joint PD with gravity compensation (``controllers.posture``), blind to balance.
+joint PD with gravity compensation (``controllers.low_level.posture``), blind to balance.
 
 * :class:`DecoupledController` (registry ``decoupled``): Krang 2014 as published
   (docs/AUTHORS_CONFIG.md §5.2). It balances about ``theta_ref = 0``, ``thetad_ref = 0`` and
@@ -20,7 +20,7 @@ joint PD with gravity compensation (``controllers.posture``), blind to balance.
   with 3.2 N m and 28 cm with 13 N m.
 * :class:`DecoupledLQRController` (registry ``decoupled-lqr``): our stronger variant. An LQR
   on the WIPM (paper section "Simplified Model") with the wheel torques as inputs, i.e. its
-  ``x`` and ``theta`` rows before the torque is eliminated (ERRATA 1) and, in 3-D, its spin
+  ``x`` and ``theta`` rows before the torque is eliminated (docs/ERRATA.md §1) and, in 3-D, its spin
   row, linearised at balance by ``jax.jacfwd`` and discretised (zero-order hold) at the control
   step, tracks the plan's *lean* ``theta`` as well as ``x`` (and ``psi``), with an integral of
   the position error. Its gains are 2 to 9 times stiffer than Krang's, and tracking the
@@ -37,19 +37,19 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from controllers.lqr import dlqr, zero_order_hold
-from controllers.planning import Plan, PlanConfig, plan_to_goal
+from controllers.baselines.lqr import dlqr, zero_order_hold
+from controllers.baselines.minimum_jerk import GoalReference
+from controllers.high_level.planning import Plan, PlanConfig, plan_to_goal
+from controllers.low_level.posture import PostureHold
 from controllers.policy import ModelChoice, PolicyBase, TaskInfo, plan_counters
-from controllers.posture import PostureHold
-from controllers.reference import GoalReference
-from controllers.wipm import (
+from controllers.simplified.wipm import (
     WIPMParams,
     linearize,
     params_from_lambda,
     planar_torque_dynamics,
     spatial_torque_dynamics,
 )
-from controllers.wipm_problem import wipm_state
+from controllers.simplified.wipm_problem import wipm_state
 from wip_gym.robot_model import RobotModel
 
 Array = NDArray[np.float64]

@@ -1,5 +1,5 @@
 """The offline plan: DDP on the WIPM over the whole horizon (paper section "Receding Horizon
-Control"; issue 4).
+Control").
 
 From the current state and ``lambda(q)`` to the goal over ``t_f`` (20 s at 10 ms: 2000 steps),
 weights as the paper describes (a high weight on ``theta`` for heavy robots, terminal weights)
@@ -18,9 +18,9 @@ from typing import Literal
 import jax
 import numpy as np
 
-from controllers.ddp import DDPConfig
-from controllers.wipm import WIPMParams
-from controllers.wipm_problem import (
+from controllers.optimizer.ddp import DDPConfig
+from controllers.simplified.wipm import WIPMParams
+from controllers.simplified.wipm_problem import (
     PLANAR_STATE,
     SPATIAL_STATE,
     Weights,
@@ -34,7 +34,7 @@ A_MAX_SPELLINGS = ("cup_safe", "none")
 
 @dataclass(frozen=True)
 class PlanConfig:
-    """Offline plan settings. Authors' values (krang_facts 3.2) for comparison.
+    """Offline plan settings. Authors' values (docs/AUTHORS_CONFIG.md §3.2) for comparison.
 
     Attributes:
         horizon_s, dt: ``t_f`` and the step: 20 s at 10 ms (authors: the same).
@@ -205,8 +205,9 @@ class Plan:
         return out
 
 
-def planning_problem(planar: bool, config: PlanConfig, a_max: float, heading_given: bool
-                     ) -> WIPMProblem:  # fmt: skip
+def planning_problem(
+    planar: bool, config: PlanConfig, a_max: float, heading_given: bool
+) -> WIPMProblem:
     c = config
     # state and control sizes differ: planar 4 and 1, spatial 8 and 2
     q: tuple[float, ...]
@@ -220,13 +221,22 @@ def planning_problem(planar: bool, config: PlanConfig, a_max: float, heading_giv
         r_rate = (c.r_rate,)
     else:
         # x (odometry) is not tracked: the position is (X0, Y0)
-        q = (0.0, c.q_heading, c.q_theta, c.q_speed, c.q_speed, c.q_thetad, c.q_position,
-             c.q_position)  # fmt: skip
+        q = (
+            0.0,
+            c.q_heading,
+            c.q_theta,
+            c.q_speed,
+            c.q_speed,
+            c.q_thetad,
+            c.q_position,
+            c.q_position,
+        )
         q_terminal = (0.0, c.q_terminal if heading_given else 0.0, *(c.q_terminal,) * 6)
         r = (c.r_control, c.r_control)
         r_rate = (c.r_rate, c.r_rate_spin)
-    weights = Weights(q=q, r=r, r_rate=r_rate, q_terminal=q_terminal, a_max=a_max,
-                      theta_max=c.theta_max)  # fmt: skip
+    weights = Weights(
+        q=q, r=r, r_rate=r_rate, q_terminal=q_terminal, a_max=a_max, theta_max=c.theta_max
+    )
     return WIPMProblem(planar=planar, dt=c.dt, weights=weights)
 
 
@@ -235,8 +245,9 @@ def _accelerations(problem: WIPMProblem):  # noqa: ANN202 (a jitted function)
     return jax.jit(jax.vmap(problem.horizontal_acceleration, in_axes=(0, 0, None)))
 
 
-def arrival_time(times: np.ndarray, states: np.ndarray, goal: np.ndarray, planar: bool
-                 ) -> float | None:  # fmt: skip
+def arrival_time(
+    times: np.ndarray, states: np.ndarray, goal: np.ndarray, planar: bool
+) -> float | None:
     """First time from which the plan stays within 1 cm of the goal, slower than 1 cm/s and
     0.01 rad/s."""
     if planar:
@@ -309,9 +320,18 @@ def plan_to_goal(
     if not np.all(np.isfinite(Z)):
         violations.append("non-finite plan")
     return Plan(
-        times=times, states=states, controls=controls, goal_state=goal, planar=planar,
-        cost=float(result.cost), iterations=int(result.iterations),
-        converged=bool(result.converged), peak_acceleration=peak_a, peak_theta=peak_theta,
-        arrival_time=arrival, a_max=a_max, theta_max=config.theta_max,
+        times=times,
+        states=states,
+        controls=controls,
+        goal_state=goal,
+        planar=planar,
+        cost=float(result.cost),
+        iterations=int(result.iterations),
+        converged=bool(result.converged),
+        peak_acceleration=peak_a,
+        peak_theta=peak_theta,
+        arrival_time=arrival,
+        a_max=a_max,
+        theta_max=config.theta_max,
         violations=tuple(violations),
-    )  # fmt: skip
+    )

@@ -6,8 +6,8 @@ Model"; :func:`params_from_lambda`). Pure, jit-friendly functions in the style o
 ``dynamics(s, u, params) -> sdot`` in continuous time, with :func:`discretize` for the paper's
 explicit-Euler steps and :func:`linearize` for the Jacobians.
 
-Planar model (state ``s = [theta, thetad, x, xd]``), ERRATA 1. The two rows of the one-link WIP,
-with ``m_w``, ``I_w`` the mass and axial inertia of BOTH wheels, ``I`` the body's pitch inertia
+Planar model (state ``s = [theta, thetad, x, xd]``), docs/ERRATA.md §1. The two rows of the one-link
+WIP, with ``m_w``, ``I_w`` the mass and axial inertia of BOTH wheels, ``I`` the body's pitch inertia
 about the axle, ``tau_w = tau_L + tau_R`` the total wheel torque and ``d`` one wheel joint's
 viscous damping (acting on the wheel's rotation relative to the body, ``xd / R - thd``):
 
@@ -16,7 +16,7 @@ viscous damping (acting on the wheel's rotation relative to the body, ``xd / R -
     th row: M L cos th xdd + I thdd - M g L sin th = -tau_w + 2 d (xd/R - thd)
 
 ``R * (x row) + (th row)`` eliminates the torque (and the damping with it) and gives the zero
-dynamics, paper eqs. ``WIPzero`` / ``WIPdyn`` as corrected by ERRATA 1:
+dynamics, paper eqs. ``WIPzero`` / ``WIPdyn`` as corrected by docs/ERRATA.md §1:
 
     (alpha + cos th) xdd + (beta + R cos th) thdd = g sin th + R sin th thd^2
     alpha = R (M + m_w + I_w/R^2) / (M L),   beta = I / (M L)
@@ -25,7 +25,7 @@ The paper's printed form (``beta + cos th`` and ``- R sin th thd^2``) is kept in
 :func:`paper_printed_planar_dynamics` only so that a test can show it is wrong.
 
 3-D model (state ``s = [x, psi, theta, xd, psid, thetad, X0, Y0]``), the structure of the
-authors' Krang3D model (reference/krang_facts.md 2.1-2.4) but derived here exactly, by Kane's
+authors' Krang3D model (docs/AUTHORS_CONFIG.md §2.1-2.4) but derived here exactly, by Kane's
 method. ``xd`` (the axle's forward speed) is a quasi-velocity, so a Lagrangian in ``x`` is not
 exact; instead, with ``nu = [xd, psid, thetad]`` and the rolling/no-side-slip constraints built
 into the velocities of the three rigid bodies (the lumped body and the two wheels),
@@ -42,7 +42,7 @@ contact forces do no work and drop out. The wheels' rotation relative to the bod
 ``phi_dot - thetad`` with ``phi_dot = (xd -+ sep/2 psid)/R`` (left/right), so a motor torque (and
 each joint's damping ``-d (phi_dot - thetad)``) enters through the column
 ``[1/R, -+sep/(2R), -1]``: ``B [tau_L, tau_R] = [(tau_L + tau_R)/R, tau_0, tau_1]`` with
-``tau_0 = sep/(2R) (tau_R - tau_L)`` the generalised force on ``psi`` (ERRATA 3;
+``tau_0 = sep/(2R) (tau_R - tau_L)`` the generalised force on ``psi`` (docs/ERRATA.md §3;
 wip_gym.wheel_torques) and ``tau_1 = -(tau_L + tau_R)`` the torque on the body pitch (paper
 eq. ``dyn``, ``simple1``/``simple2`` for the lumped model).
 
@@ -104,7 +104,8 @@ class WIPMParams(NamedTuple):
         wheel_damping: viscous damping of ONE wheel joint (N m s/rad), on the wheel's rotation
             relative to the body.
         wheel_radius: ``R`` (m).
-        wheel_separation: distance between the wheels (the paper's other ``L``, ERRATA 2) (m).
+        wheel_separation: distance between the wheels (the paper's other ``L``, docs/ERRATA.md §2)
+            (m).
         gravity: ``g`` (m/s^2, positive).
     """
 
@@ -182,7 +183,7 @@ def _planar_alpha_beta(params: WIPMParams) -> tuple[Array, Array]:
 
 def planar_dynamics(s: ArrayLike, u: ArrayLike, params: WIPMParams) -> Array:
     """Planar WIPM zero dynamics with the pitch acceleration as control (paper eq. ``WIPdyn``,
-    ``f_c`` from eq. ``WIPzero``, corrected per ERRATA 1).
+    ``f_c`` from eq. ``WIPzero``, corrected per docs/ERRATA.md §1).
 
     ``s = [theta, thetad, x, xd]``, ``u = thdd`` (scalar or shape ``(1,)``). Returns
     ``sdot = [thd, thdd, xd, xdd]`` with
@@ -202,7 +203,7 @@ def planar_dynamics(s: ArrayLike, u: ArrayLike, params: WIPMParams) -> Array:
 
 
 def paper_printed_planar_dynamics(s: ArrayLike, u: ArrayLike, params: WIPMParams) -> Array:
-    """The paper's eq. ``WIPdyn`` AS PRINTED (wrong; ERRATA 1), kept only for a test.
+    """The paper's eq. ``WIPdyn`` AS PRINTED (wrong; docs/ERRATA.md §1), kept only for a test.
 
     ``xdd = (g sin th - R sin th thd^2 - (beta + cos th) u) / (alpha + cos th)`` with the printed
     ``alpha = R/(M L) (M + m_w + I_w/R^2)`` and ``beta = I/(M L)`` (``m_w``, ``I_w`` of both
@@ -220,7 +221,7 @@ def paper_printed_planar_dynamics(s: ArrayLike, u: ArrayLike, params: WIPMParams
 
 def _planar_rows(s: Array, params: WIPMParams) -> tuple[Array, Array, Array]:
     """Mass matrix ``A`` (rows x, th over ``[xdd, thdd]``), the right-hand side without the
-    torque, and the torque column ``b``: ``A [xdd, thdd] = rhs + b tau_w`` (ERRATA 1)."""
+    torque, and the torque column ``b``: ``A [xdd, thdd] = rhs + b tau_w`` (docs/ERRATA.md §1)."""
     th, thd, xd = s[0], s[1], s[3]
     M, L, R, g = params.body_mass, params.com_distance, params.wheel_radius, params.gravity
     m_w = 2.0 * params.wheel_mass
@@ -237,7 +238,7 @@ def _planar_rows(s: Array, params: WIPMParams) -> tuple[Array, Array, Array]:
 
 def planar_torque_dynamics(s: ArrayLike, tau_w: ArrayLike, params: WIPMParams) -> Array:
     """Planar WIPM with the total wheel torque ``tau_w = tau_L + tau_R`` as input (the x and th
-    rows of ERRATA 1 before the torque is eliminated, with the wheels' viscous damping).
+    rows of docs/ERRATA.md §1 before the torque is eliminated, with the wheels' viscous damping).
 
     ``s = [theta, thetad, x, xd]``; returns ``[thd, thdd, xd, xdd]``.
     """
@@ -309,13 +310,17 @@ def spatial_terms(s: ArrayLike, params: WIPMParams) -> SpatialTerms:
     p = (J_xx - J_zz) * sc - J_xz * (cc - ss)
     damping = 2.0 * params.wheel_damping * (xd / R - thd)  # both joints', on x and theta
     a_pp = (
-        J_xx * ss + J_zz * cc - 2.0 * J_xz * sc
+        J_xx * ss
+        + J_zz * cc
+        - 2.0 * J_xz * sc
         + 2.0 * (k * k * rolling_mass + params.wheel_inertia_transverse)
-    )  # fmt: skip
+    )
     h_p = (
-        ML_s * xd * psid + 2.0 * p * psid * thd - (J_xy * c + J_yz * sn) * thd * thd
+        ML_s * xd * psid
+        + 2.0 * p * psid * thd
+        - (J_xy * c + J_yz * sn) * thd * thd
         + 2.0 * params.wheel_damping * (k / R) ** 2 * psid
-    )  # fmt: skip
+    )
     return SpatialTerms(
         a_xx=M + 2.0 * rolling_mass,
         a_xp=-M * params.com_lateral,
@@ -388,7 +393,7 @@ def _heading_inertias(theta: Array, params: WIPMParams) -> tuple[Array, Array]:
 def wheel_torque_matrix(params: WIPMParams) -> Array:
     """``B`` (3x2): the generalised forces on ``[x, psi, theta]`` of ``[tau_L, tau_R]``, the
     gradient of each wheel's relative rate ``phi_dot - thetad`` with respect to ``nu``:
-    ``[(tau_L + tau_R)/R, sep/(2R) (tau_R - tau_L), -(tau_L + tau_R)]`` (ERRATA 3)."""
+    ``[(tau_L + tau_R)/R, sep/(2R) (tau_R - tau_L), -(tau_L + tau_R)]`` (docs/ERRATA.md §3)."""
     R, sep = params.wheel_radius, params.wheel_separation
     k = sep / (2.0 * R)
     one = jnp.ones_like(jnp.asarray(R))
@@ -485,8 +490,8 @@ def _spatial_zero_dynamics(
     s: Array, u: Array, params: WIPMParams
 ) -> tuple[Array, Array, SpatialTerms]:
     """``(xdd, psidd, terms)`` for ``u = [thdd, tau_0]``: ``tau_1`` eliminated by
-    ``R * (x row) + (theta row)``, the psi row kept with ``tau_0`` (krang_facts 2.3). The wheel
-    damping cancels from the combined row (``R h_x + h_t``) as the torque does."""
+    ``R * (x row) + (theta row)``, the psi row kept with ``tau_0`` (docs/AUTHORS_CONFIG.md §2.3).
+    The wheel damping cancels from the combined row (``R h_x + h_t``) as the torque does."""
     t = spatial_terms(s, params)
     R = params.wheel_radius
     thdd, tau_0 = u[0], u[1]
@@ -503,10 +508,11 @@ def _spatial_zero_dynamics(
 
 
 def spatial_dynamics(s: ArrayLike, u: ArrayLike, params: WIPMParams) -> Array:
-    """3-D WIPM with ``u = [thdd, tau_0]`` (the MPC's model; krang_facts 2.1-2.3 structure).
+    """3-D WIPM with ``u = [thdd, tau_0]`` (the MPC's model; docs/AUTHORS_CONFIG.md §2.1-2.3
+    structure).
 
-    ``tau_0 = sep/(2R) (tau_R - tau_L)`` is the generalised force on ``psi`` (ERRATA 3). The pitch
-    torque ``tau_1`` is eliminated by ``R * (x row) + (theta row)`` and the 2x2 system for
+    ``tau_0 = sep/(2R) (tau_R - tau_L)`` is the generalised force on ``psi`` (docs/ERRATA.md §3).
+    The pitch torque ``tau_1`` is eliminated by ``R * (x row) + (theta row)`` and the 2x2 system for
     ``(xdd, psidd)`` is solved. Returns ``[xd, psid, thetad, xdd, psidd, thdd, xd cos psi,
     xd sin psi]``.
     """
@@ -520,7 +526,7 @@ def inverse_dynamics(s: ArrayLike, u: ArrayLike, params: WIPMParams) -> tuple[Ar
     """The wheel torques ``(tau_L, tau_R)`` that realise ``u = [thdd, tau_0]`` at state ``s``.
 
     ``tau_1`` from the theta row with the accelerations of :func:`spatial_dynamics`
-    (krang_facts 2.4), then the inverse map of wip_gym.wheel_torques:
+    (docs/AUTHORS_CONFIG.md §2.4), then the inverse map of wip_gym.wheel_torques:
     ``tau_L = (-tau_1 - 2R/sep tau_0) / 2``, ``tau_R = (-tau_1 + 2R/sep tau_0) / 2``.
     """
     s = jnp.asarray(s)
@@ -547,7 +553,7 @@ def linearize(
 
 def discretize(dynamics: Dynamics, dt: float) -> Dynamics:
     """The paper's explicit-Euler discretisation: ``f(s, u, params) = s + dt dynamics(s, u,
-    params)`` (krang_facts 3.1)."""
+    params)`` (docs/AUTHORS_CONFIG.md §3.1)."""
 
     def step(s: ArrayLike, u: ArrayLike, params: WIPMParams) -> Array:
         s = jnp.asarray(s)

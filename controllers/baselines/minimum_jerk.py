@@ -1,4 +1,4 @@
-"""Smooth references that take a WIP to its goal (the decoupled baseline's, issue 3).
+"""Smooth references that take a WIP to its goal (the decoupled baseline's).
 
 A minimum-jerk profile (Flash and Hogan 1985) moves a coordinate from 0 to ``D`` in ``T`` with
 zero velocity and acceleration at both ends; its peak acceleration is ``10/sqrt(3) D / T^2``, so
