@@ -55,6 +55,7 @@ from benchmarks.scenario import (
 from benchmarks.seeding import episode_seed
 from benchmarks.statistics import describe, rate
 from controllers import registry
+from controllers.optimizer import jax_setup
 
 DEFAULT_ENV = "wip_gym/PlanarTray-v0"
 RATES = ("success", "goal_reached", "cup_kept", "tray_kept", "fell")
@@ -310,7 +311,9 @@ def _run_tasks(
         context = multiprocessing.get_context("spawn")
         with context.Manager() as manager:
             reports = manager.Queue()
-            with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
+            with ProcessPoolExecutor(
+                max_workers=jobs, mp_context=context, initializer=jax_setup.configure
+            ) as pool:  # a spawned worker is an entry point: the solvers' JAX settings first
                 futures = {
                     pool.submit(compare_episode, *task, progress=reports): k
                     for k, task in enumerate(tasks)
