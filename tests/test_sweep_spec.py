@@ -250,3 +250,26 @@ def test_episodes_run_replicate_by_replicate_so_a_partial_sweep_is_balanced():
     assert {e.cell_index for e in first} == set(range(len(spec.cells())))
     assert [e.replicate for e in episodes] == sorted(e.replicate for e in episodes)
     assert len({e.id for e in episodes}) == len(episodes) == per_replicate * spec.seeds
+
+
+def test_a_one_axis_sweep_whose_cells_all_succeed_gets_its_line_plot(tmp_path):
+    """Every episode a success: the Wilson interval's upper end is 1 up to round-off, and the
+    error bars must not turn negative."""
+    one_axis = ISSUE_SPEC.replace("seeds = 2", "seeds = 10").replace('"env.goal" = [1.0, 1.5]\n', "").replace(
+        'axes = ["env.cup_friction", "env.goal"]', 'axes = ["env.cup_friction"]'
+    )
+    spec = parse_spec(one_axis, validate_env=False)
+    with open(tmp_path / "episodes.jsonl", "w") as f:
+        for episode in spec.episodes():
+            f.write(json.dumps({**_row(episode.id, "aaa"), "replicate": episode.replicate}) + "\n")
+    summary = write_report(spec, tmp_path)
+    assert summary["episodes_ok"] == len(spec.episodes())
+    assert (tmp_path / "line_env.cup_friction.png").stat().st_size > 0
+
+
+def test_the_wilson_interval_ends_exactly_at_0_and_1_when_every_episode_agrees():
+    from benchmarks.sweep.stats import wilson_interval
+
+    for n in (1, 3, 10, 29, 100):
+        assert wilson_interval(n, n)[1] == 1.0 and wilson_interval(n, n)[0] < 1.0
+        assert wilson_interval(0, n)[0] == 0.0 and wilson_interval(0, n)[1] > 0.0

@@ -126,7 +126,7 @@ def _line_plots(spec: SweepSpec, summary: Mapping[str, Any], directory: Path) ->
             axes[0].errorbar(
                 xs,
                 rate,
-                yerr=[rate - ci[:, 0], ci[:, 1] - rate],
+                yerr=np.clip([rate - ci[:, 0], ci[:, 1] - rate], 0.0, None),  # round-off at 0 and 1
                 marker="o",
                 capsize=3,
                 label=controller,
