@@ -115,6 +115,8 @@ def test_mpc_step_is_traced_once(reference: dict[str, np.ndarray]) -> None:
 
 
 _CACHE_SCRIPT = """
+from controllers.optimizer import jax_setup
+jax_setup.configure()  # a new process is an entry point: the settings, the cache among them
 import numpy as np, jax.numpy as jnp
 from controllers.optimizer.ddp import make_ddp_solver, DDPConfig
 def dynamics(x, u, p):

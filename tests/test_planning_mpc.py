@@ -51,6 +51,14 @@ def test_3d_plan_turns_to_an_offset_goal() -> None:
     # spin, no detour); a WIP's brief backward lurch before it leans forward is allowed
     assert 0.2 < final[1] < 0.7
     assert np.hypot(2.0, 1.0) < final[0] < 1.15 * np.hypot(2.0, 1.0)
+    # past its end the plan gives its goal; x (the distance rolled) is no part of the 3-D goal,
+    # so it holds the x the plan arrived with (it used to drop to 0 there: a 2.3 m step in the
+    # reference of every controller that tracks x); the rest moves by at most the plan's
+    # arrival tolerance (1 cm, 1 cm/s)
+    before, after = plan.sample(plan.times[-1] - 1e-9), plan.sample(plan.times[-1] + 1.0)
+    assert after["x"] == pytest.approx(before["x"], abs=1e-9)
+    for name in ("xd", "theta", "thetad", "psi", "X0", "Y0"):
+        assert after[name] == pytest.approx(before[name], abs=0.01), name
 
 
 def test_violations_are_reported() -> None:

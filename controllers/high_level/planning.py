@@ -308,6 +308,12 @@ def plan_to_goal(
     peak_a = float(accelerations.max())
     peak_theta = float(np.abs(states[:, problem.theta_index]).max())
     times = np.arange(steps + 1) * config.dt
+    if not planar:
+        # x (the distance rolled) is no part of the 3-D goal (its weight is 0: the goal is
+        # (X0, Y0)), so past the end the plan holds the x it arrived with, not 0: a controller
+        # that tracks x from the plan (the decoupled baselines) must see no jump at t_f
+        goal = goal.copy()
+        goal[0] = states[-1, 0]
     arrival = arrival_time(times, states, goal, planar)
     violations = []
     if peak_a > a_max:
