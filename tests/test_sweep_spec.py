@@ -255,8 +255,10 @@ def test_episodes_run_replicate_by_replicate_so_a_partial_sweep_is_balanced():
 def test_a_one_axis_sweep_whose_cells_all_succeed_gets_its_line_plot(tmp_path):
     """Every episode a success: the Wilson interval's upper end is 1 up to round-off, and the
     error bars must not turn negative."""
-    one_axis = ISSUE_SPEC.replace("seeds = 2", "seeds = 10").replace('"env.goal" = [1.0, 1.5]\n', "").replace(
-        'axes = ["env.cup_friction", "env.goal"]', 'axes = ["env.cup_friction"]'
+    one_axis = (
+        ISSUE_SPEC.replace("seeds = 2", "seeds = 10")
+        .replace('"env.goal" = [1.0, 1.5]\n', "")
+        .replace('axes = ["env.cup_friction", "env.goal"]', 'axes = ["env.cup_friction"]')
     )
     spec = parse_spec(one_axis, validate_env=False)
     with open(tmp_path / "episodes.jsonl", "w") as f:
