@@ -14,7 +14,8 @@ import argparse
 import os
 import sys
 
-from benchmarks import compare, figures, profile, render, solvers
+from benchmarks import compare, figures, render
+from benchmarks.speed import profile, solvers
 from benchmarks.sweep import cli as sweep_cli
 from controllers.optimizer import jax_setup
 

@@ -1,5 +1,5 @@
 """Correctness guards of the DDP's speed work: the offline plan and the MPC give the
-results recorded before it (tests/data/ddp_reference.npz, see tests/ddp_reference.py), the
+results recorded before it (tests/data/ddp_recorded.npz, see tests/ddp_recorded.py), the
 closed-form running-cost derivatives equal autodiff's, the MPC step is compiled once, and the
 persistent compilation cache works from an empty directory."""
 
@@ -16,20 +16,20 @@ import pytest
 
 from controllers.high_level.mpc import ModelPredictiveController, MPCConfig, mpc_problem
 from controllers.high_level.planning import PlanConfig, plan_to_goal, planning_problem
-from tests import ddp_reference
+from tests import ddp_recorded
 
 REPO = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
 def reference() -> dict[str, np.ndarray]:
-    return dict(np.load(ddp_reference.PATH))
+    return dict(np.load(ddp_recorded.PATH))
 
 
 @pytest.fixture(scope="module")
 def computed(reference: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    params = ddp_reference.params_from_arrays(reference)
-    return ddp_reference.compute(params, float(reference["theta0"]))
+    params = ddp_recorded.params_from_arrays(reference)
+    return ddp_recorded.compute(params, float(reference["theta0"]))
 
 
 @pytest.mark.parametrize("problem", ["planar", "3d"])
@@ -74,7 +74,7 @@ def _random_points(problem, rng: np.random.Generator, count: int) -> list[tuple]
 def test_running_derivatives_equal_autodiff(
     planar: bool, kind: str, reference: dict[str, np.ndarray]
 ) -> None:
-    params = ddp_reference.params_from_arrays(reference)
+    params = ddp_recorded.params_from_arrays(reference)
     if kind == "plan":
         problem = planning_problem(planar, PlanConfig(), a_max=1.0, heading_given=False)
     else:
@@ -100,8 +100,8 @@ def test_running_derivatives_equal_autodiff(
 
 
 def test_mpc_step_is_traced_once(reference: dict[str, np.ndarray]) -> None:
-    params = ddp_reference.params_from_arrays(reference)
-    state = ddp_reference.initial_state("planar", float(reference["theta0"]))
+    params = ddp_recorded.params_from_arrays(reference)
+    state = ddp_recorded.initial_state("planar", float(reference["theta0"]))
     plan = plan_to_goal(state, params, np.array([2.0, 0.0]), planar=True)
     mpc = ModelPredictiveController(plan)
     rng = np.random.default_rng(0)

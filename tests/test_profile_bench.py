@@ -1,7 +1,7 @@
 """``wip-bench profile``: runs, writes the documented JSON schema, and attributes time
 where it was spent: a known delay put into one part shows up in that part and no other, and the
-unit (``benchmarks.yardstick``) agrees with a bare ``mj_step`` of Krang-v0 timed by the test. No
-upper bounds on absolute times (the figures depend on the machine and its load)."""
+unit (``benchmarks.speed.yardstick``) agrees with a bare ``mj_step`` of Krang-v0 timed by the test.
+No upper bounds on absolute times (the figures depend on the machine and its load)."""
 
 from __future__ import annotations
 
@@ -17,11 +17,11 @@ import mujoco
 import numpy as np
 import pytest
 
-import benchmarks.profile as profile_module
+import benchmarks.speed.profile as profile_module
 from benchmarks.cli import main
-from benchmarks.profile import ROWS, profile_episode
 from benchmarks.scenario import Scenario
-from benchmarks.yardstick import REFERENCE_ENV, reference_step_us
+from benchmarks.speed.profile import ROWS, profile_episode
+from benchmarks.speed.yardstick import REFERENCE_ENV, reference_step_us
 
 TOP_KEYS = {
     "env",

@@ -12,17 +12,17 @@ import numpy as np
 import pytest
 
 from benchmarks.cli import main
-from benchmarks.crocoddyl_wipm import CrocoddylWIPM
-from benchmarks.ddp_bench import (
+from benchmarks.speed.crocoddyl_wipm import CrocoddylWIPM
+from benchmarks.speed.ddp_bench import (
     CROCODDYL_TH_STOP_CONVERGED,
     GOALS,
     goal_state,
     initial_state,
     krang_params,
 )
-from benchmarks.numpy_ilqr import NumpyILQR
-from benchmarks.qp_peers import all_solvers, reference_solution, solution_error
-from benchmarks.qp_recording import RecordedQP
+from benchmarks.speed.numpy_ilqr import NumpyILQR
+from benchmarks.speed.qp_peers import all_solvers, reference_solution, solution_error
+from benchmarks.speed.qp_recording import RecordedQP
 from controllers.high_level.mpc import MPCConfig, mpc_problem
 from controllers.high_level.planning import PlanConfig, planning_problem
 from controllers.simplified.wipm_problem import ddp_solver_for, refs_for
@@ -177,10 +177,10 @@ def test_qp_peers_agree_on_a_constrained_qp() -> None:
 
 
 def test_ddp_timing_script_runs() -> None:
-    """``python -m benchmarks.ddp_timing`` (the DDP alone, caller vs bare compiled call): it
+    """``python -m benchmarks.speed.ddp_timing`` (the DDP alone, caller vs bare compiled call): it
     runs on the planar problem and its timed MPC steps do not retrace."""
-    from benchmarks.ddp_bench import krang_params
-    from benchmarks.ddp_timing import bench
+    from benchmarks.speed.ddp_bench import krang_params
+    from benchmarks.speed.ddp_timing import bench
 
     params, theta0 = krang_params()
     out = bench("planar", params, theta0, reps=1, mpc_steps=3)
@@ -189,8 +189,8 @@ def test_ddp_timing_script_runs() -> None:
 
 
 def test_first_call_script_runs(capsys: pytest.CaptureFixture[str]) -> None:
-    """``python -m benchmarks.first_call`` plans, steps the MPC and prints both times."""
-    from benchmarks.first_call import main
+    """``python -m benchmarks.speed.first_call`` plans, steps the MPC and prints both times."""
+    from benchmarks.speed.first_call import main
 
     main()
     assert capsys.readouterr().out.startswith("first plan ")

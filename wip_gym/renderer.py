@@ -1,7 +1,7 @@
 """Offscreen frames of a model's state through a named camera, with settings chosen for speed,
 and renderers that close themselves before the interpreter tears EGL down.
 
-Render settings (``python -m benchmarks.render_cost``, 480 x 320, Mesa llvmpipe on the 2-core
+Render settings (``python -m benchmarks.speed.render_cost``, 480 x 320, Mesa llvmpipe on the 2-core
 development machine while other jobs ran, so +-50 %; median ms per frame over two runs each of
 PlanarTray-v0 and KrangTray-v0, and the mean |pixel difference| to the chosen frame, 0-255):
 chosen (no shadows, no reflections, no anti-aliasing) 15-24 ms; with shadows 64-150 ms

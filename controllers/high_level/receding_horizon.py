@@ -28,7 +28,7 @@ class HighLevelConfig:
 
 
 @dataclass(frozen=True)
-class HighLevelReference:
+class HighLevelSetpoint:
     """What the low level tracks at one control step."""
 
     theta: float
@@ -77,7 +77,7 @@ class HighLevel:
         self._last = None
         return self.plan
 
-    def reference(self, robot: RobotModel) -> HighLevelReference:
+    def reference(self, robot: RobotModel) -> HighLevelSetpoint:
         """Advance one control step: run the MPC when it is due (``lambda(q)`` from the robot's
         current state), and return the references interpolated inside the MPC step."""
         if self.mpc is None or self.plan is None:
@@ -97,14 +97,14 @@ class HighLevel:
         control = last.control
         dt = self.config.mpc.dt
         if robot.layout.planar:
-            return HighLevelReference(
+            return HighLevelSetpoint(
                 theta=float(theta),
                 thetad=float(thetad),
                 thdd=float(control[0]),
                 tau_0=0.0,
                 mpc_index=index,
             )
-        return HighLevelReference(
+        return HighLevelSetpoint(
             theta=float(theta),
             thetad=float(thetad),
             thdd=float(control[0]),

@@ -17,7 +17,7 @@ matrix product); 3. ``H = T^T T + eps I``, ``g = -T^T b``;
 
 Why NumPy and not a jitted JAX function: for these sizes (Krang: 18 variables, 30 task rows, 34
 constraint rows) the whole arithmetic costs less than one call of a jitted function, measured by
-``benchmarks/low_level_kernel_bench.py`` (its module docstring has the figures).
+``benchmarks/speed/low_level_kernel_bench.py`` (its module docstring has the figures).
 """
 
 from __future__ import annotations

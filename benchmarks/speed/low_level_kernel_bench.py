@@ -1,11 +1,11 @@
 """The low level's kernel (``controllers.low_level.kernel``) in NumPy against the same arithmetic
 as a jitted JAX function, on the inputs of a real ``unified`` closed loop on KrangTray-v0.
 
-    python -m benchmarks.low_level_kernel_bench [--steps 300] [--repeats 5]
+    python -m benchmarks.speed.low_level_kernel_bench [--steps 300] [--repeats 5]
 
 Timed per call (median over the recorded states, then the median of ``--repeats`` rounds,
 interleaved so that the machine's load falls on every variant alike), beside the unit of
-``benchmarks.yardstick``:
+``benchmarks.speed.yardstick``:
 
 * ``numpy``: ``LowLevelKernel.run`` (steps 1 to 5, eq. iso3 included);
 * ``before``: the same arithmetic as the task QP did it before the kernel, piece by piece
@@ -35,7 +35,7 @@ import gymnasium as gym
 import numpy as np
 
 import wip_gym  # noqa: F401
-from benchmarks.yardstick import reference_step_us
+from benchmarks.speed.yardstick import reference_step_us
 from controllers.hierarchical import HierarchicalController
 from controllers.low_level.kernel import KernelLayout
 

@@ -1,11 +1,11 @@
 """Reference outputs of the offline plan and the MPC (the correctness guard of the DDP's speed
 work): the same problems solved by the code being tested, compared with the outputs of
-the code before that work, stored in ``tests/data/ddp_reference.npz``.
+the code before that work, stored in ``tests/data/ddp_recorded.npz``.
 
 The WIPM parameters are stored with the outputs (Krang's ``lambda(q)`` at its initial pose when
 the file was made), so the comparison does not depend on the robot model. Regenerate (only after
 a deliberate change of the results, with the reason in the commit message) with
-``python -m tests.ddp_reference``.
+``python -m tests.ddp_recorded``.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from controllers.high_level.mpc import ModelPredictiveController
 from controllers.high_level.planning import Plan, PlanConfig, plan_to_goal
 from controllers.simplified.wipm import WIPMParams
 
-PATH = Path(__file__).parent / "data" / "ddp_reference.npz"
+PATH = Path(__file__).parent / "data" / "ddp_recorded.npz"
 GOALS = {"planar": (2.0, 0.0), "3d": (2.0, 1.0)}
 MPC_STEPS = 20
 
@@ -79,7 +79,7 @@ def compute(params: WIPMParams, theta0: float) -> dict[str, np.ndarray]:
 
 
 def _krang() -> tuple[WIPMParams, float]:
-    from benchmarks.solvers import krang_params
+    from benchmarks.speed.solvers import krang_params
 
     return krang_params()
 

@@ -3,11 +3,11 @@ SLSQP on the QPs of a real closed loop.
 
 For each env (``planar``: ``PlanarTray-v0``, ``krang``: ``KrangTray-v0``) the ``unified``
 controller runs a short episode and every control step's QP is recorded
-(:mod:`benchmarks.qp_recording`). Each solver (:mod:`benchmarks.qp_peers`) then solves the
-same sequence in order (warm starts carry from one QP to the next, as in the controller), in
+(:mod:`benchmarks.speed.qp_recording`). Each solver (:mod:`benchmarks.speed.qp_peers`) then solves
+the same sequence in order (warm starts carry from one QP to the next, as in the controller), in
 ``passes`` passes, each from a fresh start. First the solutions: every one is compared with the
 KKT-checked reference; a solver agrees when all of them are within
-:data:`benchmarks.qp_peers.SOLUTION_TOLERANCE` (a solver that does not is reported with its
+:data:`benchmarks.speed.qp_peers.SOLUTION_TOLERANCE` (a solver that does not is reported with its
 worst error and its failures, never dropped and never given a looser test). Then the times:
 the wall time of each ``solve`` call (ours: ProxQP's ``update`` + ``solve``; OSQP's ``update`` +
 ``solve``; the others' whole call), median and p99 in microseconds over all passes.
@@ -26,14 +26,14 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from benchmarks.qp_peers import (
+from benchmarks.speed.qp_peers import (
     SOLUTION_TOLERANCE,
     QPSolver,
     all_solvers,
     reference_solution,
     solution_error,
 )
-from benchmarks.qp_recording import Recording, record_qps
+from benchmarks.speed.qp_recording import Recording, record_qps
 
 ENVS = {"planar": "wip_gym/PlanarTray-v0", "krang": "wip_gym/KrangTray-v0"}
 ACTIVE_TOLERANCE = 1e-9

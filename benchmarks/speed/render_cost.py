@@ -1,6 +1,7 @@
 """What a video frame costs, setting by setting (the measurement behind ``wip_gym.renderer.FAST``).
 
-    MUJOCO_GL=egl python -m benchmarks.render_cost --env PlanarTray-v0 --size 480x320 --frames 60
+    MUJOCO_GL=egl python -m benchmarks.speed.render_cost --env PlanarTray-v0 --size 480x320
+    --frames 60
 
 Prints the median wall time per frame (ms) of: the fast settings (no shadows, no reflections,
 no anti-aliasing), each expensive setting added alone, all of them, the overlay, and the H.264

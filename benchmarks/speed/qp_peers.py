@@ -1,6 +1,6 @@
 """The task-QP solvers ``wip-bench solvers`` compares, behind one interface.
 
-Every solver takes the recorded sequence (:mod:`benchmarks.qp_recording`) in order, one QP
+Every solver takes the recorded sequence (:mod:`benchmarks.speed.qp_recording`) in order, one QP
 per control step, ``min 0.5 x'Hx + g'x  s.t.  lower <= C x <= upper``:
 
 * ``proxqp`` (ours): ``controllers.low_level.task_qp``'s path exactly: one dense ProxQP object, no
@@ -39,7 +39,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 from scipy.optimize import minimize
 
-from benchmarks.qp_recording import RecordedQP
+from benchmarks.speed.qp_recording import RecordedQP
 from controllers.low_level.task_qp import QPSettings, feasible_unconstrained_minimiser, start_proxqp
 
 FloatArray = NDArray[np.float64]

@@ -1,5 +1,5 @@
 """Guards for the low level's speed changes: the code reproduces the reference data
-recorded by ``tools/record_lowlevel_reference.py`` before any of them.
+recorded by ``tests/lowlevel_recording.py`` before any of them.
 
 * Main guard, on recorded inputs: the task QP assembled from a recorded observation and task
   references is the recorded ``(H, g, C, lower, upper)`` to 1e-9 (relative to each array's
@@ -18,7 +18,6 @@ recording and carries a state of its own, so both guards run with it off
 
 from __future__ import annotations
 
-from pathlib import Path
 from types import SimpleNamespace
 
 import gymnasium as gym
@@ -29,15 +28,8 @@ import wip_gym  # noqa: F401
 from controllers.hierarchical import HierarchicalConfig, HierarchicalController
 from controllers.low_level.isolated_dynamics import isolated_dynamics
 from controllers.low_level.task_qp import TaskQP
+from tests.lowlevel_recording import CASES, DATA  # the one table of recorded cases
 
-DATA = Path(__file__).parent / "data"
-CASES = {
-    "planar": ("wip_gym/PlanarTray-v0", 2.0, "level"),
-    "planar_waiter": ("wip_gym/PlanarTray-v0", 2.0, "specific_force"),
-    "krang": ("wip_gym/KrangTray-v0", (2.0, 0.0), "level"),
-    "planar_nocup": ("wip_gym/Planar-v0", 2.0, "level"),
-    "krang_nocup": ("wip_gym/Krang-v0", (2.0, 1.0), "level"),
-}
 CLOSED_LOOP_STEPS = 100
 
 

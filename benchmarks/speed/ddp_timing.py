@@ -1,8 +1,8 @@
 """Timing of the JAX DDP alone: the offline plan (N = 2000) and the MPC step, as the
 caller sees them and as a bare jitted call, for the planar and the 3-D WIPM.
 
-``python -m benchmarks.ddp_timing [--reps R] [--mpc-steps S]`` prints medians (ms). The problems
-are those of ``wip-bench solvers`` (Krang's ``lambda(q)``, goals (2, 0) and (2, 1)).
+``python -m benchmarks.speed.ddp_timing [--reps R] [--mpc-steps S]`` prints medians (ms). The
+problems are those of ``wip-bench solvers`` (Krang's ``lambda(q)``, goals (2, 0) and (2, 1)).
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from typing import Any
 import jax
 import numpy as np
 
-from benchmarks.ddp_bench import GOALS, krang_params
+from benchmarks.speed.ddp_bench import GOALS, krang_params
 from controllers.high_level.mpc import ModelPredictiveController
 from controllers.high_level.planning import PlanConfig, plan_to_goal, planning_problem
 from controllers.simplified.wipm import WIPMParams

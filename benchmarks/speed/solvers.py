@@ -1,10 +1,10 @@
 """``wip-bench solvers``: our solvers against the peers a user would pick instead, on the same
 problems, in one process, on this machine.
 
-* DDP on the WIPM (:mod:`benchmarks.ddp_bench`): ours vs crocoddyl (the WIPM as a Python action
-  model) vs a NumPy iLQR, the N = 2000 offline plan and the N = 100 warm-started MPC step, on
+* DDP on the WIPM (:mod:`benchmarks.speed.ddp_bench`): ours vs crocoddyl (the WIPM as a Python
+  action model) vs a NumPy iLQR, the N = 2000 offline plan and the N = 100 warm-started MPC step, on
   the planar and the 3-D model; the optimum checked first on converged solves.
-* The whole-body task QP (:mod:`benchmarks.qp_bench`): our ProxQP path vs OSQP, DAQP,
+* The whole-body task QP (:mod:`benchmarks.speed.qp_bench`): our ProxQP path vs OSQP, DAQP,
   quadprog and SLSQP on the QPs of a real ``unified`` closed loop on ``PlanarTray-v0`` and
   ``KrangTray-v0``; every solution checked against a KKT-checked reference first.
 
@@ -22,7 +22,7 @@ JSON (``--json PATH``), beyond the details of each half (``ddp``, ``qp``):
   ``qp_SOLVER_krang``, ``qp_SOLVER_planar`` for each QP peer against ``proxqp``;
 * ``ratios_controller_path``: the QP peers' ``qp_SOLVER_ENV`` against ``proxqp_shortcut``;
 * ``optimum_checks``: the DDP cost agreement (plan and MPC step) and each QP solver's agreement;
-* ``reference_step_us``: the unit (``benchmarks.yardstick``: a bare, warm ``mj_step`` of
+* ``reference_step_us``: the unit (``benchmarks.speed.yardstick``: a bare, warm ``mj_step`` of
   Krang-v0 at its reset state), the median of its timings before and after the DDP half and
   after every timed MPC step (the same load as the steps);
   ``mpc_step_units``: ``{planar|3d: {median, p99}}``, our MPC step in that unit;
@@ -48,8 +48,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
-    from benchmarks.ddp_bench import DDPBenchConfig
-    from benchmarks.qp_bench import QPBenchConfig
+    from benchmarks.speed.ddp_bench import DDPBenchConfig
+    from benchmarks.speed.qp_bench import QPBenchConfig
 
 # The peers (the ``bench`` extra) are imported when the command runs, not with the CLI, so
 # ``wip-bench compare`` works without them.
@@ -64,8 +64,8 @@ QP_OURS_ALL = (QP_OURS, QP_CONTROLLER_PATH)
 
 def configs(quick: bool) -> tuple[DDPBenchConfig, QPBenchConfig]:
     """The full run's sizes, or ``--quick``'s (a 3 s plan, 10 MPC steps, a 0.05 s loop)."""
-    from benchmarks.ddp_bench import DDPBenchConfig  # noqa: PLC0415
-    from benchmarks.qp_bench import QPBenchConfig  # noqa: PLC0415
+    from benchmarks.speed.ddp_bench import DDPBenchConfig  # noqa: PLC0415
+    from benchmarks.speed.qp_bench import QPBenchConfig  # noqa: PLC0415
 
     if not quick:
         return DDPBenchConfig(), QPBenchConfig()
@@ -232,7 +232,7 @@ def summarise(
 def run_benchmark(quick: bool = False, mpc_steps: int | None = None) -> dict[str, Any]:
     """All measurements as one JSON-ready dictionary."""
     try:
-        from benchmarks import ddp_bench, qp_bench  # noqa: PLC0415
+        from benchmarks.speed import ddp_bench, qp_bench  # noqa: PLC0415
     except ImportError as error:
         raise ValueError(
             f"wip-bench solvers needs the peers: pip install -c constraints.txt -e '.[bench]' "
@@ -249,7 +249,7 @@ def run_benchmark(quick: bool = False, mpc_steps: int | None = None) -> dict[str
         "cpus": os.cpu_count(),
         "load_average_1min_at_start": os.getloadavg()[0],
     }
-    from benchmarks.yardstick import reference_step_samples  # noqa: PLC0415
+    from benchmarks.speed.yardstick import reference_step_samples  # noqa: PLC0415
 
     unit_before = reference_step_samples()
     ddp_bench.REFERENCE_SAMPLES.clear()

@@ -20,7 +20,7 @@ every 10 ms). A part the controller lacks is ``null``. The floor, ``mujoco_step`
 env's data taken just before every ``env.step``, with the same control: the same states, in the
 same run, outside the timed loop.
 
-The unit (``benchmarks.yardstick``): ``reference_step_us``, the median of a bare, warm
+The unit (``benchmarks.speed.yardstick``): ``reference_step_us``, the median of a bare, warm
 ``mj_step`` of Krang-v0's model at its reset state, timed in this process before and after the
 episode and once after every control step (outside the timed parts, so that its samples see
 the machine's load as the episode's do); ``per_step_units`` and ``control_time_units`` are
@@ -32,7 +32,7 @@ JSON schema (``--json PATH``; times per control step in microseconds unless name
       "env": str, "controller": str, "seed": int, "model": "nominal",
       "duration_s": float, "steps": int, "control_dt_s": float, "frame_skip": int,
       "setup_s": float,                   # env reset + policy construction + policy.reset
-      "reference_step_us": float,         # the unit (benchmarks.yardstick)
+      "reference_step_us": float,         # the unit (benchmarks.speed.yardstick)
       "control_time_ms": {"mean": float, "median": float, "p99": float},  # policy __call__
       "per_step_us": {                    # each {"mean": float, "median": float} or null
         "mujoco_step": ...,               # the floor: bare mj_step for one control period
@@ -81,7 +81,7 @@ import numpy as np
 
 from benchmarks.registry import controller_names, make_policy
 from benchmarks.scenario import Scenario
-from benchmarks.yardstick import ReferenceStep, reference_step_samples
+from benchmarks.speed.yardstick import ReferenceStep, reference_step_samples
 
 PARTS = ("robot_model", "qp_assembly", "qp_solve", "high_level")
 ROWS = (

@@ -1,8 +1,9 @@
-"""Where the MPC step's time goes: its pieces jitted alone, in units (``benchmarks.yardstick``).
+"""Where the MPC step's time goes: its pieces jitted alone, in units
+(``benchmarks.speed.yardstick``).
 
-    python -m benchmarks.ddp_parts [--rounds 3]
+    python -m benchmarks.speed.ddp_parts [--rounds 3]
 
-On Krang's WIPM (``benchmarks.ddp_bench``: the plan to (2, 0) planar, (2, 1) 3-D), the MPC's
+On Krang's WIPM (``benchmarks.speed.ddp_bench``: the plan to (2, 0) planar, (2, 1) 3-D), the MPC's
 problem at plan index 400 from the plan's state plus 0.01 (``N = 100``), each piece timed as its
 own jitted call (median of 200 calls, then the median over ``--rounds`` interleaved rounds):
 
@@ -34,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.yardstick import ReferenceStep
+from benchmarks.speed.yardstick import ReferenceStep
 
 PIECES = ("empty_call", "rollout", "cost", "backward", "solve_0", "solve_1", "solve_2")
 
@@ -54,7 +55,7 @@ def _problem_calls(problem: str, params: Any, theta0: float) -> dict[str, Callab
     import jax  # noqa: PLC0415
     import jax.numpy as jnp  # noqa: PLC0415
 
-    from benchmarks.ddp_bench import GOALS, initial_state  # noqa: PLC0415
+    from benchmarks.speed.ddp_bench import GOALS, initial_state  # noqa: PLC0415
     from controllers.high_level.mpc import MPCConfig, mpc_problem  # noqa: PLC0415
     from controllers.high_level.planning import plan_to_goal  # noqa: PLC0415
     from controllers.optimizer.ddp import DDPConfig, rollout, trajectory_cost  # noqa: PLC0415
@@ -97,7 +98,7 @@ def _problem_calls(problem: str, params: Any, theta0: float) -> dict[str, Callab
 
 def measure(rounds: int = 3) -> dict[str, dict[str, float]]:
     """``{planar|3d: {piece: units}}`` and each problem's ``unit_us``."""
-    from benchmarks.ddp_bench import krang_params  # noqa: PLC0415
+    from benchmarks.speed.ddp_bench import krang_params  # noqa: PLC0415
 
     params, theta0 = krang_params()
     reference = ReferenceStep()

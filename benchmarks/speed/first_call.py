@@ -1,7 +1,7 @@
 """The first plan and the first MPC step of a new process: compilation, or loading it from JAX's
 persistent cache. Planar WIPM with Krang's ``lambda(q)``, goal 2 m.
 
-    WIP_GYM_JAX_CACHE=$(mktemp -d) python -m benchmarks.first_call   # empty cache: compiles
+    WIP_GYM_JAX_CACHE=$(mktemp -d) python -m benchmarks.speed.first_call   # empty cache: compiles
 
 Run it twice with the same directory: the second process loads what the first compiled.
 """
@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 
-from benchmarks.ddp_bench import GOALS, krang_params
+from benchmarks.speed.ddp_bench import GOALS, krang_params
 from controllers.high_level.mpc import ModelPredictiveController
 from controllers.high_level.planning import plan_to_goal
 

@@ -10,7 +10,7 @@ seed and stores in ``tests/data/lowlevel_<case>.npz``:
   ``lower``, ``upper``) and ProxQP's solution ``x``.
 
 Run it only on the code whose results are the reference (it was run once, before the low
-level's speed changes): ``python tools/record_lowlevel_reference.py``.
+level's speed changes): ``python -m tests.lowlevel_recording``.
 """
 
 from __future__ import annotations
