@@ -345,7 +345,7 @@ def run(args: argparse.Namespace) -> dict[str, Any] | None:
         return None
     spec = spec_from_args(args)
     names = list(spec.configs)
-    env = gym.make(spec.env_id, max_episode_steps=None, **spec.env_kwargs)
+    env = gym.make(spec.env_id, max_episode_steps=-1, **spec.env_kwargs)
     videos = video_options(args, env.unwrapped.model)
     env.close()
     out = Path(args.out)

@@ -71,7 +71,8 @@ def rollout(
     """
     if not (np.isfinite(duration) and duration > 0):
         raise ValueError(f"duration must be positive, got {duration}")
-    env = gym.make(env_id, max_episode_steps=None, **env_kwargs)
+    # -1: no TimeLimit (None would mean the registered 25 000 steps); the duration ends it
+    env = gym.make(env_id, max_episode_steps=-1, **env_kwargs)
     try:
         setup_start = time.perf_counter()
         observation, info = env.reset(seed=seed)

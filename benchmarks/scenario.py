@@ -109,7 +109,7 @@ class Scenario:
         return kwargs
 
     def make_env(self, **extra: Any) -> gym.Env:
-        return gym.make(self.env_id, max_episode_steps=None, **self.env_kwargs(), **extra)
+        return gym.make(self.env_id, max_episode_steps=-1, **self.env_kwargs(), **extra)
 
     def describe(self) -> dict[str, Any]:
         """Every parameter, defaults included (read back from the env)."""

@@ -1,10 +1,12 @@
-"""The one seed rule of every ``wip-bench`` command and tool.
+"""The seed rule of every ``wip-bench`` command and tool that runs episodes by index.
 
 Episode ``index`` (0, 1, 2, ...) of a run started with ``--seed base_seed`` resets its env with
 ``episode_seed(base_seed, index) = base_seed + index``. The same seed gives the same reset noise
 and link-mass randomisation whichever command runs it, in any process, in any order: a
 ``compare`` episode can be re-run alone by ``figures`` or a tool with ``--seed`` set to its
-``seed`` column in ``episodes.jsonl``.
+``seed`` column in ``episodes.jsonl``. A sweep's episodes have no index: their seed is
+derived from what they are (``benchmarks.sweep.seeding.cell_seed``: a hash of the cell's
+parameters and the replicate), and is recorded in each row for the same re-run.
 """
 
 from __future__ import annotations

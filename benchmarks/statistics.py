@@ -1,9 +1,10 @@
 """Summary statistics over episodes: every metric with its spread, every rate with an interval.
 
-``describe`` gives ``{"mean", "std", "min", "max", "n"}`` (population ``std``, 0 for one
-episode) of the episodes that report the metric; ``rate`` gives the fraction of ``True`` among
-the episodes that report a boolean with its Wilson score 95 % interval (Wilson 1927, the
-interval that stays inside [0, 1] and is not degenerate at 0 or n successes).
+The one module of summary statistics: ``compare`` and the sweep's report both use it.
+``describe`` gives ``{"mean", "std", "min", "max", "n"}`` (the sample standard deviation,
+``ddof = 1``; 0 for one episode) of the episodes that report the metric; ``rate`` gives the
+fraction of ``True`` among the episodes that report a boolean with its Wilson score 95 % interval
+(Wilson 1927, the interval that stays inside [0, 1] and is not degenerate at 0 or n successes).
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ def describe(values: Sequence[float | int | None]) -> dict[str, float | int] | N
         raise ValueError(f"a metric has a NaN among its values {present.tolist()}")
     return {
         "mean": float(present.mean()),
-        "std": float(present.std()),
+        "std": float(present.std(ddof=1)) if present.size > 1 else 0.0,
         "min": float(present.min()),
         "max": float(present.max()),
         "n": int(present.size),
@@ -42,7 +43,10 @@ def wilson_interval(successes: int, trials: int, z: float = WILSON_Z) -> tuple[f
     denominator = 1.0 + z * z / trials
     centre = (p + z * z / (2 * trials)) / denominator
     half = z * math.sqrt(p * (1 - p) / trials + z * z / (4 * trials * trials)) / denominator
-    return max(0.0, centre - half), min(1.0, centre + half)
+    # at 0 (all) successes the lower (upper) end is exactly 0 (1); round-off would put it inside
+    low = 0.0 if successes == 0 else max(0.0, centre - half)
+    high = 1.0 if successes == trials else min(1.0, centre + half)
+    return low, high
 
 
 def rate(values: Sequence[bool | None]) -> dict[str, Any] | None:

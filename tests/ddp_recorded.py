@@ -79,7 +79,7 @@ def compute(params: WIPMParams, theta0: float) -> dict[str, np.ndarray]:
 
 
 def _krang() -> tuple[WIPMParams, float]:
-    from benchmarks.speed.solvers import krang_params
+    from benchmarks.speed.ddp_bench import krang_params
 
     return krang_params()
 

@@ -73,13 +73,6 @@ def test_unknown_names_and_presets_are_refused() -> None:
         make_policy("unified", env, DecoupledConfig())
 
 
-def test_benchmarks_registry_is_the_same_registry() -> None:
-    from benchmarks import registry as old
-
-    assert old.controller_names() == controller_names()
-    assert old.default_config is default_config
-
-
 # -------------------------------------------------------------------------------- presets
 def test_plan_preset_is_the_authors_plan() -> None:
     paper, ours = PlanConfig.paper(), PlanConfig()

@@ -111,8 +111,9 @@ def test_bad_actions_raise(action: np.ndarray, message: str) -> None:
 def test_bad_kwargs_raise() -> None:
     with pytest.raises(ValueError, match="goal"):
         gym.make("wip_gym/Planar-v0", goal=(1.0, 2.0))
-    with pytest.raises(ValueError, match="cup_friction"):
-        gym.make("wip_gym/PlanarTray-v0", cup_friction=-1.0)
+    for friction in (-1.0, 0.0):  # 0: friction use (tangential / (mu normal)) is undefined
+        with pytest.raises(ValueError, match="cup_friction"):
+            gym.make("wip_gym/PlanarTray-v0", cup_friction=friction)
     with pytest.raises(ValueError, match="mass_randomization"):
         gym.make("wip_gym/Krang-v0", mass_randomization=2.0)
 

@@ -12,7 +12,7 @@ from matplotlib import image as mpimg
 
 from benchmarks import figures
 from benchmarks.cli import main
-from benchmarks.registry import controller_names
+from controllers.registry import controller_names
 
 CONTROLLERS = ("unified", "decoupled")
 

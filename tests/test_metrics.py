@@ -142,14 +142,16 @@ def test_wilson_interval_against_textbook_values() -> None:
     assert (low, high) == (pytest.approx(0.2366, abs=1e-4), pytest.approx(0.7634, abs=1e-4))
     z2 = 1.959963984540054**2
     assert wilson_interval(0, 10) == (0.0, pytest.approx(z2 / (10 + z2)))
-    assert wilson_interval(10, 10)[1] == pytest.approx(1.0)
+    assert wilson_interval(10, 10)[1] == 1.0  # exactly: round-off must not put it inside
     with pytest.raises(ValueError):
         wilson_interval(3, 2)
 
 
 def test_describe_and_rate_report_spread_and_skip_absent_values() -> None:
     stats = describe([1.0, None, 3.0])
-    assert stats == {"mean": 2.0, "std": 1.0, "min": 1.0, "max": 3.0, "n": 2}
+    # the sample standard deviation (ddof 1): sqrt(((1 - 2)^2 + (3 - 2)^2) / (2 - 1))
+    assert stats == {"mean": 2.0, "std": pytest.approx(2**0.5), "min": 1.0, "max": 3.0, "n": 2}
+    assert describe([4.0]) == {"mean": 4.0, "std": 0.0, "min": 4.0, "max": 4.0, "n": 1}
     assert describe([None, None]) is None
     with pytest.raises(ValueError, match="NaN"):
         describe([1.0, float("nan")])
@@ -176,7 +178,7 @@ def test_a_cup_moved_a_known_distance_over_the_tray_gives_that_slip_distance() -
 
     import wip_gym  # noqa: F401
 
-    env = gym.make("wip_gym/PlanarTray-v0", max_episode_steps=None, terminate_on_cup_loss=False)
+    env = gym.make("wip_gym/PlanarTray-v0", max_episode_steps=-1, terminate_on_cup_loss=False)
     observation, reset_info = env.reset(seed=0)
     base = env.unwrapped
     model, data = base.model, base.data

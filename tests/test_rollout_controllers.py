@@ -54,3 +54,22 @@ def test_run_configured_episode_returns_a_json_row() -> None:
     assert row["seed"] == 3 and row["env_arguments"]["cup_friction"] == 0.5
     assert row["overrides"] == {"env.cup_friction": 0.5, "unified.theta_kp": 1.0}
     assert row["config"]["plan"]["horizon_s"] > 0 and row["steps"] == 200
+
+
+def test_the_rollout_runs_past_the_registered_time_limit() -> None:
+    """The envs register 25 000 steps (25 s); an episode's duration is the rollout's, so the
+    rollout's env carries no TimeLimit."""
+    import gymnasium as gym
+
+    spec = resolve_run("wip_gym/Planar-v0", ["decoupled"])
+    episode = rollout(
+        "wip_gym/Planar-v0", {}, "decoupled", spec.configs["decoupled"], 0, 0.01, keep_env=True
+    )
+    env = episode.env
+    assert env is not None
+    wrappers = []
+    while isinstance(env, gym.Wrapper):
+        wrappers.append(type(env).__name__)
+        env = env.env
+    assert "TimeLimit" not in wrappers, wrappers
+    episode.env.close()

@@ -214,7 +214,9 @@ class EpisodeRecorder:
             raise RuntimeError("EpisodeRecorder.on_step before on_reset")
         base = wip_env(env)
         self._steps = step_index + 1
-        if not info.get("cup_on_tray", True) and math.isnan(self._cup_lost_at):
+        # a free tray off the hand ends the episode like a lost cup: the overlay marks both
+        lost = not info.get("cup_on_tray", True) or not info.get("tray_on_hand", True)
+        if lost and math.isnan(self._cup_lost_at):
             self._cup_lost_at = float(base.data.time)
         if self._frame_of(step_index + 1) > self._frame_of(step_index):
             self._append(base, info)

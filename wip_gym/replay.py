@@ -146,7 +146,7 @@ class Replay:
     ) -> None:
         self.recording = recording
         self.overlay = overlay
-        self._env = gym.make(recording.env_id, max_episode_steps=None, **recording.env_kwargs)
+        self._env = gym.make(recording.env_id, max_episode_steps=-1, **recording.env_kwargs)
         base = wip_env(self._env)
         base.reset(seed=0)
         model = base.model

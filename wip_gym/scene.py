@@ -121,8 +121,9 @@ class SceneOptions:
             value = getattr(self, name)
             if not np.isfinite(value) or value < 0:
                 raise ValueError(f"{name} must be finite and >= 0, got {value}")
-        if self.wheel_torque_limit == 0:
-            raise ValueError("wheel_torque_limit must be positive")
+        for name in ("wheel_torque_limit", "cup_friction"):
+            if getattr(self, name) == 0:  # friction use is tangential / (mu normal)
+                raise ValueError(f"{name} must be positive")
 
 
 def reset_qpos(model: mujoco.MjModel, robot: RobotModel | None = None) -> np.ndarray:

@@ -74,9 +74,6 @@ def record_episode(
 
 
 def main(argv: list[str] | None = None) -> None:
-    from controllers.optimizer import jax_setup
-
-    jax_setup.configure()  # the solvers' JAX settings, before JAX starts
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--env", default="wip_gym/KrangTray-v0", choices=list(wip_gym.ENV_IDS))
     parser.add_argument("--out", default="out/episode.mp4")

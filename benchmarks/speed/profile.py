@@ -79,9 +79,9 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from benchmarks.registry import controller_names, make_policy
 from benchmarks.scenario import Scenario
 from benchmarks.speed.yardstick import ReferenceStep, reference_step_samples
+from controllers.registry import controller_names, make_policy
 
 PARTS = ("robot_model", "qp_assembly", "qp_solve", "high_level")
 ROWS = (
@@ -174,7 +174,7 @@ def profile_episode(
     env = scenario.make_env()
     setup_start = time.perf_counter()
     observation, info = env.reset(seed=seed)
-    policy = make_policy(controller, env, scenario.model)
+    policy = make_policy(controller, env, model=scenario.model)
     policy.reset(observation, info)
     setup_s = time.perf_counter() - setup_start
 

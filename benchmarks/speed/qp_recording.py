@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 from tqdm import tqdm
 
 import wip_gym  # noqa: F401  (registers the environments)
-from benchmarks.registry import make_policy
+from controllers.registry import make_policy
 
 FloatArray = NDArray[np.float64]
 CONTROLLER = "unified"

@@ -57,7 +57,7 @@ def worker_env_vars() -> dict[str, str]:
         if threshold > 0:
             flags += f" --xla_backend_extra_options={jax_setup.SMALL_LOOP_OPTION}={threshold}"
     if "xla_cpu_multi_thread_eigen" not in flags:
-        flags += " --xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
+        flags += " --xla_cpu_multi_thread_eigen=false"
     env = {
         "JAX_ENABLE_X64": "1",
         "XLA_FLAGS": flags.strip(),

@@ -28,7 +28,7 @@ def _digest(value: Any) -> bytes:
     return hashlib.sha256(canonical_json(value).encode()).digest()
 
 
-def episode_seed(
+def cell_seed(
     env_id: str,
     preset: str | None,
     parameters: Mapping[str, Any],

@@ -36,10 +36,10 @@ from typing import Any
 
 import gymnasium as gym
 
-from benchmarks.registry import controller_names
 from benchmarks.scenario import resolve_env_id
 from benchmarks.sweep import keys as sweep_keys
-from benchmarks.sweep.seeding import episode_id, episode_seed, key_stream
+from benchmarks.sweep.seeding import cell_seed, episode_id, key_stream
+from controllers.registry import controller_names
 
 TOP_LEVEL = ("env", "controllers", "duration", "seeds", "seed", "preset", "timeout")
 TABLES = ("set", "grid", "random", "report")
@@ -132,7 +132,7 @@ class SweepSpec:
         for replicate in range(self.seeds):
             for index, cell in cells:
                 resolved = {**self.base, **cell}
-                seed = episode_seed(self.env, self.preset, resolved, replicate, self.seed)
+                seed = cell_seed(self.env, self.preset, resolved, replicate, self.seed)
                 draws = {key: dist.draw(key_stream(seed, key)) for key, dist in self.random.items()}
                 for controller in self.controllers:
                     identity = episode_id(
@@ -221,7 +221,7 @@ def check_env_values(
                 trials.append((key, {**base_kwargs, key.removeprefix("env."): option}))
     for key, kwargs in trials:
         try:
-            env = gym.make(env_id, max_episode_steps=None, **kwargs)
+            env = gym.make(env_id, max_episode_steps=-1, **kwargs)
         except (ValueError, TypeError) as error:
             named = key or ", ".join(f"env.{k}" for k in kwargs) or env_id
             raise SpecError(f"bad value for {named}: {error}") from None

@@ -1,4 +1,4 @@
-"""Intervals of the sweep's report: Wilson's score interval of a success rate, Newcombe's
+"""Intervals of the sweep's report: Newcombe's
 interval of a paired difference of success rates, Student's t interval of a paired mean
 difference."""
 
@@ -10,22 +10,11 @@ from collections.abc import Sequence
 import numpy as np
 from scipy import stats
 
-Z95 = float(stats.norm.ppf(0.975))
+from benchmarks.statistics import WILSON_Z, describe, wilson_interval
 
+__all__ = ["describe", "paired_mean_difference", "paired_success_difference", "wilson_interval"]
 
-def wilson_interval(successes: int, n: int, z: float = Z95) -> tuple[float, float]:
-    """Wilson's score interval of a binomial proportion (Wilson 1927; Newcombe 1998, method 3).
-    ValueError for n < 1 or successes outside [0, n]."""
-    if n < 1 or not 0 <= successes <= n:
-        raise ValueError(f"need 0 <= successes <= n and n >= 1, got {successes} of {n}")
-    p = successes / n
-    denominator = 1.0 + z * z / n
-    centre = (p + z * z / (2 * n)) / denominator
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denominator
-    # at p = 0 (p = 1) the lower (upper) end is exactly 0 (1); round-off would put it inside
-    low = 0.0 if successes == 0 else max(0.0, centre - half)
-    high = 1.0 if successes == n else min(1.0, centre + half)
-    return low, high
+Z95 = WILSON_Z  # the two-sided 95 % normal quantile
 
 
 def paired_success_difference(
@@ -64,17 +53,3 @@ def paired_mean_difference(
         return mean, None
     half = float(stats.t.ppf(0.5 + level / 2, d.size - 1) * d.std(ddof=1) / math.sqrt(d.size))
     return mean, (mean - half, mean + half)
-
-
-def describe(values: Sequence[float]) -> dict[str, float | int] | None:
-    """``{n, mean, std, min, max}`` (std with ddof 1; 0 for one value); None if empty."""
-    if not values:
-        return None
-    v = np.asarray(values, dtype=float)
-    return {
-        "n": int(v.size),
-        "mean": float(v.mean()),
-        "std": float(v.std(ddof=1)) if v.size > 1 else 0.0,
-        "min": float(v.min()),
-        "max": float(v.max()),
-    }

@@ -61,9 +61,9 @@ def _add_xla_flag() -> None:
         return  # the user's own backend options win
     if xla_bridge.backends_are_initialized():
         warnings.warn(
-            "JAX's backend was initialised before controllers was imported, so the DDP runs "
-            f"without {SMALL_LOOP_OPTION} (correct, ~10x slower); import controllers first or "
-            f"set XLA_FLAGS={flag}",
+            "JAX's backend was initialised before jax_setup.configure() was called, so the DDP "
+            f"runs without {SMALL_LOOP_OPTION} (correct, ~10x slower); call configure() before "
+            f"JAX's first computation or set XLA_FLAGS={flag}",
             stacklevel=3,
         )
         return
