@@ -399,7 +399,7 @@ def run_controller(scenario: Scenario, controller: str, seed: int, width: int, h
 def wipm_signals(run: Run) -> dict[str, tuple[Array, Array]]:
     """The WIPM state under control, by name: ``(t, values)``. From the diagnostics'
     ``wipm_state`` (the hierarchical and MPC controllers), else from the decoupled
-    controller's ``theta``, ``thetad``, ``x``, ``xd``, else from the env's info."""
+    baselines' ``theta``, ``thetad``, ``x``, ``xd``, else from the env's info."""
     diag = run.diagnostics
     names = PLANAR_STATE if run.planar else SPATIAL_STATE
     if "wipm_state" in diag and "t" in diag:
@@ -412,20 +412,21 @@ def wipm_signals(run: Run) -> dict[str, tuple[Array, Array]]:
 
 
 def wipm_references(run: Run) -> dict[str, tuple[Array, Array]]:
-    """The reference, by name: the offline plan's states up to the run's end, else the
-    controller's own ``*_ref`` diagnostics (the decoupled controller's minimum-jerk)."""
+    """The reference, by name: the controller's own ``*_ref`` diagnostics where it records
+    them (the decoupled baselines: ``decoupled`` balances about ``theta_ref = 0`` while it
+    follows the plan's ``x``; ``decoupled-lqr`` tracks the plan's lean), else the offline
+    plan's states up to the run's end (the MPC controllers' reference)."""
     names = PLANAR_STATE if run.planar else SPATIAL_STATE
-    if run.plan is not None:
-        keep = run.plan.times <= run.duration + 1e-9
-        return {
-            name: (run.plan.times[keep], run.plan.states[keep, i]) for i, name in enumerate(names)
-        }
     diag = run.diagnostics
-    return {
+    own = {
         name: (diag["t"], diag[f"{name}_ref"])
         for name, _ in WIPM_PANELS
         if "t" in diag and f"{name}_ref" in diag
     }
+    if own or run.plan is None:
+        return own
+    keep = run.plan.times <= run.duration + 1e-9
+    return {name: (run.plan.times[keep], run.plan.states[keep, i]) for i, name in enumerate(names)}
 
 
 def _mark_events(ax: Axes, run: Run) -> None:
@@ -490,7 +491,7 @@ def wipm_figure(run: Run, path: Path) -> Path:
         ax.text(
             0.5,
             0.92,
-            "no MPC: LQR on the wheel torques",
+            "no MPC: state feedback on the wheel torques",
             transform=ax.transAxes,
             ha="center",
             va="top",
