@@ -32,8 +32,29 @@ inverse_dynamics = jax.jit(wipm.inverse_dynamics)
 planar_dynamics = jax.jit(wipm.planar_dynamics)
 planar_torque_dynamics = jax.jit(wipm.planar_torque_dynamics)
 planar_inverse_dynamics = jax.jit(wipm.planar_inverse_dynamics)
-paper_printed_planar_dynamics = jax.jit(wipm.paper_printed_planar_dynamics)
 linearize = jax.jit(wipm.linearize, static_argnums=0)
+
+
+def _paper_printed_planar_dynamics(
+    s: jax.Array, u: jax.Array, params: wipm.WIPMParams
+) -> jax.Array:
+    """The paper's eq. ``WIPdyn`` AS PRINTED (wrong; docs/ERRATA.md §1).
+
+    ``xdd = (g sin th - R sin th thd^2 - (beta + cos th) u) / (alpha + cos th)`` with the printed
+    ``alpha = R/(M L) (M + m_w + I_w/R^2)`` and ``beta = I/(M L)`` (``m_w``, ``I_w`` of both
+    wheels). Same state and control as ``wipm.planar_dynamics``.
+    """
+    s = jnp.asarray(s)
+    thdd = jnp.reshape(jnp.asarray(u), (-1,))[0]
+    th, thd, xd = s[0], s[1], s[3]
+    R, g = params.wheel_radius, params.gravity
+    alpha, beta = wipm._planar_alpha_beta(params)
+    c, sn = jnp.cos(th), jnp.sin(th)
+    xdd = (g * sn - R * sn * thd**2 - (beta + c) * thdd) / (alpha + c)
+    return jnp.stack([thd, thdd, xd, xdd])
+
+
+paper_printed_planar_dynamics = jax.jit(_paper_printed_planar_dynamics)
 
 
 def _wip_model(skewed: bool = False) -> mujoco.MjModel:

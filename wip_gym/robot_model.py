@@ -471,12 +471,6 @@ class RobotModel:
         return self._B
 
     @property
-    def mass_matrix(self) -> Array:
-        """MuJoCo's full mass matrix at this state (``nv x nv``)."""
-        self._require_dynamics()
-        return self._M
-
-    @property
     def psi(self) -> float:
         self._require()
         return self._psi

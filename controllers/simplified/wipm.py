@@ -21,8 +21,8 @@ dynamics, paper eqs. ``WIPzero`` / ``WIPdyn`` as corrected by docs/ERRATA.md §1
     (alpha + cos th) xdd + (beta + R cos th) thdd = g sin th + R sin th thd^2
     alpha = R (M + m_w + I_w/R^2) / (M L),   beta = I / (M L)
 
-The paper's printed form (``beta + cos th`` and ``- R sin th thd^2``) is kept in
-:func:`paper_printed_planar_dynamics` only so that a test can show it is wrong.
+The paper's printed form (``beta + cos th`` and ``- R sin th thd^2``) is wrong by order
+10 m/s^2 on random states; ``tests/test_wipm.py`` writes it out and shows it.
 
 3-D model (state ``s = [x, psi, theta, xd, psid, thetad, X0, Y0]``), the structure of the
 authors' Krang3D model (docs/AUTHORS_CONFIG.md §2.1-2.4) but derived here exactly, by Kane's
@@ -199,23 +199,6 @@ def planar_dynamics(s: ArrayLike, u: ArrayLike, params: WIPMParams) -> Array:
     alpha, beta = _planar_alpha_beta(params)
     c, sn = jnp.cos(th), jnp.sin(th)
     xdd = (g * sn + R * sn * thd**2 - (beta + R * c) * thdd) / (alpha + c)
-    return jnp.stack([thd, thdd, xd, xdd])
-
-
-def paper_printed_planar_dynamics(s: ArrayLike, u: ArrayLike, params: WIPMParams) -> Array:
-    """The paper's eq. ``WIPdyn`` AS PRINTED (wrong; docs/ERRATA.md §1), kept only for a test.
-
-    ``xdd = (g sin th - R sin th thd^2 - (beta + cos th) u) / (alpha + cos th)`` with the printed
-    ``alpha = R/(M L) (M + m_w + I_w/R^2)`` and ``beta = I/(M L)`` (``m_w``, ``I_w`` of both
-    wheels). Same state and control as :func:`planar_dynamics`.
-    """
-    s = jnp.asarray(s)
-    thdd = jnp.reshape(jnp.asarray(u), (-1,))[0]
-    th, thd, xd = s[0], s[1], s[3]
-    R, g = params.wheel_radius, params.gravity
-    alpha, beta = _planar_alpha_beta(params)
-    c, sn = jnp.cos(th), jnp.sin(th)
-    xdd = (g * sn - R * sn * thd**2 - (beta + c) * thdd) / (alpha + c)
     return jnp.stack([thd, thdd, xd, xdd])
 
 
