@@ -37,6 +37,12 @@ StepHook = Callable[[gym.Env, dict[str, Any], int], None]
 ProgressHook = Callable[[float], None]
 
 
+class EpisodeError(RuntimeError):
+    """An episode that raised while it ran (a controller's or the env's ValueError, e.g. a NaN
+    action): a failure of the run, not of the command's arguments, so the CLI shows its
+    traceback instead of a usage message."""
+
+
 @dataclass
 class Episode:
     """One rollout's outcome (see the module docstring)."""
@@ -91,9 +97,15 @@ def rollout(
         loop_time = 0.0
         for n in range(1, steps + 1):
             tick = time.perf_counter()
-            action = policy(observation)
-            tock = time.perf_counter()
-            observation, _, terminated, truncated, info = env.step(action)
+            try:
+                action = policy(observation)
+                tock = time.perf_counter()
+                observation, _, terminated, truncated, info = env.step(action)
+            except ValueError as error:  # not a usage error: say where the episode failed
+                raise EpisodeError(
+                    f"{controller} on {env_id} (seed {seed}) failed at step {n} "
+                    f"(t = {(n - 1) * dt:.3f} s): {error}"
+                ) from error
             loop_time += time.perf_counter() - tick
             metrics.update(info, observation, action, tock - tick)
             if on_step is not None:

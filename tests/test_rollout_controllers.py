@@ -73,3 +73,28 @@ def test_the_rollout_runs_past_the_registered_time_limit() -> None:
         env = env.env
     assert "TimeLimit" not in wrappers, wrappers
     episode.env.close()
+
+
+def test_an_episode_that_raises_is_a_failure_of_the_run_not_of_the_arguments(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A controller's NaN action raises in the env; the rollout names the episode and step,
+    and the CLI (which turns ValueError into a usage message, exit 2) lets it through."""
+    import numpy as np
+
+    from benchmarks.rollout import EpisodeError
+    from controllers import registry
+
+    class NaNPolicy:
+        counters: dict[str, float] = {}
+
+        def reset(self, observation, info) -> None:
+            pass
+
+        def __call__(self, observation):
+            return np.full(2, np.nan)
+
+    monkeypatch.setattr(registry, "make_policy", lambda *args, **kwargs: NaNPolicy())
+    with pytest.raises(EpisodeError, match=r"step 1 .*t = 0.000 s"):
+        rollout("wip_gym/WIP-v0", {}, "decoupled", None, 0, 0.1)
+    assert not issubclass(EpisodeError, ValueError)
