@@ -21,6 +21,8 @@ from benchmarks.sweep.spec import SweepSpec  # noqa: E402
 PLOT_METRICS = {
     "success_rate": ("success rate", (0.0, 1.0), "RdYlGn"),
     "max_cup_friction_use": ("mean peak friction use", (0.0, 1.0), "viridis_r"),
+    # the 99th percentile over an episode's steps: a one-step spike does not decide it
+    "cup_friction_use_p99": ("mean p99 friction use", (0.0, 1.0), "viridis_r"),
 }
 
 
@@ -96,7 +98,7 @@ def _heatmaps(spec: SweepSpec, summary: Mapping[str, Any], directory: Path) -> l
             if fixed_params:
                 title += " (" + ", ".join(f"{k}={v}" for k, v in fixed_params.items()) + ")"
             fig.suptitle(title, fontsize=10)
-            name = f"heatmap_{metric}{_slug(suffix)}.png"
+            name = f"heatmap_{metric}" + (f"_{_slug(suffix)}" if suffix else "") + ".png"
             fig.savefig(directory / name, dpi=110, bbox_inches="tight")
             plt.close(fig)
             names.append(name)

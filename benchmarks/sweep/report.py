@@ -22,6 +22,7 @@ SPEC_NAME = "spec.toml"
 # Per-episode metrics summarised per controller and compared between controllers.
 STAT_METRICS = (
     "max_cup_friction_use",
+    "cup_friction_use_p99",
     "max_tray_tilt_deg",
     "cup_slip_distance_m",
     "slipping_time_s",
