@@ -457,10 +457,12 @@ def wipm_figure(run: Run, path: Path) -> Path:
     fig = Figure(figsize=(15, 7.5), layout="constrained")
     axes = fig.subplots(2, 3)
     signals, references = wipm_signals(run), wipm_references(run)
+    own = "theta_ref" in run.diagnostics  # the decoupled baselines record their own
+    source = "the controller's reference" if own else "reference (DDP plan)"
     for ax, (name, label) in zip(axes.flat[:4], WIPM_PANELS, strict=True):
         if name in references:
             t_ref, ref = references[name]
-            ax.plot(t_ref, ref, "--", color="tab:orange", lw=1.5, label="reference (DDP plan)")
+            ax.plot(t_ref, ref, "--", color="tab:orange", lw=1.5, label=source)
         t, value = signals[name]
         ax.plot(t, value, "-", color="tab:blue", lw=1.2, label="state under control")
         ax.set_ylabel(label)
