@@ -82,6 +82,17 @@ def _plan(robot: RobotModel, params: WIPMParams, task: TaskInfo, config: PlanCon
 
 
 # ------------------------------------------------------------------ Krang 2014 as published
+
+
+def held_body_counters(posture: PostureHold, plan: Plan | None) -> dict[str, float]:
+    """The counters of a controller that holds the body and follows a plan: the largest joint
+    deviation the hold allowed, and the plan's violations and convergence."""
+    counters = {"max_joint_deviation_rad": posture.max_deviation}
+    if plan is not None:
+        counters.update(plan_counters(plan))
+    return counters
+
+
 @dataclass(frozen=True)
 class DecoupledConfig:
     """Krang 2014's balance controller (docs/AUTHORS_CONFIG.md §5.2).
@@ -205,10 +216,7 @@ class DecoupledController(PolicyBase):
         return applied
 
     def controller_counters(self) -> dict[str, float]:
-        counters = {"max_joint_deviation_rad": self._posture.max_deviation}
-        if self.plan is not None:
-            counters.update(plan_counters(self.plan))
-        return counters
+        return held_body_counters(self._posture, self.plan)
 
     @property
     def diagnostics(self) -> dict[str, Array]:
@@ -416,10 +424,7 @@ class DecoupledLQRController(PolicyBase):
         return applied
 
     def controller_counters(self) -> dict[str, float]:
-        counters = {"max_joint_deviation_rad": self._posture.max_deviation}
-        if self.plan is not None:
-            counters.update(plan_counters(self.plan))
-        return counters
+        return held_body_counters(self._posture, self.plan)
 
     @property
     def diagnostics(self) -> dict[str, Array]:
