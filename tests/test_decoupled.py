@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import wip_gym  # noqa: F401
+from benchmarks.rollout import rollout
 from controllers.baselines.decoupled import (
     BAL_LO_AMPS,
     DecoupledConfig,
@@ -118,20 +119,18 @@ def test_ill_posed_posture_raises() -> None:
         policy.reset(obs, info)
 
 
-def run_closed_loop(env: gym.Env, policy, seconds: float) -> dict:  # noqa: ANN001
-    obs, info = env.reset(seed=0)
-    policy.reset(obs, info)
-    for _ in range(int(seconds / env.unwrapped.dt)):
-        obs, _, terminated, _, info = env.step(policy(obs))
-        assert not terminated, info
-    return info
+def run_closed_loop(env_id: str, controller: str, config, seconds: float, **env_kwargs):  # noqa: ANN001, ANN201
+    """One episode through the one rollout; it must run its whole duration."""
+    episode = rollout(env_id, env_kwargs, controller, config, 0, seconds)
+    assert episode.metrics["sim_time_s"] == pytest.approx(seconds), episode.metrics
+    assert not episode.metrics["fell"]
+    return episode
 
 
 @pytest.mark.parametrize("env_id", ["wip_gym/WIP-v0", "wip_gym/Planar-v0"])
 def test_krang_2014_reaches_a_2m_goal_and_stops(env_id: str) -> None:
-    env = gym.make(env_id, goal=2.0)
-    policy = DecoupledController.for_env(env)
-    info = run_closed_loop(env, policy, 15.0)
+    episode = run_closed_loop(env_id, "decoupled", DecoupledConfig(), 15.0, goal=2.0)
+    policy = episode.policy
     # Krang 2014's law, rebuilt from the plan and the measured state: each wheel gets
     # K . [theta - 0, thetad - 0, (x - x_plan) / R, (xd - xd_plan) / R] (the plan's lean is
     # not tracked; planar: no spin term)
@@ -150,16 +149,18 @@ def test_krang_2014_reaches_a_2m_goal_and_stops(env_id: str) -> None:
         assert np.abs([p["theta"] for p in planned]).max() > 0.01  # a lean it does not track
     wheels = diag["torque"][:, :2]
     np.testing.assert_allclose(wheels, np.stack([law, law], axis=1), rtol=0, atol=1e-9)
-    assert info["goal_distance"] < 0.05
-    assert abs(info["xd"]) < 0.05
-    assert not info["fallen"]
+    assert episode.metrics["goal_reached"]  # within 5 cm and 5 cm/s to the episode's end
 
 
 def test_integral_action_reaches_the_goal_with_an_unmodelled_payload() -> None:
     """Krang with 2 kg in the hand that the nominal model does not know."""
-    env = gym.make("wip_gym/Krang-v0", goal=(2.0, 0.0), payload_mass=2.0)
-    policy = DecoupledLQRController.for_env(env, DecoupledLQRConfig(model="nominal"))
-    assert policy.robot.model.body("payload").mass[0] == 0.0
-    info = run_closed_loop(env, policy, 18.0)
-    assert info["goal_distance"] < 0.05
-    assert abs(info["xd"]) < 0.05
+    episode = run_closed_loop(
+        "wip_gym/Krang-v0",
+        "decoupled-lqr",
+        DecoupledLQRConfig(model="nominal"),
+        18.0,
+        goal=(2.0, 0.0),
+        payload_mass=2.0,
+    )
+    assert episode.policy.robot.model.body("payload").mass[0] == 0.0
+    assert episode.metrics["goal_reached"] and episode.metrics["final_goal_error_m"] < 0.05
