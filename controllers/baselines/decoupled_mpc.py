@@ -21,10 +21,11 @@ import jax
 import numpy as np
 from numpy.typing import NDArray
 
+from controllers.baselines.decoupled import held_body_counters
 from controllers.high_level.planning import Plan, PlanConfig
 from controllers.high_level.receding_horizon import HighLevel, HighLevelConfig
 from controllers.low_level.posture import PostureHold
-from controllers.policy import ModelChoice, PolicyBase, TaskInfo, plan_counters
+from controllers.policy import ModelChoice, PolicyBase, TaskInfo
 from controllers.simplified.wipm import (
     inverse_dynamics,
     planar_dynamics,
@@ -150,9 +151,7 @@ class DecoupledMPCController(PolicyBase):
         return applied
 
     def controller_counters(self) -> dict[str, float]:
-        counters = {"max_joint_deviation_rad": self._posture.max_deviation}
-        if self.plan is not None:
-            counters.update(plan_counters(self.plan))
+        counters = held_body_counters(self._posture, self.plan)
         if self.high_level.mpc is not None:
             counters["mpc_rejections"] = float(self.high_level.rejections)
         return counters
