@@ -94,18 +94,32 @@ class DisturbanceRejectingTask:
         self.task = task
         self.settings = settings
         self.name = task.name
-        self.estimate = np.zeros(len(task.weights()))
-        # (task velocity, commanded xdd*) of the last step, as lists of floats
-        self._previous: tuple[list[float], list[float]] | None = None
-        self._key = ("disturbance_rejecting_task", id(self))
+        # the whole state in one array, shared with the compiled task stack
+        # (controllers.low_level.compiled_tasks): rows estimate, last J nu, last command, and
+        # [1 when a last step exists, 0, ...]
+        self.memory = np.zeros((4, len(task.weights())))
+        self.cache_key = ("disturbance_rejecting_task", id(self))
         self._alpha = settings.alpha
         self._bound = settings.bound
         # the wrapped task's own J nu when it has one (shared with its PD law), else J @ nu
         self._velocity = getattr(task, "velocity", None)
 
+    @property
+    def estimate(self) -> Array:
+        """``d_hat``, the current estimate (a view on :attr:`memory`)."""
+        return self.memory[0]
+
+    def adopt_memory(self, buffer: Array) -> None:
+        """Keep the state in ``buffer`` (same shape) from now on, its current values copied:
+        the compiled task stack holds every observer's state in one array."""
+        if buffer.shape != self.memory.shape:
+            raise ValueError(f"memory of shape {self.memory.shape} expected, got {buffer.shape}")
+        buffer[:] = self.memory
+        self.memory = buffer
+
     def restart(self) -> None:
         """Forget the last step (after a reset, or a jump in the state); keep the estimate."""
-        self._previous = None
+        self.memory[3, 0] = 0.0
 
     def jacobian(self, robot: RobotModel) -> Array:
         return self.task.jacobian(robot)
@@ -121,7 +135,7 @@ class DisturbanceRejectingTask:
         return self.task.jdot_nu(probe)
 
     def reference_acceleration(self, robot: RobotModel) -> Array:
-        cached = robot.cache.get(self._key)
+        cached = robot.cache.get(self.cache_key)
         if cached is not None:
             return cached  # type: ignore[return-value]
         velocity = (
@@ -129,19 +143,21 @@ class DisturbanceRejectingTask:
             if self._velocity is not None
             else self.task.jacobian(robot) @ robot.nu
         ).tolist()
-        estimate = self.estimate
-        if self._previous is not None:
+        memory = self.memory
+        if memory[3, 0] != 0.0:
             # per component in Python floats (the same IEEE arithmetic as NumPy's, without a
             # NumPy call per operation on a 3-vector); the clamp is np.clip's
-            previous_velocity, previous_command = self._previous
+            previous_velocity, previous_command = memory[1].tolist(), memory[2].tolist()
             dt, alpha, bound = self.settings.dt, self._alpha, self._bound
-            values = estimate.tolist()
+            values = memory[0].tolist()
             for i, value in enumerate(values):
                 measured = (velocity[i] - previous_velocity[i]) / dt - previous_command[i]
                 value += alpha * (measured - value)
                 values[i] = min(max(value, -bound), bound)
-            estimate[:] = values
-        command = self.task.reference_acceleration(robot) - estimate
-        self._previous = (velocity, command.tolist())
-        robot.cache[self._key] = command
+            memory[0] = values
+        command = self.task.reference_acceleration(robot) - memory[0]
+        memory[1] = velocity
+        memory[2] = command
+        memory[3, 0] = 1.0
+        robot.cache[self.cache_key] = command
         return command

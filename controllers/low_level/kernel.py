@@ -12,12 +12,14 @@ and the joint state, one call of :meth:`LowLevelKernel.run` computes, into preal
 matrix product); 3. ``H = T^T T + eps I``, ``g = -T^T b``;
 4. the constraint rows: actuator torques ``tau_min - M_act Ph <= M_act calA qdd <= tau_max -
    M_act Ph`` and the joint-limit acceleration bounds ``2 (q_lim - q - qd h) / h^2``;
-5. the unconstrained minimiser ``H qdd = -g`` (LAPACK ``dposv``) and whether it meets every
-   constraint (then it is the convex QP's optimum and no QP solver is needed).
+5. the unconstrained minimiser ``H qdd = -g`` (a Cholesky factorisation and two triangular
+   solves) and whether it meets every constraint (then it is the convex QP's optimum and no QP
+   solver is needed).
 
-Why NumPy and not a jitted JAX function: for these sizes (Krang: 18 variables, 30 task rows, 34
-constraint rows) the whole arithmetic costs less than one call of a jitted function, measured by
-``benchmarks/speed/low_level_kernel_bench.py`` (its module docstring has the figures).
+Compiled by numba (two calls: step 1, steps 2 to 5). For these sizes (Krang: 18 variables, 31
+task rows, 34 constraint rows) the arithmetic costs less than one call of a jitted JAX
+function, and NumPy spends more in its per-call overhead than in arithmetic:
+``benchmarks/speed/low_level_kernel_bench.py`` measures the three.
 """
 
 from __future__ import annotations
@@ -25,8 +27,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
-from scipy.linalg.lapack import dposv
 
 from controllers.low_level.isolated_dynamics import IsolatedDynamics
 
@@ -88,10 +90,14 @@ class LowLevelKernel:
         self.upper = np.zeros(m + n_limit)
         self.x = np.zeros(n)
         self._m = m
-        self._outer = np.zeros((n, n))
-        self._A_star = np.zeros((n, n))
-        self._diagonal = np.arange(n)
-        self._limit_square = layout.limit_horizon**2
+        width = max(m, n_limit)
+        self._bounds = np.zeros((4, width))
+        self._bounds[0, :m] = layout.torque_low
+        self._bounds[1, :m] = layout.torque_high
+        self._bounds[2, :n_limit] = layout.limit_min
+        self._bounds[3, :n_limit] = layout.limit_max
+        self._limit_indices = np.asarray(layout.limit_indices, dtype=np.int64)
+        self._constants = np.array([layout.limit_horizon, layout.regularization])
 
     def run(
         self,
@@ -108,77 +114,169 @@ class LowLevelKernel:
         """Fill every buffer for this state; True when the unconstrained minimiser ``x`` meets
         every constraint (it is then the QP's optimum). With ``iso`` given, its ``calA``,
         ``Ph``, ``E``, ``e`` are used instead of step 1."""
+        lay = self.layout
+        m = self._m
+        self._bounds[0, :m] = lay.torque_low  # read every call: limits may be changed in place
+        self._bounds[1, :m] = lay.torque_high
         if iso is None:
-            self._isolated_dynamics(A, h)
+            isolated_dynamics_into(
+                A, h, lay.index_q1, lay.wheel_radius, self.calA, self.Ph, self.E, self.e
+            )
         else:
             self.calA[:] = iso.calA
             self.Ph[:] = iso.Ph
             self.E[:] = iso.E
             self.e[:] = iso.e
-        return self._rows_and_solve(J, target, jdot_nu, w, q, nu)
+        return rows_and_solve(
+            J,
+            target,
+            jdot_nu,
+            w,
+            q,
+            nu,
+            self.calA,
+            self.Ph,
+            self.E,
+            self.e,
+            lay.actuator_map,
+            self._bounds,
+            self._limit_indices,
+            self._constants,
+            self.T,
+            self.b,
+            self.H,
+            self.g,
+            self.C,
+            self.lower,
+            self.upper,
+            self.x,
+        )
 
-    def _isolated_dynamics(self, A: Array, h: Array) -> None:
-        """Step 1: eq. iso3 (``controllers.low_level.isolated_dynamics``, operation for
-        operation)."""
-        lay = self.layout
-        k, r = lay.index_q1, lay.wheel_radius
-        a_xx = float(A[0, 0])
-        a_xq = A[1:, 0]
-        h_x, h_q = float(h[0]), h[1:]
-        outer, A_star, calA = self._outer, self._A_star, self.calA
-        np.multiply(a_xq[:, None], a_xq, out=outer)
-        outer /= a_xx
-        np.subtract(A[1:, 1:], outer, out=A_star)
-        beta = 1.0 / (1.0 + float(a_xq[k]) / (r * a_xx))
-        scale = beta / (r * a_xx)
-        np.multiply(a_xq[:, None], A_star[k], out=outer)
-        outer *= scale
-        np.subtract(A_star, outer, out=calA)
-        h_star = h_q - a_xq * h_x / a_xx
-        Ph = self.Ph
-        np.subtract(h_star, scale * a_xq * float(h_star[k]), out=Ph)
-        E0 = self.E[0]
-        np.divide(-calA[k] / r - a_xq, a_xx, out=E0)
-        self.e[0] = (-float(Ph[k]) / r - h_x) / a_xx
 
-    def _rows_and_solve(
-        self, J: Array, target: Array, jdot_nu: Array, w: Array, q: Array, nu: Array
-    ) -> bool:
-        """Steps 2 to 5."""
-        lay = self.layout
-        E0, e0, calA, Ph = self.E[0], float(self.e[0]), self.calA, self.Ph
-        # 2. task rows
-        T, b = self.T, self.b
-        column = J[:, 0]
-        np.multiply(column[:, None], E0, out=T)
-        T += J[:, 1:]
-        T *= w[:, None]
-        np.subtract(target, jdot_nu, out=b)
-        b -= column * e0
-        b *= w
-        # 3. the cost
-        H, g = self.H, self.g
-        np.matmul(T.T, T, out=H)
-        H[self._diagonal, self._diagonal] += lay.regularization
-        np.matmul(T.T, b, out=g)
-        np.negative(g, out=g)
-        # 4. constraints
-        m, C, lower, upper = self._m, self.C, self.lower, self.upper
-        np.matmul(lay.actuator_map, calA, out=C[:m])
-        offset = lay.actuator_map @ Ph
-        np.subtract(lay.torque_low, offset, out=lower[:m])
-        np.subtract(lay.torque_high, offset, out=upper[:m])
-        index = lay.limit_indices
-        drift = q[index] + nu[index] * lay.limit_horizon
-        np.subtract(lay.limit_min, drift, out=lower[m:])
-        np.subtract(lay.limit_max, drift, out=upper[m:])
-        for bound in (lower[m:], upper[m:]):
-            bound *= 2.0
-            bound /= self._limit_square
-        # 5. the unconstrained minimiser and its feasibility
-        _, x, info = dposv(H, g, overwrite_b=False)
-        if info != 0:
+@njit(cache=True)
+def isolated_dynamics_into(
+    A: Array,
+    h: Array,
+    k: int,
+    r: float,
+    calA: Array,
+    Ph: Array,
+    E: Array,
+    e: Array,
+) -> None:
+    """Step 1: eq. iso3 (``controllers.low_level.isolated_dynamics``, operation for
+    operation) into ``calA``, ``Ph`` and the first rows of ``E``, ``e``."""
+    a_xx = A[0, 0]
+    a_xq = A[1:, 0]
+    h_x, h_q = h[0], h[1:]
+    n = len(a_xq)
+    for i in range(n):
+        for j in range(n):
+            calA[i, j] = A[1 + i, 1 + j] - a_xq[i] * a_xq[j] / a_xx
+    beta = 1.0 / (1.0 + a_xq[k] / (r * a_xx))
+    scale = beta / (r * a_xx)
+    row_k = calA[k].copy()
+    for i in range(n):
+        for j in range(n):
+            calA[i, j] -= a_xq[i] * row_k[j] * scale
+    h_star = h_q - a_xq * h_x / a_xx
+    for i in range(n):
+        Ph[i] = h_star[i] - scale * a_xq[i] * h_star[k]
+    for j in range(n):
+        E[0, j] = (-calA[k, j] / r - a_xq[j]) / a_xx
+    e[0] = (-Ph[k] / r - h_x) / a_xx
+
+
+@njit(cache=True)
+def _cholesky_solve(H: Array, rhs: Array, x: Array) -> bool:
+    """``x = H^-1 rhs`` by Cholesky (``H = L L^T``); False when ``H`` is not positive
+    definite."""
+    n = len(rhs)
+    L = np.zeros((n, n))
+    for j in range(n):
+        d = H[j, j]
+        for p in range(j):
+            d -= L[j, p] * L[j, p]
+        if not d > 0.0:
             return False
-        np.negative(x, out=self.x)
-        Cx = C @ self.x
-        return bool(np.isfinite(Cx).all() and (Cx >= lower).all() and (Cx <= upper).all())
+        L[j, j] = np.sqrt(d)
+        for i in range(j + 1, n):
+            v = H[i, j]
+            for p in range(j):
+                v -= L[i, p] * L[j, p]
+            L[i, j] = v / L[j, j]
+    for i in range(n):
+        v = rhs[i]
+        for p in range(i):
+            v -= L[i, p] * x[p]
+        x[i] = v / L[i, i]
+    for i in range(n - 1, -1, -1):
+        v = x[i]
+        for p in range(i + 1, n):
+            v -= L[p, i] * x[p]
+        x[i] = v / L[i, i]
+    return True
+
+
+@njit(cache=True)
+def rows_and_solve(
+    J: Array,
+    target: Array,
+    jdot_nu: Array,
+    w: Array,
+    q: Array,
+    nu: Array,
+    calA: Array,
+    Ph: Array,
+    E: Array,
+    e: Array,
+    actuator_map: Array,
+    bounds: Array,
+    limit_indices: Array,
+    constants: Array,
+    T: Array,
+    b: Array,
+    H: Array,
+    g: Array,
+    C: Array,
+    lower: Array,
+    upper: Array,
+    x: Array,
+) -> bool:
+    """Steps 2 to 5. ``bounds``: rows torque low, torque high, limit min, limit max (padded);
+    ``constants``: ``(limit_horizon, regularization)``."""
+    horizon, regularization = constants[0], constants[1]
+    E0, e0 = E[0], e[0]
+    rows, n = T.shape
+    # 2. task rows
+    for i in range(rows):
+        column = J[i, 0]
+        for j in range(n):
+            T[i, j] = (column * E0[j] + J[i, 1 + j]) * w[i]
+        b[i] = (target[i] - jdot_nu[i] - column * e0) * w[i]
+    # 3. the cost
+    H[:] = T.T @ T
+    for i in range(n):
+        H[i, i] += regularization
+    g[:] = -(T.T @ b)
+    # 4. constraints
+    m = actuator_map.shape[0]
+    C[:m] = actuator_map @ calA
+    offset = actuator_map @ Ph
+    for i in range(m):
+        lower[i] = bounds[0, i] - offset[i]
+        upper[i] = bounds[1, i] - offset[i]
+    square = horizon * horizon
+    for i in range(len(limit_indices)):
+        index = limit_indices[i]
+        drift = q[index] + nu[index] * horizon
+        lower[m + i] = (bounds[2, i] - drift) * 2.0 / square
+        upper[m + i] = (bounds[3, i] - drift) * 2.0 / square
+    # 5. the unconstrained minimiser and its feasibility
+    if not _cholesky_solve(H, -g, x):
+        return False
+    Cx = C @ x
+    for i in range(len(Cx)):  # noqa: SIM110 (a generator in all() does not compile)
+        if not (np.isfinite(Cx[i]) and lower[i] <= Cx[i] <= upper[i]):
+            return False
+    return True

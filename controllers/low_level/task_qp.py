@@ -39,6 +39,7 @@ from scipy.linalg.lapack import dposv
 from controllers.low_level.isolated_dynamics import IsolatedDynamics
 from controllers.low_level.kernel import KernelLayout, LowLevelKernel
 from controllers.low_level.motion_probe import MotionProbe
+from controllers.low_level.task_stack import CompiledTaskStack, supports
 from controllers.low_level.tasks import Task
 from wip_gym.robot_model import RobotModel
 from wip_gym.wheel_torques import generalized_to_wheel_matrix
@@ -57,6 +58,9 @@ class QPSettings:
     max_iterations: ProxQP's iteration cap (its default, 10000, lets an infeasible QP run for
         a minute before it gives up; a feasible one here takes under 20).
     unconstrained_first: try the unconstrained minimiser before ProxQP (module docstring).
+    compiled_tasks: fill the task rows by one compiled call
+        (``controllers.low_level.task_stack``) when every task is of a kind it knows; False:
+        always from the task objects (the reference it is tested against).
     """
 
     regularization: float = 1e-6
@@ -64,6 +68,7 @@ class QPSettings:
     limit_horizon: float = 0.05
     max_iterations: int = 1000
     unconstrained_first: bool = True
+    compiled_tasks: bool = True
 
 
 @dataclass(frozen=True)
@@ -163,6 +168,7 @@ class TaskQP:
         self._J: Array | None = None  # task-row buffers and kernel, made by _buffers
         self._rows = -1
         self._feasible = False
+        self._stack: CompiledTaskStack | None = None
 
     def _buffers(self, rows: int, n_min: int) -> None:
         """(Re)allocate the task-row buffers and the kernel for ``rows`` rows (once per task
@@ -190,22 +196,46 @@ class TaskQP:
             )
         )
 
-    def _snapshot(self, robot: RobotModel, tasks: Sequence[Task]) -> None:
-        """The stacked tasks' ``J``, reference accelerations, weights and ``Jdot nu`` into
-        the row buffers."""
-        blocks = [task.jacobian(robot) for task in tasks]
-        rows = sum(len(block) for block in blocks)
+    def _ensure_buffers(self, rows: int, n_min: int) -> None:
         J = self._J
         if (
             J is None
             or self._rows != rows
-            or J.shape[1] != blocks[0].shape[1]
+            or J.shape[1] != n_min
             or self.kernel.layout.torque_low is not self.torque_low
             or self.kernel.layout.torque_high is not self.torque_high
         ):
-            self._buffers(rows, blocks[0].shape[1])
-            J = self._J
-        target, w = self._target, self._w
+            self._buffers(rows, n_min)
+
+    def _compiled_stack(self, robot: RobotModel, tasks: Sequence[Task]) -> CompiledTaskStack | None:
+        """The compiled stack of this task list (made on its first step), or None when the
+        settings or a task's kind ask for the Python path."""
+        if not self.settings.compiled_tasks:
+            return None
+        stack = self._stack
+        if (
+            stack is not None
+            and len(stack.tasks) == len(tasks)
+            and all(a is b for a, b in zip(stack.tasks, tasks, strict=True))
+        ):
+            return stack
+        if not supports(tasks):
+            return None
+        self._stack = CompiledTaskStack(robot, self.motion, tasks)
+        return self._stack
+
+    def _snapshot(self, robot: RobotModel, tasks: Sequence[Task]) -> None:
+        """The stacked tasks' ``J``, reference accelerations, weights and ``Jdot nu`` into
+        the row buffers: by one compiled call when the tasks allow, else task by task."""
+        stack = self._compiled_stack(robot, tasks)
+        if stack is not None:
+            self._ensure_buffers(stack.rows, robot.layout.n_min)
+            stack.fill(robot, self._J, self._target, self._bias, self._w)
+            return
+        blocks = [task.jacobian(robot) for task in tasks]
+        rows = sum(len(block) for block in blocks)
+        self._ensure_buffers(rows, blocks[0].shape[1])
+        J, target, w = self._J, self._target, self._w
         start = 0
         for task, block in zip(tasks, blocks, strict=True):
             stop = start + len(block)

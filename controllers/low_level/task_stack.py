@@ -1,0 +1,245 @@
+"""The per-step snapshot and parameters of a task stack, for its compiled rows.
+
+:class:`CompiledTaskStack` turns a list of task objects of ``controllers.low_level.tasks``
+(``ThetaTask``, ``SpinTask``, ``FramePositionTask``, ``FrameOrientationTask``, ``PostureTask``,
+the two frame tasks optionally wrapped by ``DisturbanceRejectingTask``) into the arrays of
+:func:`controllers.low_level.compiled_tasks.task_rows`, once; then, every control step,
+
+1. fills the snapshot with MuJoCo calls into preallocated buffers: each site's ``[jacp; jacr]``
+   at the robot's state (``mj_jacSite``), and at the motion probe's idealised state the origin's
+   and each site's Jacobian and its time derivative (``mj_jac``, ``mj_jacDot``), and the subtree
+   rows of the CoM drift (``mj_subtreeVel``, ``mj_rnePostConstraint``; only with a theta task);
+2. reads the tasks' parameters (gains, targets, weights: the task objects stay their one
+   source, so a target changed between steps is seen);
+3. makes one call of the compiled function.
+
+The disturbance observers keep their state in one array of this stack
+(``DisturbanceRejectingTask.adopt_memory``), advanced by the compiled call.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+
+from controllers.low_level import compiled_tasks as ct
+from controllers.low_level.disturbance_tasks import DisturbanceRejectingTask
+from controllers.low_level.motion_probe import MotionProbe
+from controllers.low_level.tasks import (
+    FrameOrientationTask,
+    FramePositionTask,
+    PostureTask,
+    SpinTask,
+    ThetaTask,
+)
+from wip_gym.robot_model import RobotModel
+
+Array = NDArray[np.float64]
+
+_KINDS: dict[type, int] = {
+    ThetaTask: ct.THETA,
+    SpinTask: ct.SPIN,
+    FramePositionTask: ct.POSITION,
+    FrameOrientationTask: ct.ORIENTATION,
+    PostureTask: ct.POSTURE,
+}
+
+
+def _unwrap(task: object) -> tuple[object, DisturbanceRejectingTask | None]:
+    if type(task) is DisturbanceRejectingTask:
+        return task.task, task
+    return task, None
+
+
+def supports(tasks: Sequence[object]) -> bool:
+    """Whether every task is of a kind the compiled rows know (exact types: a subclass may
+    change the arithmetic, and then runs the Python path). An observer may wrap a frame task."""
+    for task in tasks:
+        inner, observer = _unwrap(task)
+        kind = _KINDS.get(type(inner))
+        if kind is None or (observer is not None and kind not in (ct.POSITION, ct.ORIENTATION)):
+            return False
+    return bool(tasks)
+
+
+class CompiledTaskStack:
+    """One task list's arrays and snapshot buffers (module docstring)."""
+
+    def __init__(self, robot: RobotModel, probe: MotionProbe, tasks: Sequence[object]) -> None:
+        if not supports(tasks):
+            raise ValueError("CompiledTaskStack: a task of a kind the compiled rows do not know")
+        m, lay = robot.model, robot.layout
+        self.tasks = list(tasks)
+        self._probe = probe
+        inner = [_unwrap(task) for task in tasks]
+        self._inner = [task for task, _ in inner]
+        self.kinds = np.array([_KINDS[type(task)] for task in self._inner], dtype=np.int64)
+        sites: list[int] = []
+        slots = []
+        for task in self._inner:
+            if isinstance(task, FramePositionTask | FrameOrientationTask):
+                if task.site not in sites:
+                    sites.append(task.site)
+                slots.append(sites.index(task.site))
+            else:
+                slots.append(-1)
+        self.site_ids = np.array(sites, dtype=np.int64)
+        self.sites = np.array(slots, dtype=np.int64)
+        counts = [len(np.atleast_1d(task.weights())) for task in self.tasks]  # type: ignore[attr-defined]
+        self.row_start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        self.rows = int(self.row_start[-1])
+        observers = [observer for _, observer in inner if observer is not None]
+        self.observer_memory = np.zeros((max(len(observers), 1), 4, 3))
+        self.observer_settings = np.zeros((max(len(observers), 1), 3))
+        self.observers = np.full(len(tasks), -1, dtype=np.int64)
+        slot = 0
+        self._observer_rows: list[tuple[object, int, int]] = []
+        for k, (_, observer) in enumerate(inner):
+            if observer is not None:
+                self._observer_rows.append(
+                    (observer.cache_key, int(self.row_start[k]), int(self.row_start[k + 1]))
+                )
+                observer.adopt_memory(self.observer_memory[slot])
+                s = observer.settings
+                self.observer_settings[slot] = (s.dt, s.alpha, s.bound)
+                self.observers[k] = slot
+                slot += 1
+        self.params = np.zeros((len(tasks), ct.PARAMETERS))
+        self.targets = np.zeros((len(tasks), 9))
+        self.row_column = np.zeros(self.rows, dtype=np.int64)
+        self.row_target = np.zeros(self.rows)
+        for k, task in enumerate(self._inner):
+            if isinstance(task, PostureTask):
+                start, stop = self.row_start[k], self.row_start[k + 1]
+                self.row_column[start:stop] = task.columns
+        n_sites, nv = len(sites), m.nv
+        self.scalars = np.zeros(6)
+        self.scalars[5] = -1 if lay.index_psi is None else lay.index_psi
+        self._planar = lay.planar
+        self.site_pos = np.zeros((n_sites, 3))
+        self.site_mat = np.zeros((n_sites, 9))
+        self.site_jac = np.zeros((n_sites, 6, nv))
+        self.probe_motion = np.zeros((2, nv))
+        self.probe_pos = np.zeros((n_sites + 1, 3))
+        self.probe_jac = np.zeros((n_sites + 1, 6, nv))
+        self.probe_jac_dot = np.zeros((n_sites + 1, 6, nv))
+        self.com_rows = np.zeros((4, 3, 3))
+        self._theta = bool((self.kinds == ct.THETA).any())
+        self._base = lay.base_body
+        self._subtree_rows = np.array([lay.base_body, *lay.wheel_bodies])
+        self._wheels = np.array(lay.wheel_bodies)
+        self._site_body = m.site_bodyid[self.site_ids].astype(int).tolist()
+        self._site_list = self.site_ids.tolist()
+
+    def _fill_snapshot(self, robot: RobotModel) -> None:
+        """Step 1 of the module docstring."""
+        m, d = robot.model, robot.data
+        for i, site in enumerate(self._site_list):
+            jac = self.site_jac[i]
+            mujoco.mj_jacSite(m, d, jac[:3], jac[3:], site)
+        self.site_pos[:] = d.site_xpos[self.site_ids]
+        self.site_mat[:] = d.site_xmat[self.site_ids]
+        probe = self._probe
+        probe.update(robot)
+        pd = probe.data
+        self.probe_motion[0] = pd.qvel
+        self.probe_motion[1] = probe.qacc0
+        origin = pd.xpos[self._base]
+        self.probe_pos[0] = origin
+        jac, jac_dot = self.probe_jac[0], self.probe_jac_dot[0]
+        mujoco.mj_jac(m, pd, jac[:3], jac[3:], origin, self._base)
+        mujoco.mj_jacDot(m, pd, jac_dot[:3], jac_dot[3:], origin, self._base)
+        site_xpos = pd.site_xpos
+        for i, (site, body) in enumerate(zip(self._site_list, self._site_body, strict=True)):
+            position = site_xpos[site]
+            self.probe_pos[1 + i] = position
+            jac, jac_dot = self.probe_jac[1 + i], self.probe_jac_dot[1 + i]
+            mujoco.mj_jac(m, pd, jac[:3], jac[3:], position, body)
+            mujoco.mj_jacDot(m, pd, jac_dot[:3], jac_dot[3:], position, body)
+        if self._theta:
+            rows = self._subtree_rows
+            com = self.com_rows
+            com[0, 0] = pd.subtree_com[self._base]
+            com[0, 1:] = pd.xipos[self._wheels]
+            mujoco.mj_subtreeVel(m, pd)
+            com[1] = pd.subtree_linvel[rows]
+            pd.qacc[:] = probe.qacc0
+            mujoco.mj_rnePostConstraint(m, pd)
+            com[2] = pd.cfrc_int[rows, 3:]
+            com[3, 0] = m.body_subtreemass[rows]
+            com[3, 1] = m.opt.gravity
+
+    def _pack_parameters(self, w: Array) -> None:
+        """Step 2: gains, targets and weights from the task objects."""
+        params, targets, start = self.params, self.targets, self.row_start
+        for k, task in enumerate(self._inner):
+            kind = self.kinds[k]
+            if kind == ct.THETA:
+                params[k] = (task.kp, task.kv, task.theta_d, task.thetad_d, task.thdd_d)  # type: ignore[attr-defined]
+                w[start[k]] = task.weight  # type: ignore[attr-defined]
+            elif kind == ct.SPIN:
+                params[k] = (task.kp, task.kv, task.psi_d, task.psid_d, task.psidd_d)  # type: ignore[attr-defined]
+                w[start[k]] = task.weight  # type: ignore[attr-defined]
+            elif kind == ct.POSITION:
+                params[k, :2] = (task.kp, task.kv)  # type: ignore[attr-defined]
+                targets[k, :3] = task.target  # type: ignore[attr-defined]
+                w[start[k] : start[k + 1]] = task.weight  # type: ignore[attr-defined]
+            elif kind == ct.ORIENTATION:
+                params[k, :2] = (task.kp, task.kv)  # type: ignore[attr-defined]
+                targets[k] = np.ravel(task.target)  # type: ignore[attr-defined]
+                w[start[k] : start[k + 1]] = task.weight  # type: ignore[attr-defined]
+            else:
+                params[k, :2] = (task.kp, task.kv)  # type: ignore[attr-defined]
+                self.row_target[start[k] : start[k + 1]] = task.target  # type: ignore[attr-defined]
+                w[start[k] : start[k + 1]] = task.joint_weights  # type: ignore[attr-defined]
+
+    def fill(self, robot: RobotModel, J: Array, target: Array, jdot_nu: Array, w: Array) -> None:
+        """The stacked rows ``J``, ``xdd*``, ``Jdot nu`` and weights ``w`` of this state (the
+        same as the task objects' ``jacobian``, ``reference_acceleration``, ``jdot_nu`` and
+        ``weights``, tested), advancing the observers once."""
+        self._fill_snapshot(robot)
+        self._pack_parameters(w)
+        scalars = self.scalars
+        heading = robot.heading_rotation
+        scalars[0] = robot.theta
+        scalars[1] = robot.thetad
+        scalars[2] = heading[0, 0]
+        scalars[3] = heading[1, 0]
+        scalars[4] = 0.0 if self._planar else robot.nu[int(scalars[5])]
+        ct.task_rows(
+            self.kinds,
+            self.sites,
+            self.observers,
+            self.row_start,
+            self.params,
+            self.targets,
+            self.row_column,
+            self.row_target,
+            robot.q,
+            robot.nu,
+            robot.J_tf,
+            robot.J_theta,
+            scalars,
+            self.site_pos,
+            self.site_mat,
+            self.site_jac,
+            robot.data.xpos[self._base],
+            robot.cache["origin_jacobian"],  # type: ignore[arg-type]
+            self.probe_motion,
+            self.probe_pos,
+            self.probe_jac,
+            self.probe_jac_dot,
+            self.com_rows,
+            self.observer_memory,
+            self.observer_settings,
+            J,
+            target,
+            jdot_nu,
+        )
+        # an observer advances once per state: its command memoised as its Python path does
+        cache = robot.cache
+        for key, start, stop in self._observer_rows:
+            cache[key] = target[start:stop].copy()
