@@ -31,6 +31,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from controllers.low_level.isolated_dynamics import IsolatedDynamics
+from controllers.low_level.small_linalg import gram, matmul, matvec, matvec_transposed
 
 Array = NDArray[np.float64]
 
@@ -255,14 +256,14 @@ def rows_and_solve(
             T[i, j] = (column * E0[j] + J[i, 1 + j]) * w[i]
         b[i] = (target[i] - jdot_nu[i] - column * e0) * w[i]
     # 3. the cost
-    H[:] = T.T @ T
+    H[:] = gram(T)
     for i in range(n):
         H[i, i] += regularization
-    g[:] = -(T.T @ b)
+    g[:] = -matvec_transposed(T, b)
     # 4. constraints
     m = actuator_map.shape[0]
-    C[:m] = actuator_map @ calA
-    offset = actuator_map @ Ph
+    C[:m] = matmul(actuator_map, calA)
+    offset = matvec(actuator_map, Ph)
     for i in range(m):
         lower[i] = bounds[0, i] - offset[i]
         upper[i] = bounds[1, i] - offset[i]
@@ -275,7 +276,7 @@ def rows_and_solve(
     # 5. the unconstrained minimiser and its feasibility
     if not _cholesky_solve(H, -g, x):
         return False
-    Cx = C @ x
+    Cx = matvec(C, x)
     for i in range(len(Cx)):  # noqa: SIM110 (a generator in all() does not compile)
         if not (np.isfinite(Cx[i]) and lower[i] <= Cx[i] <= upper[i]):
             return False
