@@ -218,3 +218,59 @@ def test_bad_state_raises(robot: RobotModel) -> None:
         robot.update(np.zeros(lay.nq + 1), np.zeros(lay.nv))
     with pytest.raises(ValueError, match="NaN"):
         robot.update(np.full(lay.nq, np.nan), np.zeros(lay.nv))
+
+
+def test_compiled_arithmetic_equals_numpy(robot: RobotModel) -> None:
+    """``wip_gym.minimal_kernels`` against the NumPy expressions it replaced, on random
+    states on and off the rolling manifold: ``A``, ``h``, ``B`` of eq. ``dyn``, the body CoM in
+    the axle frame, its Jacobian, ``theta``, ``thetad`` and ``J_theta``."""
+    m, d, lay = robot.model, robot.data, robot.layout
+    rng = np.random.default_rng(17)
+    for k in range(6):
+        qpos, qvel = robot.full_state(*random_minimal_state(robot, rng))
+        if k % 2:
+            qpos = qpos + 1e-4 * rng.normal(size=qpos.shape)
+            qvel = qvel + 1e-2 * rng.normal(size=qvel.shape)
+            if not lay.planar:
+                qpos[3:7] /= np.linalg.norm(qpos[3:7])
+        robot.update(qpos, qvel)
+        J = robot.J_tf
+        M = np.zeros((m.nv, m.nv))
+        mujoco.mj_fullM(m, d, M)
+        bias = np.zeros(m.nv)
+        mujoco.mj_rne(m, d, 0, bias)
+        scale = max(1.0, float(np.abs(M).max()))
+        np.testing.assert_allclose(robot.A, J.T @ M @ J, rtol=0, atol=1e-12 * scale)
+        h = J.T @ (M @ robot.Jdot_tf_nu + bias - d.qfrc_passive)
+        np.testing.assert_allclose(robot.h, h, rtol=0, atol=1e-12 * max(1.0, np.abs(h).max()))
+        S = np.zeros((m.nv, m.nu))
+        for a in range(m.nu):
+            S[m.jnt_dofadr[m.actuator_trnid[a, 0]], a] = m.actuator_gear[a, 0]
+        np.testing.assert_allclose(robot.B, J.T @ S, rtol=0, atol=1e-12)
+        # the body CoM, as RobotModel computed it before the compiled kernel
+        ids = np.array(lay.body_bodies)
+        masses = m.body_mass[ids]
+        mass = masses.sum()
+        origin = d.xpos[lay.base_body]
+        Rt = robot.heading_rotation.T
+        rel = Rt @ (masses @ d.xipos[ids] / mass - origin)
+        jacp, jac_wheel, jac_origin = (np.zeros((3, m.nv)) for _ in range(3))
+        mujoco.mj_jacSubtreeCom(m, d, jacp, lay.base_body)
+        Jc = jacp * m.body_subtreemass[lay.base_body]
+        for w in lay.wheel_bodies:
+            mujoco.mj_jac(m, d, jac_wheel, None, d.xipos[w], w)
+            Jc -= m.body_mass[w] * jac_wheel
+        Jc /= mass
+        mujoco.mj_jac(m, d, jac_origin, None, origin, lay.base_body)
+        J_rel = Rt @ ((Jc - jac_origin) @ J)
+        if not lay.planar:
+            J_rel[0, 1] += rel[1]
+            J_rel[1, 1] -= rel[0]
+        X, Z = rel[0], rel[2]
+        J_theta = (Z * J_rel[0] - X * J_rel[2]) / (X * X + Z * Z)
+        np.testing.assert_allclose(robot.body_mass, mass, rtol=1e-15)
+        np.testing.assert_allclose(robot.com, rel, rtol=0, atol=1e-14)
+        np.testing.assert_allclose(robot.J_com, J_rel, rtol=0, atol=1e-13)
+        assert robot.theta == pytest.approx(np.arctan2(X, Z), abs=1e-14)
+        np.testing.assert_allclose(robot.J_theta, J_theta, rtol=0, atol=1e-12)
+        assert robot.thetad == pytest.approx(float(J_theta @ robot.nu), abs=1e-12)

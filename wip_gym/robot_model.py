@@ -33,6 +33,8 @@ import mujoco
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from wip_gym.minimal_kernels import body_com, minimal_dynamics
+
 Array = NDArray[np.float64]
 
 _FREE = int(mujoco.mjtJoint.mjJNT_FREE)
@@ -250,7 +252,7 @@ class RobotModel:
         for a in range(model.nu):
             self._S[model.jnt_dofadr[model.actuator_trnid[a, 0]], a] = model.actuator_gear[a, 0]
         self._jacp = np.zeros((3, nv))
-        self._jacp_wheel = np.zeros((3, nv))
+        self._jac_wheels = np.zeros((2, 3, nv))
         self._jac_origin = np.zeros((3, nv))
         # views on MuJoCo's buffers (an attribute read makes a new view: ~1 us each); masses
         # are read at every update (an env may change them: payload, randomisation)
@@ -259,6 +261,7 @@ class RobotModel:
         self._mj_body_mass, self._mj_subtree_mass = model.body_mass, model.body_subtreemass
         self._mj_qfrc_passive = self.data.qfrc_passive
         self._body_ids = np.array(lay.body_bodies)
+        self._wheel_ids = np.array(lay.wheel_bodies)
         self._body_qpos = np.array(lay.body_qpos, dtype=int)
         self._body_dof = np.array(lay.body_dof, dtype=int)
         self._heading = _read_only(np.eye(3))
@@ -320,10 +323,9 @@ class RobotModel:
         mujoco.mj_comVel(m, d)
         mujoco.mj_passive(m, d)
         mujoco.mj_rne(m, d, 0, self._bias)
-        J = self._J
-        self._A = J.T @ self._M @ J
-        self._h = J.T @ (self._M @ self._Jdot_nu + self._bias - self._mj_qfrc_passive)
-        self._B = J.T @ self._S
+        self._A, self._h, self._B = minimal_dynamics(
+            self._M, self._J, self._Jdot_nu, self._bias, self._mj_qfrc_passive, self._S
+        )
 
     def _update_minimal_coordinates(self) -> None:
         d, lay = self.data, self.layout
@@ -379,44 +381,42 @@ class RobotModel:
         Jd[o + 5] = -s1 * q1d * psid
 
     def _update_com(self) -> None:
+        """The body CoM, ``theta`` and their Jacobians (``wip_gym.minimal_kernels.body_com``)
+        from MuJoCo's subtree-CoM Jacobian of the base less the wheels' and the origin's."""
         m, d, lay = self.model, self.data, self.layout
         base = lay.base_body
-        masses = self._mj_body_mass[self._body_ids]
-        mass = float(masses.sum())
-        com_world = masses @ self._mj_xipos[self._body_ids] / mass
-        origin = self._mj_xpos[base]
-        planar = lay.planar
-        Rt = None if planar else self._heading.T  # planar: the axle frame is the world's
-        rel = com_world - origin if planar else Rt @ (com_world - origin)
-        # CoM Jacobian of the body (wheels excluded) in world coordinates
         mujoco.mj_jacSubtreeCom(m, d, self._jacp, base)
-        Jc = self._jacp * self._mj_subtree_mass[base]
-        for w in lay.wheel_bodies:
-            mujoco.mj_jac(m, d, self._jacp_wheel, None, self._mj_xipos[w], w)
-            Jc -= self._mj_body_mass[w] * self._jacp_wheel
-        Jc /= mass
+        xipos = self._mj_xipos
+        for k, wheel in enumerate(lay.wheel_bodies):
+            mujoco.mj_jac(m, d, self._jac_wheels[k], None, xipos[wheel], wheel)
+        origin = self._mj_xpos[base]
         # axle-origin velocity: the base origin's linear velocity (kept for the tasks)
         mujoco.mj_jac(m, d, self._jac_origin, None, origin, base)
         self.cache["origin_jacobian"] = self._jac_origin
-        J_rel = (Jc - self._jac_origin) @ self._J
-        if not planar:
-            J_rel = Rt @ J_rel
-            # the axle frame turns with psi: d/dt (Rh^T p) has the extra term -psid e_z x rel
-            J_rel[0, 1] += rel[1]
-            J_rel[1, 1] -= rel[0]
-        X, Z = rel[0], rel[2]
-        self._body_mass = mass
-        self._com = rel
-        self._J_com = J_rel
-        self._theta = float(np.arctan2(X, Z))
-        # theta is undefined with the CoM on the axle: its Jacobian is then set to zero
-        distance_sq = X * X + Z * Z
-        self._J_theta = (
-            (Z * J_rel[0] - X * J_rel[2]) / distance_sq
-            if distance_sq > 1e-18
-            else (np.zeros_like(J_rel[0]))
+        heading = self._heading
+        body_mass = self._mj_body_mass
+        (
+            self._body_mass,
+            self._com,
+            self._J_com,
+            self._theta,
+            self._thetad,
+            self._J_theta,
+        ) = body_com(
+            body_mass[self._body_ids],
+            xipos[self._body_ids],
+            origin,
+            self._jacp,
+            float(self._mj_subtree_mass[base]),
+            body_mass[self._wheel_ids],
+            self._jac_wheels,
+            self._jac_origin,
+            self._J,
+            self._nu,
+            float(heading[0, 0]),
+            float(heading[1, 0]),
+            lay.planar,
         )
-        self._thetad = float(self._J_theta @ self._nu)
 
     def _require(self) -> None:
         if not self._updated:

@@ -30,7 +30,7 @@ import math
 import numpy as np
 from numba import njit
 
-from controllers.low_level.small_linalg import matmul, matvec
+from wip_gym.small_linalg import matmul, matvec
 
 THETA, SPIN, POSITION, ORIENTATION, POSTURE = 0, 1, 2, 3, 4
 """Task kinds (``kinds`` of :func:`task_rows`)."""

@@ -31,7 +31,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from controllers.low_level.isolated_dynamics import IsolatedDynamics
-from controllers.low_level.small_linalg import gram, matmul, matvec, matvec_transposed
+from wip_gym.small_linalg import gram, matmul, matvec, matvec_transposed
 
 Array = NDArray[np.float64]
 

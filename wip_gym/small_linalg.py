@@ -65,3 +65,18 @@ def matvec_transposed(A: np.ndarray, x: np.ndarray) -> np.ndarray:
         for i in range(n):
             out[i] += A[p, i] * value
     return out
+
+
+@njit(cache=True)
+def matmul_transposed(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """``A^T @ B``."""
+    k, n = A.shape
+    m = B.shape[1]
+    out = np.zeros((n, m))
+    for p in range(k):
+        for i in range(n):
+            a = A[p, i]
+            if a != 0.0:
+                for j in range(m):
+                    out[i, j] += a * B[p, j]
+    return out
