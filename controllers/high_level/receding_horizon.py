@@ -4,10 +4,19 @@ and what the low level reads between two MPC steps.
 Between MPC steps the low level tracks the *current MPC solution's* predicted ``theta`` and
 ``thetad``, interpolated linearly inside the 10 ms, with the MPC's ``thdd`` as feed-forward;
 the offline plan is only the MPC's reference, so the low level never fights a re-plan.
+
+With ``mpc_delay_steps = d > 0`` the MPC runs as on a robot whose MPC computes beside its
+control loop: the solve from the state at step ``k`` runs in a background thread (the compiled
+DDP releases the GIL) and its solution is applied from step ``k + d`` on; until then the low
+level follows the previous solution further along its prediction. Step ``k + d`` waits for the
+solve if it is not done, so an episode is the same whatever the machine's speed (deterministic),
+and the control step's worst case no longer holds a whole MPC solve. ``d = 0`` (the default,
+the paper's timing) solves in the control step that uses it.
 """
 
 from __future__ import annotations
 
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -21,10 +30,17 @@ from wip_gym.robot_model import RobotModel
 
 @dataclass(frozen=True)
 class HighLevelConfig:
-    """Plan and MPC settings (see :class:`PlanConfig`, :class:`MPCConfig`)."""
+    """Plan and MPC settings (see :class:`PlanConfig`, :class:`MPCConfig`).
+
+    Attributes:
+        mpc_delay_steps: control steps between the state an MPC solve starts from and the
+            first step that uses its solution (module docstring); 0 (the paper's timing, our
+            default): the same step. Less than the MPC period in control steps.
+    """
 
     plan: PlanConfig = field(default_factory=PlanConfig)
     mpc: MPCConfig = field(default_factory=MPCConfig)
+    mpc_delay_steps: int = 0
 
 
 @dataclass(frozen=True)
@@ -52,10 +68,37 @@ class HighLevel:
                 f"mpc dt {config.mpc.dt} is not a whole number of control steps of {control_dt}"
             )
         self.steps_per_mpc = int(round(ratio))
+        if not 0 <= config.mpc_delay_steps < self.steps_per_mpc:
+            raise ValueError(
+                f"mpc_delay_steps must be in [0, {self.steps_per_mpc}) (the MPC period in "
+                f"control steps), got {config.mpc_delay_steps}"
+            )
         self.control_dt = control_dt
         self.plan: Plan | None = None
         self.mpc: ModelPredictiveController | None = None
         self._last: MPCStep | None = None
+        self._last_start = 0  # the control step whose state self._last was solved from
+        self._pending: tuple[Future[MPCStep], int] | None = None
+        self._executor: ThreadPoolExecutor | None = None
+
+    def __getstate__(self) -> dict[str, object]:
+        state = self.__dict__.copy()
+        state["_executor"] = None  # threads do not pickle; made again when needed
+        state["_pending"] = None
+        return state
+
+    def _solve_later(self, index: int, state: np.ndarray, params: object) -> None:
+        if self._executor is None:
+            self._executor = ThreadPoolExecutor(1, thread_name_prefix="wip-gym-mpc")
+        assert self.mpc is not None
+        self._pending = (self._executor.submit(self.mpc.step, index, state, params), self._step)
+
+    def _wait_pending(self) -> None:
+        """Take the pending solve's solution (waiting for it) as the one in use."""
+        if self._pending is not None:
+            future, start = self._pending
+            self._pending = None
+            self._last, self._last_start = future.result(), start
 
     def reset(self, robot: RobotModel, goal_xy: np.ndarray, cup_friction: float | None) -> Plan:
         """Plan from the robot's current state to the goal, build the MPC and run (and so
@@ -72,6 +115,7 @@ class HighLevel:
         )
         # one solve now compiles the MPC (reset does the slow work); then start afresh
         ModelPredictiveController(self.plan, self.config.mpc).step(0, state, self.params)
+        self._wait_pending()  # a solve still running from the last episode: let it end
         self.mpc = ModelPredictiveController(self.plan, self.config.mpc)
         self._step = 0
         self._last = None
@@ -84,17 +128,28 @@ class HighLevel:
             raise RuntimeError("HighLevel.reset() first")
         phase = self._step % self.steps_per_mpc
         index = self._step // self.steps_per_mpc
+        delay = self.config.mpc_delay_steps
         if phase == 0 or self._last is None:
             self.params = params_from_lambda(robot.wipm_parameters())
-            self._last = self.mpc.step(index, wipm_state(robot), self.params)
-        self._step += 1
+            state = wipm_state(robot)
+            if delay == 0 or self._last is None:
+                self._last, self._last_start = self.mpc.step(index, state, self.params), self._step
+            else:
+                self._solve_later(index, state, self.params)
+        if self._pending is not None and self._step >= self._pending[1] + delay:
+            self._wait_pending()
         last = self._last
-        fraction = phase / self.steps_per_mpc
+        assert last is not None
+        # where the solution in use is along its own prediction (inside its first MPC step
+        # unless it is delayed)
+        interval, rest = divmod(self._step - self._last_start, self.steps_per_mpc)
+        self._step += 1
+        fraction = rest / self.steps_per_mpc
         ti, tdi = (0, 1) if robot.layout.planar else (2, 5)
-        s0, s1 = last.predicted_states[0], last.predicted_states[1]
+        s0, s1 = last.predicted_states[interval], last.predicted_states[interval + 1]
         theta = (1 - fraction) * s0[ti] + fraction * s1[ti]
         thetad = (1 - fraction) * s0[tdi] + fraction * s1[tdi]
-        control = last.control
+        control = last.predicted_controls[interval]
         dt = self.config.mpc.dt
         if robot.layout.planar:
             return HighLevelSetpoint(
