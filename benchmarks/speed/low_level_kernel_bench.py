@@ -1,5 +1,6 @@
-"""The low level's kernel (``controllers.low_level.kernel``) in NumPy against the same arithmetic
-as a jitted JAX function, on the inputs of a real ``unified`` closed loop on KrangTray-v0.
+"""The low level's compiled parts against NumPy and JAX, on the inputs of a real ``unified``
+closed loop on KrangTray-v0: the QP kernel (``controllers.low_level.kernel``) and the task rows
+(``controllers.low_level.task_stack``).
 
     python -m benchmarks.speed.low_level_kernel_bench [--steps 300] [--repeats 5]
 
@@ -7,21 +8,28 @@ Timed per call (median over the recorded states, then the median of ``--repeats`
 interleaved so that the machine's load falls on every variant alike), beside the unit of
 ``benchmarks.speed.yardstick``:
 
-* ``numpy``: ``LowLevelKernel.run`` (steps 1 to 5, eq. iso3 included);
+* ``numba``: ``LowLevelKernel.run`` (steps 1 to 5, eq. iso3 included), ours;
+* ``numpy``: the same five steps as one NumPy function into preallocated buffers (the kernel
+  before it was compiled);
 * ``before``: the same arithmetic as the task QP did it before the kernel, piece by piece
   (``isolated_dynamics``, products with ``E`` and ``e``, the constraint rows,
   ``feasible_unconstrained_minimiser``);
 * ``jax``: the same five steps as one ``jax.jit`` function of the eight input arrays
   (``jax.scipy.linalg.cho_factor``/``cho_solve`` for the minimiser), result fetched to NumPy;
 * ``jax_packed``: the same with the inputs packed in one vector (one transfer);
-* ``jax_empty``: a jitted function of the packed vector that returns it: the call's floor.
+* ``jax_empty``: a jitted function of the packed vector that returns it: the call's floor;
 
-Measured (``--steps 300 --repeats 5``, the 2-core machine shared with other jobs; two runs):
-``numpy`` 4.3 / 3.3 units, ``before`` 4.5 units, ``jax`` 7.4 / 5.1, ``jax_packed`` 6.0 / 3.9,
-``jax_empty`` 1.35 / 0.95. NumPy is kept: a jitted call's floor is about one unit before any
-arithmetic, and XLA:CPU runs this size's arithmetic no faster than NumPy. The fusion itself
-gains little over the separate calls it replaced (the same ~30 NumPy calls): what costs is the
-number of calls, not the arithmetic (18 variables, 30 task rows, 34 constraint rows for Krang).
+and for the task rows (``J``, ``xdd*``, ``Jdot nu``, weights of the seven tasks, MuJoCo calls
+included): ``rows_compiled`` (``CompiledTaskStack.fill``, ours) against ``rows_python`` (the
+task objects one by one, ``QPSettings(compiled_tasks=False)``).
+
+Measured before numba (``--steps 300 --repeats 5``, the 2-core machine shared with other
+jobs; two runs): ``numpy`` 4.3 / 3.3 units, ``before`` 4.5 units, ``jax`` 7.4 / 5.1,
+``jax_packed`` 6.0 / 3.9, ``jax_empty`` 1.35 / 0.95: a jitted JAX call's floor is about one unit
+before any arithmetic, XLA:CPU runs this size's arithmetic no faster than NumPy, and NumPy's
+cost is its number of calls, not the arithmetic (18 variables, 31 task rows, 34 constraint rows
+for Krang). numba compiles the loops once (cached on disk) and calls them for well under a
+unit; docs/performance.md §7 has today's figures.
 """
 
 from __future__ import annotations
@@ -142,6 +150,104 @@ def before_kernel(layout: KernelLayout, robot_layout: Any) -> Callable[..., Any]
     return kernel
 
 
+def numpy_kernel(layout: KernelLayout) -> Callable[..., Any]:
+    """The kernel's five steps as one NumPy function into preallocated buffers (the kernel as
+    it was before it was compiled)."""
+    from scipy.linalg.lapack import dposv  # noqa: PLC0415
+
+    k, r = layout.index_q1, layout.wheel_radius
+    n = layout.n_min - 1
+    M = layout.actuator_map
+    m = len(M)
+    n_limit = len(layout.limit_columns)
+    outer, A_star, calA = np.zeros((n, n)), np.zeros((n, n)), np.zeros((n, n))
+    Ph, E0 = np.zeros(n), np.zeros(n)
+    T, b = np.zeros((layout.rows, n)), np.zeros(layout.rows)
+    H, g, x = np.zeros((n, n)), np.zeros(n), np.zeros(n)
+    C = np.zeros((m + n_limit, n))
+    C[m + np.arange(n_limit), layout.limit_columns] = 1.0
+    lower, upper = np.zeros(m + n_limit), np.zeros(m + n_limit)
+    diagonal, square = np.arange(n), layout.limit_horizon**2
+
+    def kernel(A: Any, h: Any, J: Any, target: Any, jdot_nu: Any, w: Any, q: Any, nu: Any) -> Any:
+        a_xx, a_xq = float(A[0, 0]), A[1:, 0]
+        h_x, h_q = float(h[0]), h[1:]
+        np.multiply(a_xq[:, None], a_xq, out=outer)
+        np.divide(outer, a_xx, out=outer)
+        np.subtract(A[1:, 1:], outer, out=A_star)
+        scale = 1.0 / (1.0 + float(a_xq[k]) / (r * a_xx)) / (r * a_xx)
+        np.multiply(a_xq[:, None], A_star[k], out=outer)
+        np.multiply(outer, scale, out=outer)
+        np.subtract(A_star, outer, out=calA)
+        h_star = h_q - a_xq * h_x / a_xx
+        np.subtract(h_star, scale * a_xq * float(h_star[k]), out=Ph)
+        np.divide(-calA[k] / r - a_xq, a_xx, out=E0)
+        e0 = (-float(Ph[k]) / r - h_x) / a_xx
+        column = J[:, 0]
+        np.multiply(column[:, None], E0, out=T)
+        np.add(T, J[:, 1:], out=T)
+        np.multiply(T, w[:, None], out=T)
+        np.subtract(target, jdot_nu, out=b)
+        np.subtract(b, column * e0, out=b)
+        np.multiply(b, w, out=b)
+        np.matmul(T.T, T, out=H)
+        H[diagonal, diagonal] += layout.regularization
+        np.matmul(T.T, b, out=g)
+        np.negative(g, out=g)
+        np.matmul(M, calA, out=C[:m])
+        offset = M @ Ph
+        np.subtract(layout.torque_low, offset, out=lower[:m])
+        np.subtract(layout.torque_high, offset, out=upper[:m])
+        index = layout.limit_indices
+        drift = q[index] + nu[index] * layout.limit_horizon
+        np.subtract(layout.limit_min, drift, out=lower[m:])
+        np.subtract(layout.limit_max, drift, out=upper[m:])
+        for bound in (lower[m:], upper[m:]):
+            bound *= 2.0
+            bound /= square
+        _, solution, info = dposv(H, g, overwrite_b=False)
+        if info != 0:
+            return False
+        np.negative(solution, out=x)
+        Cx = C @ x
+        return bool(np.isfinite(Cx).all() and (Cx >= lower).all() and (Cx <= upper).all())
+
+    return kernel
+
+
+def compare_task_rows(steps: int, repeats: int) -> dict[str, float]:
+    """Median microseconds per step of the task rows, compiled and by the task objects."""
+    import dataclasses  # noqa: PLC0415
+
+    env = gym.make("wip_gym/KrangTray-v0")
+    obs, info = env.reset(seed=0)
+    policy = HierarchicalController.for_env(env)
+    policy.reset(obs, info)
+    states = []
+    for _ in range(steps):
+        action = policy(obs)
+        states.append((obs["qpos"].copy(), obs["qvel"].copy()))
+        obs, *_ = env.step(action)
+    env.close()
+    qp, robot, tasks = policy.qp, policy.robot, policy.tasks
+    settings = {
+        "rows_compiled": dataclasses.replace(qp.settings, compiled_tasks=True),
+        "rows_python": dataclasses.replace(qp.settings, compiled_tasks=False),
+    }
+    rounds: dict[str, list[float]] = {name: [] for name in settings}
+    for _ in range(repeats):
+        for name, setting in settings.items():
+            qp.settings = setting
+            times = []
+            for qpos, qvel in states:
+                robot.update(qpos, qvel)
+                start = time.perf_counter()
+                qp._snapshot(robot, tasks)
+                times.append(time.perf_counter() - start)
+            rounds[name].append(float(np.median(times)) * 1e6)
+    return {name: float(np.median(values)) for name, values in rounds.items()}
+
+
 def _median_call(function: Callable[[Inputs], Any], inputs: list[Inputs]) -> float:
     function(inputs[0])
     times = []
@@ -176,16 +282,18 @@ def compare(steps: int, repeats: int) -> dict[str, float]:
     def pack(args: Inputs) -> np.ndarray:
         return np.concatenate([a.ravel() for a in args])
 
+    fused_numpy = numpy_kernel(layout)
     variants: dict[str, Callable[[Inputs], Any]] = {
-        "numpy": lambda args: ours.run(*args),
+        "numba": lambda args: ours.run(*args),
+        "numpy": lambda args: fused_numpy(*args),
         "before": lambda args: before(*args),
         "jax": lambda args: np.asarray(jitted(*args)),
         "jax_packed": lambda args: np.asarray(packed_kernel(pack(args))),
         "jax_empty": lambda args: np.asarray(empty(pack(args))),
     }
-    # the JAX result agrees with NumPy's (x, calA, Ph)
+    # the JAX and NumPy results agree with ours (x, calA; feasibility)
     for args in inputs[:: max(1, len(inputs) // 20)]:
-        ours.run(*args)
+        assert fused_numpy(*args) == ours.run(*args)
         out = np.asarray(jitted(*args))
         n = ours.n
         np.testing.assert_allclose(out[:n], ours.x, rtol=1e-8, atol=1e-8)
@@ -195,7 +303,8 @@ def compare(steps: int, repeats: int) -> dict[str, float]:
         rounds["unit"].append(reference_step_us(repeats=200))
         for name, function in variants.items():
             rounds[name].append(_median_call(function, inputs) * 1e6)
-    return {name: float(np.median(values)) for name, values in rounds.items()}
+    result = {name: float(np.median(values)) for name, values in rounds.items()}
+    return result | compare_task_rows(steps, repeats)
 
 
 def main() -> None:

@@ -2,7 +2,10 @@
 against the simulator's own floor measured in the same run.
 
     wip-bench profile --env KrangTray-v0 --controller unified [--duration 5] [--seed 0]
-                      [--json PATH]
+                      [--preset paper] [--set KEY=VALUE ...] [--json PATH]
+
+``--preset`` and ``--set`` are compare's (``benchmarks.overrides``): for example
+``--set unified.high_level.mpc_delay_steps=5`` profiles the MPC solved beside the loop.
 
 One episode of ``--duration`` s (the env's own task parameters, ``max_episode_steps`` off). The
 timing definitions are the benchmark CLI's (``benchmarks.episode``): the control time is the
@@ -76,10 +79,13 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import mujoco
 import numpy as np
 
-from benchmarks.scenario import Scenario
+from benchmarks.overrides import parse_assignment, resolve_run
+from benchmarks.presets import PRESET_NAMES
+from benchmarks.scenario import resolve_env_id
 from benchmarks.speed.yardstick import ReferenceStep, reference_step_samples
 from controllers.registry import controller_names, make_policy
 
@@ -164,17 +170,23 @@ def _paths(iterations: np.ndarray | None) -> dict[str, int] | None:
 
 
 def profile_episode(
-    env_id: str, controller: str, duration: float = 5.0, seed: int = 0
+    env_id: str,
+    controller: str,
+    duration: float = 5.0,
+    seed: int = 0,
+    env_kwargs: dict[str, Any] | None = None,
+    config: Any = None,
 ) -> dict[str, Any]:
-    """Run one instrumented episode; return the JSON-ready profile (module docstring)."""
+    """Run one instrumented episode; return the JSON-ready profile (module docstring).
+    ``env_kwargs`` and ``config`` (the controller's) default to the env's and the
+    controller's defaults."""
     if duration <= 0:
         raise ValueError(f"duration must be positive, got {duration}")
-    scenario = Scenario(env_id, duration=duration)
     reference_before = reference_step_samples()
-    env = scenario.make_env()
+    env = gym.make(env_id, max_episode_steps=-1, **(env_kwargs or {}))
     setup_start = time.perf_counter()
     observation, info = env.reset(seed=seed)
-    policy = make_policy(controller, env, model=scenario.model)
+    policy = make_policy(controller, env, config=config)
     policy.reset(observation, info)
     setup_s = time.perf_counter() - setup_start
 
@@ -244,10 +256,10 @@ def profile_episode(
         "p99": float(np.percentile(control, 99) * 1e3),
     }
     return {
-        "env": scenario.env_id,
+        "env": env_id,
         "controller": controller,
         "seed": seed,
-        "model": scenario.model,
+        "model": getattr(policy.config, "model", "nominal"),
         "duration_s": duration,
         "steps": k,
         "control_dt_s": dt,
@@ -328,12 +340,33 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--duration", type=float, default=5.0, help="episode length (s)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--json", type=Path, default=None, help="write the profile here")
+    parser.add_argument("--preset", choices=PRESET_NAMES, help="a named configuration")
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        dest="overrides",
+        help="env.<argument> or <controller>.<field.path>, as in compare (repeatable)",
+    )
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
     if args.controller not in controller_names():
         raise ValueError(f"unknown controller {args.controller!r}; valid: {controller_names()}")
-    result = profile_episode(args.env, args.controller, args.duration, args.seed)
+    env_id = resolve_env_id(args.env)
+    overrides = dict(parse_assignment(text) for text in args.overrides)
+    spec = resolve_run(env_id, [args.controller], args.preset, overrides=overrides)
+    result = profile_episode(
+        env_id,
+        args.controller,
+        args.duration,
+        args.seed,
+        spec.env_kwargs,
+        spec.configs[args.controller],
+    )
+    result["preset"] = args.preset
+    result["overrides"] = spec.overrides
     print(format_table(result))
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
