@@ -23,6 +23,7 @@ from tests.env_step_reference import (
 
 DURATION_S = 0.6
 CASES: list[tuple[str, dict[str, Any]]] = [
+    ("wip_gym/WIP-v0", {}),
     ("wip_gym/Planar-v0", {}),
     ("wip_gym/Krang-v0", {}),
     ("wip_gym/PlanarTray-v0", {}),
@@ -48,7 +49,7 @@ CASES: list[tuple[str, dict[str, Any]]] = [
     ("wip_gym/Planar-v0", {"push_force": -2000.0, "push_time": 0.05, "push_duration": 0.2}),
 ]
 #: (case index, step): the cup is thrown (its velocity set in both envs) before that step
-CUP_THROWS = {3: 150, 4: 300, 5: 200}
+CUP_THROWS = {4: 150, 5: 300, 6: 200}
 
 
 def _assert_same(new: Any, old: Any, what: str) -> None:

@@ -339,6 +339,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         m, d = self.model, self.data
         self._views_of = (m, d)
         self._view_qpos, self._view_qvel, self._view_ctrl = d.qpos, d.qvel, d.ctrl
+        self._view_robot_qpos, self._view_robot_qvel = d.qpos[: self._nq], d.qvel[: self._nv]
         self._view_xpos, self._view_xmat, self._view_xquat = d.xpos, d.xmat, d.xquat
         self._view_xipos, self._view_site_xpos, self._view_site_xmat = (
             d.xipos,
@@ -863,8 +864,8 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
 
     def _get_obs(self, cup_pose: list[float] | None = None) -> dict[str, NDArray[np.float64]]:
         obs = {
-            "qpos": self._view_qpos[: self._nq].copy(),
-            "qvel": self._view_qvel[: self._nv].copy(),
+            "qpos": self._view_robot_qpos.copy(),
+            "qvel": self._view_robot_qvel.copy(),
             "goal": self._goal.copy(),
         }
         if self._tray:
