@@ -36,7 +36,6 @@ from wip_gym.scene import (
 )
 
 DEFAULT_CAMERA_CONFIG: dict[str, Any] = {}
-CupFrame = tuple[NDArray[np.float64], NDArray[np.float64]]
 
 #: a cup counts as upright while its axis is within this angle of the tray's normal (deg)
 CUP_UPRIGHT_DEG = 30.0
@@ -313,6 +312,56 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         self._ee_reference = np.zeros(3)
         self._cup_lost = False
         self._payload_attached = True
+        # made once for step(): plain Python numbers and the views of the arrays it reads
+        self._goal_xy = (float(self._goal[0]), float(self._goal[1]))
+        self._action_lists = list(
+            zip(
+                self._action_band[0].tolist(),
+                self._action_band[1].tolist(),
+                self._action_scale.tolist(),
+                strict=True,
+            )
+        )
+        self._fall_pairs = frozenset(
+            pair for g in self._body_geom_set for pair in ((self._floor, g), (g, self._floor))
+        )
+        if tray:
+            self._plate_pairs = frozenset(
+                pair
+                for g in self._cup_geoms
+                for pair in ((self._tray_geom, g), (g, self._tray_geom))
+            )
+        self._bind_views()
+
+    def _bind_views(self) -> None:
+        """Keep the views of the model's and data's arrays that ``step`` reads (a view stays
+        valid while its MjData or MjModel lives; made again if the env gets new ones)."""
+        m, d = self.model, self.data
+        self._views_of = (m, d)
+        self._view_qpos, self._view_qvel, self._view_ctrl = d.qpos, d.qvel, d.ctrl
+        self._view_robot_qpos, self._view_robot_qvel = d.qpos[: self._nq], d.qvel[: self._nv]
+        self._view_xpos, self._view_xmat, self._view_xquat = d.xpos, d.xmat, d.xquat
+        self._view_xipos, self._view_site_xpos, self._view_site_xmat = (
+            d.xipos,
+            d.site_xpos,
+            d.site_xmat,
+        )
+        self._view_subtree_com, self._view_subtree_linvel = d.subtree_com, d.subtree_linvel
+        self._view_push = d.xfrc_applied[self._push_body]
+        self._view_subtreemass, self._view_body_mass = m.body_subtreemass, m.body_mass
+        self._step_dt = float(m.opt.timestep) * self.frame_skip
+        self._elliptic = m.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
+        lay = self._layout
+        self._measure_layout = (
+            lay.base_body,
+            *lay.wheel_bodies,
+            float(lay.wheel_radius),
+            lay.planar,
+            lay.root_qpos,
+            lay.root_dof,
+            *lay.wheel_qpos,
+            *lay.wheel_dof,
+        )
 
     # ----------------------------------------------------------------- model
     def _initialize_simulation(self) -> tuple[mujoco.MjModel, mujoco.MjData]:
@@ -465,8 +514,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
     def _get_reset_info(self) -> dict[str, Any]:
         info = self._info(fallen=False)
         if self._tray:
-            frame = self._cup_in_tray_frame()
-            self._tray_info(info, frame, self._cup_state(frame), self._tray_on_hand())
+            self._tray_entries(info)
         return info
 
     # ------------------------------------------------------------------ step
@@ -474,57 +522,62 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
     def step(  # type: ignore[override]
         self, action: NDArray[np.floating]
     ) -> tuple[dict[str, NDArray[np.float64]], float, bool, bool, dict[str, Any]]:
-        action = self._check_action(action)
+        # the action's check and its ctrl cost, one pass over plain floats (_check_action
+        # explains a rejected action)
+        a = np.asarray(action, dtype=np.float64)
+        if a.shape != self.action_space.shape:
+            a = self._check_action(a)
+        effort = 0.0
+        for value, (low, high, scale) in zip(a.tolist(), self._action_lists, strict=True):
+            if not low <= value <= high:  # also for NaN
+                a = self._check_action(a)
+            value /= scale
+            effort += value * value
         m, d = self.model, self.data
+        if self._views_of[1] is not d or self._views_of[0] is not m:
+            self._bind_views()
         t = d.time
         force, start, duration = self._push
-        d.xfrc_applied[self._push_body, :] = 0.0
+        push = self._view_push
+        push[:] = 0.0
         if force != 0.0 and start <= t < start + duration:
-            d.xfrc_applied[self._push_body, :3] = (force * self._cos_psi, force * self._sin_psi, 0)
+            push[:3] = (force * self._cos_psi, force * self._sin_psi, 0)
         if not self._payload_attached and t >= self._payload_time:
             m.body_mass[self._payload_body] = self._payload_mass
             m.body_inertia[self._payload_body] = self._nominal_inertia[self._payload_body]
             # mj_setConst overwrites the data it is given (qpos reset to qpos0): use scratch data
             mujoco.mj_setConst(m, mujoco.MjData(m))
             self._payload_attached = True
-        self.do_simulation(action, self.frame_skip)
+        self.do_simulation(a, self.frame_skip)
         self._measure()
-        # the cup's pose in the tray frame and its state, made once for this state
-        cup_frame = self._cup_in_tray_frame() if self._tray else None
-        fallen = self._fallen()
-        kept = True
-        if cup_frame is not None:
-            cup_state = self._cup_state(cup_frame)
-            tray_state = self._tray_on_hand()
-            kept = cup_state[1] and cup_state[2] and tray_state[1]
-        newly_lost = self._tray and not kept and not self._cup_lost
-        self._cup_lost = self._cup_lost or not kept
-        distance = self._goal_distance()
+        pairs = self._contact_pairs()  # read once, for the fall and the cup's friction use
+        info = self._info(pairs=pairs)
+        fallen = info["fallen"]
+        cup_pose = None
+        newly_lost = False
+        if self._tray:
+            cup_pose, kept = self._tray_entries(info, pairs)
+            newly_lost = not kept and not self._cup_lost
+            self._cup_lost = self._cup_lost or not kept
+        distance = info["goal_distance"]
         progress_w, ctrl_w, fall_pen, cup_pen = self._weights
-        scaled = action / self._action_scale
-        rewards = {
-            "reward_progress": progress_w * (self._prev_distance - distance),
-            "reward_ctrl": -ctrl_w * float(scaled @ scaled) * self.dt,
-            "reward_fall": -fall_pen if fallen else 0.0,
-            "reward_cup_loss": -cup_pen if newly_lost else 0.0,
-        }
+        info["reward_progress"] = progress = progress_w * (self._prev_distance - distance)
+        info["reward_ctrl"] = ctrl = -ctrl_w * effort * self._step_dt
+        info["reward_fall"] = fall = -fall_pen if fallen else 0.0
+        info["reward_cup_loss"] = cup_loss = -cup_pen if newly_lost else 0.0
         self._prev_distance = distance
-        reward = float(sum(rewards.values()))
+        reward = float(progress + ctrl + fall + cup_loss)
         terminated = bool(fallen or (self._tray and self._terminate_on_cup_loss and self._cup_lost))
-        info = self._info(fallen=fallen, distance=distance)
-        if cup_frame is not None:
-            self._tray_info(info, cup_frame, cup_state, tray_state)
-        info.update(rewards)
         if self.render_mode == "human":
             self.render()
-        return self._get_obs(cup_frame), reward, terminated, False, info
+        return self._get_obs(cup_pose), reward, terminated, False, info
 
     def do_simulation(self, ctrl: NDArray[np.float64], n_frames: int) -> None:
         """``n_frames`` MuJoCo steps with the (validated) torques ``ctrl``. Unlike Gymnasium's,
         it does not run ``mj_rnePostConstraint`` after them: ``data.cfrc_int``/``cfrc_ext``
         are not computed (no observation, reward or info uses them); call it to read them."""
         self.data.ctrl[:] = ctrl
-        mujoco.mj_step(self.model, self.data, nstep=n_frames)
+        mujoco.mj_step(self.model, self.data, n_frames)
 
     def _check_action(self, action: Any) -> NDArray[np.float64]:
         a = np.asarray(action, dtype=np.float64)
@@ -550,53 +603,53 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         return a
 
     # ------------------------------------------------------------- measures
+    # plain Python floats from the views bound by _bind_views: on 3-vectors they beat NumPy
     def _measure(self) -> None:
         """The robot's state measures for the current ``qpos``/``qvel``, from MuJoCo's own
         kinematics and subtree quantities on the env's data (``mj_step`` leaves its kinematics
         at the state before the step): heading ``psi``, ``psid``, ``x``, ``xd`` (the minimal
         coordinates of ``RobotModel``), the axle position, and ``theta``, ``thetad`` of the body
         CoM (wheels excluded) about the axle in the heading frame (``RobotModel.theta``)."""
-        m, d, lay = self.model, self.data, self._layout
+        m, d = self.model, self.data
+        if self._views_of[1] is not d or self._views_of[0] is not m:
+            self._bind_views()
         mujoco.mj_kinematics(m, d)
         mujoco.mj_comPos(m, d)
-        mujoco.mj_comVel(m, d)
+        mujoco.mj_comVel(m, d)  # mj_subtreeVel reads the bodies' velocities (cvel)
         mujoco.mj_subtreeVel(m, d)
-        base = lay.base_body
-        qpos, qvel = d.qpos, d.qvel
-        r = lay.wheel_radius
-        wl, wr = lay.wheel_bodies
-        axle = d.xpos[base]
-        if lay.planar:
-            o, v = lay.root_qpos, lay.root_dof
+        base, wl, wr, r, planar, o, v, ql, qr, dl, dr = self._measure_layout
+        qpos, qvel = self._view_qpos, self._view_qvel
+        ax, ay, az = self._view_xpos[base].tolist()
+        if planar:
             c, s, psi, psid = 1.0, 0.0, 0.0, 0.0
-            x, xd = float(qpos[o]), float(qvel[v])
-            vox, voy, voz = xd, 0.0, float(qvel[v + 1])
+            x = qpos.item(o)
+            xd, voz, wy_ = qvel[v : v + 3].tolist()
+            vox, voy = xd, 0.0
+            wx_ = wz_ = 0.0
         else:
-            R00, R01, R02, R10, R11, R12, R20, R21, R22 = d.xmat[base].tolist()
+            R00, R01, R02, R10, R11, R12, R20, R21, R22 = self._view_xmat[base].tolist()
             psi = math.atan2(-R01, R11)
             c, s = math.cos(psi), math.sin(psi)
             q1 = math.atan2(c * R02 + s * R12, R22)
-            v = lay.root_dof
             vox, voy, voz, w0, w1, w2 = qvel[v : v + 6].tolist()
-            omega_x = R00 * w0 + R01 * w1 + R02 * w2
-            omega_y = R10 * w0 + R11 * w1 + R12 * w2
-            psid = R20 * w0 + R21 * w1 + R22 * w2
-            q1d = -s * omega_x + c * omega_y
-            ql, qr = lay.wheel_qpos
-            dl, dr = lay.wheel_dof
-            x = r * 0.5 * (qpos[ql] + qpos[qr]) + r * q1
-            xd = r * 0.5 * (qvel[dl] + qvel[dr]) + r * q1d
+            wx_ = R00 * w0 + R01 * w1 + R02 * w2
+            wy_ = R10 * w0 + R11 * w1 + R12 * w2
+            wz_ = psid = R20 * w0 + R21 * w1 + R22 * w2
+            q1d = -s * wx_ + c * wy_
+            x = r * 0.5 * (qpos.item(ql) + qpos.item(qr)) + r * q1
+            xd = r * 0.5 * (qvel.item(dl) + qvel.item(dr)) + r * q1d
         # the body's CoM and its velocity: the robot's subtree less the wheels, whose centres
         # (their CoMs) sit on the axle: planar they move with the base origin, in 3-D also with
         # the base's rotation (omega x r)
-        mass = float(m.body_subtreemass[base])
-        ml, mr = float(m.body_mass[wl]), float(m.body_mass[wr])
+        mass = self._view_subtreemass.item(base)
+        body_mass = self._view_body_mass
+        ml, mr = body_mass.item(wl), body_mass.item(wr)
         body = mass - ml - mr
-        ax, ay, az = axle.tolist()
-        cx, cy, cz = d.subtree_com[base].tolist()
-        lx, ly, lz = d.xipos[wl].tolist()
-        rx, ry, rz = d.xipos[wr].tolist()
-        vx, vy, vz = d.subtree_linvel[base].tolist()
+        xipos = self._view_xipos
+        cx, cy, cz = self._view_subtree_com[base].tolist()
+        lx, ly, lz = xipos[wl].tolist()
+        rx, ry, rz = xipos[wr].tolist()
+        vx, vy, vz = self._view_subtree_linvel[base].tolist()
         dx = (mass * cx - ml * lx - mr * rx) / body - ax
         dy = (mass * cy - ml * ly - mr * ry) / body - ay
         dz = (mass * cz - ml * lz - mr * rz) / body - az
@@ -604,10 +657,6 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         sx = ml * (lx - ax) + mr * (rx - ax)
         sy = ml * (ly - ay) + mr * (ry - ay)
         sz = ml * (lz - az) + mr * (rz - az)
-        if lay.planar:
-            wx_, wy_, wz_ = 0.0, float(qvel[lay.root_dof + 2]), 0.0
-        else:
-            wx_, wy_, wz_ = omega_x, omega_y, psid
         wheels = ml + mr
         dvx = (mass * vx - wheels * vox - (wy_ * sz - wz_ * sy)) / body - vox
         dvy = (mass * vy - wheels * voy - (wz_ * sx - wx_ * sz)) / body - voy
@@ -618,61 +667,88 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         distance_sq = X * X + Z * Z
         self._theta = math.atan2(X, Z)
         self._thetad = (Z * Xd - X * Zd) / distance_sq if distance_sq > 1e-18 else 0.0
-        self._x, self._xd, self._psi, self._psid = float(x), float(xd), psi, psid
+        self._x, self._xd, self._psi, self._psid = x, xd, psi, psid
         self._cos_psi, self._sin_psi = c, s
-        self._axle = axle.copy()
+        self._axle_xyz = (ax, ay, az)
+        self._axle = np.array(self._axle_xyz)
 
     def _goal_distance(self) -> float:
-        axle = self._axle
+        gx, gy = self._goal_xy
+        ax, ay, _ = self._axle_xyz
         if self._spec.planar:
-            return abs(float(self._goal[0]) - float(axle[0]))
-        return math.hypot(float(self._goal[0] - axle[0]), float(self._goal[1] - axle[1]))
+            return abs(gx - ax)
+        return math.hypot(gx - ax, gy - ay)
 
     def _ee_in_axle_frame(self) -> NDArray[np.float64]:
         if self._ee_site < 0:
             return np.zeros(3)
-        dx, dy, dz = (self.data.site_xpos[self._ee_site] - self._axle).tolist()
-        c, s = self._cos_psi, self._sin_psi
-        return np.array([c * dx + s * dy, -s * dx + c * dy, dz])
+        return np.array(self._ee_in_axle_frame_xyz())
 
-    def _fallen(self) -> bool:
-        if abs(self._theta) > self._fall_angle:
-            return True
+    def _ee_in_axle_frame_xyz(self) -> tuple[float, float, float]:
+        ex, ey, ez = self._view_site_xpos[self._ee_site].tolist()
+        ax, ay, az = self._axle_xyz
+        dx, dy, dz = ex - ax, ey - ay, ez - az
+        c, s = self._cos_psi, self._sin_psi
+        return c * dx + s * dy, -s * dx + c * dy, dz
+
+    def _contact_pairs(self) -> list[tuple[int, int]]:
+        """The geom pairs of the data's contacts, in their order."""
         d = self.data
         if d.ncon == 0:
-            return False
-        floor, body = self._floor, self._body_geom_set
-        return any(
-            (g1 == floor and g2 in body) or (g2 == floor and g1 in body)
-            for g1, g2 in d.contact.geom[: d.ncon].tolist()
-        )
+            return []
+        return list(map(tuple, d.contact.geom[: d.ncon].tolist()))
 
-    def _cup_in_tray_frame(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """The cup's position and orientation (quaternion) in the tray frame."""
-        d = self.data
+    def _fallen(self, pairs: list[tuple[int, int]] | None = None) -> bool:
+        """The body pitched beyond ``fall_angle`` or touching the floor (``pairs``: the
+        contacts' geom pairs when the caller has them)."""
+        if abs(self._theta) > self._fall_angle:
+            return True
+        if pairs is None:
+            pairs = self._contact_pairs()
+        return not self._fall_pairs.isdisjoint(pairs)
+
+    def _cup_pose(self) -> list[float]:
+        """The cup's position and orientation (quaternion, ``w >= 0``) in the tray frame, as
+        ``[x, y, z, w, qx, qy, qz]``."""
         tray, cup = self._tray_body, self._cup_body
-        position = d.xmat[tray].reshape(3, 3).T @ (d.xpos[cup] - d.xpos[tray])
-        inverse, rel = np.zeros(4), np.zeros(4)
-        mujoco.mju_negQuat(inverse, d.xquat[tray])
-        mujoco.mju_mulQuat(rel, inverse, d.xquat[cup])
-        if rel[0] < 0.0:  # the sign convention of mju_mat2Quat near identity: w >= 0
-            rel = -rel
-        return position, rel
+        xpos, xquat = self._view_xpos, self._view_xquat
+        tx, ty, tz = xpos[tray].tolist()
+        cx, cy, cz = xpos[cup].tolist()
+        R00, R01, R02, R10, R11, R12, R20, R21, R22 = self._view_xmat[tray].tolist()
+        dx, dy, dz = cx - tx, cy - ty, cz - tz
+        # the conjugate of the tray's quaternion times the cup's (mju_negQuat, mju_mulQuat)
+        a0, a1, a2, a3 = xquat[tray].tolist()
+        b0, b1, b2, b3 = xquat[cup].tolist()
+        a1, a2, a3 = -a1, -a2, -a3
+        w = a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3
+        qx = a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2
+        qy = a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1
+        qz = a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0
+        if w < 0.0:  # the sign convention of mju_mat2Quat near identity: w >= 0
+            w, qx, qy, qz = -w, -qx, -qy, -qz
+        return [
+            R00 * dx + R10 * dy + R20 * dz,
+            R01 * dx + R11 * dy + R21 * dz,
+            R02 * dx + R12 * dy + R22 * dz,
+            w,
+            qx,
+            qy,
+            qz,
+        ]
 
     @staticmethod
-    def _cup_state(cup_frame: CupFrame) -> tuple[float, bool, bool]:
-        """``(tilt_deg, upright, on_plate)`` of the cup from its pose in the tray frame.
+    def _cup_state(pose: list[float]) -> tuple[float, bool, bool]:
+        """``(tilt_deg, upright, on_plate)`` of the cup from its pose in the tray frame
+        (``_cup_pose``).
 
         Tilt: the angle between the cup's axis and the tray's normal. On the plate: the cup's
         centre is over the plate (within its outline) and above it, and the cup's lowest point
         is at most ``CUP_PLATE_GAP`` above the plate's top (resting, or within a few mm)."""
-        p, q = cup_frame
-        w, x, y, _ = q.tolist()
+        px, py, pz, _, x, y, _ = pose
         cos_tilt = min(1.0, max(-1.0, 1.0 - 2.0 * (x * x + y * y)))  # R[2, 2] of the quaternion
         tilt = math.degrees(math.acos(cos_tilt))
         sin_tilt = math.sqrt(max(0.0, 1.0 - cos_tilt * cos_tilt))
         top = 2 * TRAY_HALF_SIZE[2]
-        px, py, pz = p.tolist()
         lowest = pz - CUP_HALF_HEIGHT * abs(cos_tilt) - CUP_RADIUS * sin_tilt
         on_plate = (
             abs(px) <= TRAY_HALF_SIZE[0]
@@ -689,77 +765,111 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         half-size across it)."""
         if not self._free_tray:
             return np.zeros(3), True
-        d = self.data
         rest = self._tray_rest_site
-        offset = d.site_xmat[rest].reshape(3, 3).T @ (d.xpos[self._tray_body] - d.site_xpos[rest])
-        ox, oy, oz = offset.tolist()
+        tx, ty, tz = self._view_xpos[self._tray_body].tolist()
+        sx, sy, sz = self._view_site_xpos[rest].tolist()
+        S00, S01, S02, S10, S11, S12, S20, S21, S22 = self._view_site_xmat[rest].tolist()
+        dx, dy, dz = tx - sx, ty - sy, tz - sz
+        ox = S00 * dx + S10 * dy + S20 * dz
+        oy = S01 * dx + S11 * dy + S21 * dz
+        oz = S02 * dx + S12 * dy + S22 * dz
         on_hand = (
             abs(oz) <= TRAY_HAND_GAP
             and abs(ox) <= TRAY_HALF_SIZE[0]
             and abs(oy) <= TRAY_HALF_SIZE[1]
         )
-        return offset, on_hand
+        return np.array([ox, oy, oz]), on_hand
 
-    def _cup_friction_use(self) -> float:
-        """The cup's friction use on the plate (see :func:`friction_use`)."""
-        return friction_use(
-            self.model, self.data, self._cup_geoms, self._tray_geom, self._cup_friction
-        )
+    def _cup_friction_use(self, pairs: list[tuple[int, int]] | None = None) -> float:
+        """The cup's friction use on the plate (see :func:`friction_use`; ``pairs``: the
+        contacts' geom pairs when the caller has them)."""
+        if not self._elliptic:
+            return friction_use(
+                self.model, self.data, self._cup_geoms, self._tray_geom, self._cup_friction
+            )
+        if pairs is None:
+            pairs = self._contact_pairs()
+        plate = self._plate_pairs
+        rows = [i for i, pair in enumerate(pairs) if pair in plate]
+        if not rows:
+            return 0.0
+        d = self.data
+        contact = d.contact
+        address, frame, force = contact.efc_address, contact.frame, d.efc_force
+        normal = tx = ty = tz = 0.0
+        for i in rows:
+            a = address.item(i)
+            if a < 0:  # excluded from the constraints
+                continue
+            # the contact-frame force (normal, tangent 1, tangent 2) is in efc_force
+            f_n, f_1, f_2 = force[a : a + 3].tolist()
+            # rows of the contact frame: normal, tangent 1, tangent 2
+            _, _, _, a0, a1, a2, b0, b1, b2 = frame[i].tolist()
+            normal += f_n
+            tx += f_1 * a0 + f_2 * b0
+            ty += f_1 * a1 + f_2 * b1
+            tz += f_1 * a2 + f_2 * b2
+        if normal <= 0.0:
+            return 0.0
+        return math.sqrt(tx * tx + ty * ty + tz * tz) / (self._cup_friction * normal)
 
     def _tray_tilt_deg(self) -> float:
-        z = float(self.data.xmat[self._tray_body, 8])  # the normal's world z
+        z = self._view_xmat.item(self._tray_body, 8)  # the normal's world z
         return math.degrees(math.acos(min(1.0, max(-1.0, z))))
 
-    def _info(self, *, fallen: bool, distance: float | None = None) -> dict[str, Any]:
-        """The robot's info for the state ``_measure`` made (``distance`` when the caller has
-        it); a tray task's entries are added by ``_tray_info``."""
+    def _info(
+        self, *, fallen: bool | None = None, pairs: list[tuple[int, int]] | None = None
+    ) -> dict[str, Any]:
+        """The robot's info for the state ``_measure`` made (``fallen``: found by ``_fallen``
+        if None; ``pairs``: the contacts' geom pairs when the caller has them); a tray task's
+        entries are added by ``_tray_entries``."""
         info: dict[str, Any] = {
             "x": self._x,
             "xd": self._xd,
             "theta": self._theta,
             "thetad": self._thetad,
             "axle_position": self._axle,
-            "goal_distance": self._goal_distance() if distance is None else distance,
-            "fallen": bool(fallen),
+            "goal_distance": self._goal_distance(),
+            "fallen": self._fallen(pairs) if fallen is None else bool(fallen),
         }
         if not self._spec.planar:
             info["psi"] = self._psi
             info["psid"] = self._psid
         if self._ee_site >= 0:
-            ex, ey, ez = (self._ee_in_axle_frame() - self._ee_reference).tolist()
+            ex, ey, ez = self._ee_in_axle_frame_xyz()
+            rx, ry, rz = self._ee_reference.tolist()
+            ex, ey, ez = ex - rx, ey - ry, ez - rz
             info["ee_error"] = math.sqrt(ex * ex + ey * ey + ez * ez)
         return info
 
-    def _tray_info(
-        self,
-        info: dict[str, Any],
-        cup_frame: CupFrame,
-        cup_state: tuple[float, bool, bool],
-        tray_state: tuple[NDArray[np.float64], bool],
-    ) -> None:
-        """The tray task's info entries, from the state's cup frame, cup and tray states."""
-        tilt, upright, on_plate = cup_state
-        tray_offset, tray_on_hand = tray_state
+    def _tray_entries(
+        self, info: dict[str, Any], pairs: list[tuple[int, int]] | None = None
+    ) -> tuple[list[float], bool]:
+        """Add the tray task's info entries for the state ``_measure`` made; return the cup's
+        pose in the tray frame (``_cup_pose``) and whether the cup is kept (on the tray, and
+        the tray on the hand)."""
+        pose = self._cup_pose()
+        tilt, upright, on_plate = self._cup_state(pose)
+        tray_offset, tray_on_hand = self._tray_on_hand()
         info["tray_tilt_deg"] = self._tray_tilt_deg()
-        info["cup_offset"] = cup_frame[0]
+        info["cup_offset"] = np.array(pose[:3])
         info["cup_tilt_deg"] = tilt
         info["cup_upright"] = upright
         info["cup_on_plate"] = on_plate
-        info["cup_on_tray"] = on_plate and upright
-        info["cup_friction_use"] = self._cup_friction_use()
+        info["cup_on_tray"] = on_tray = on_plate and upright
+        info["cup_friction_use"] = self._cup_friction_use(pairs)
         info["tray_offset"] = tray_offset
         info["tray_on_hand"] = tray_on_hand
+        return pose, on_tray and tray_on_hand
 
-    def _get_obs(self, cup_frame: CupFrame | None = None) -> dict[str, NDArray[np.float64]]:
-        d = self.data
+    def _get_obs(self, cup_pose: list[float] | None = None) -> dict[str, NDArray[np.float64]]:
         obs = {
-            "qpos": d.qpos[: self._nq].copy(),
-            "qvel": d.qvel[: self._nv].copy(),
+            "qpos": self._view_robot_qpos.copy(),
+            "qvel": self._view_robot_qvel.copy(),
             "goal": self._goal.copy(),
         }
         if self._tray:
-            position, quat = cup_frame or self._cup_in_tray_frame()
-            obs["cup_pose"] = np.concatenate([position, quat])
+            obs["cup_pose"] = np.array(self._cup_pose() if cup_pose is None else cup_pose)
         return obs
 
     # ------------------------------------------------------------- rendering
