@@ -281,3 +281,13 @@ def rows_and_solve(
         if not (np.isfinite(Cx[i]) and lower[i] <= Cx[i] <= upper[i]):
             return False
     return True
+
+
+@njit(cache=True)
+def solution_terms(
+    calA: Array, Ph: Array, actuator_map: Array, E: Array, e: Array, qdd: Array
+) -> tuple[Array, Array, Array]:
+    """What a solution ``qdd`` implies (new arrays): the generalised forces ``Gamma = calA qdd
+    + Ph`` (eq. ``iso3``), the actuator torques ``M_act Gamma`` and ``nu_dot = E qdd + e``."""
+    generalized = matvec(calA, qdd) + Ph
+    return generalized, matvec(actuator_map, generalized), matvec(E, qdd) + e

@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 from scipy.linalg.lapack import dposv
 
 from controllers.low_level.isolated_dynamics import IsolatedDynamics
-from controllers.low_level.kernel import KernelLayout, LowLevelKernel
+from controllers.low_level.kernel import KernelLayout, LowLevelKernel, solution_terms
 from controllers.low_level.motion_probe import MotionProbe
 from controllers.low_level.task_stack import CompiledTaskStack, supports
 from controllers.low_level.tasks import Task
@@ -169,6 +169,7 @@ class TaskQP:
         self._rows = -1
         self._feasible = False
         self._stack: CompiledTaskStack | None = None
+        self._stack_identity: tuple[int, ...] = ()
 
     def _buffers(self, rows: int, n_min: int) -> None:
         """(Re)allocate the task-row buffers and the kernel for ``rows`` rows (once per task
@@ -213,15 +214,13 @@ class TaskQP:
         if not self.settings.compiled_tasks:
             return None
         stack = self._stack
-        if (
-            stack is not None
-            and len(stack.tasks) == len(tasks)
-            and all(a is b for a, b in zip(stack.tasks, tasks, strict=True))
-        ):
+        identity = tuple(map(id, tasks))  # the same task objects, in the same order
+        if stack is not None and identity == self._stack_identity:
             return stack
         if not supports(tasks):
             return None
         self._stack = CompiledTaskStack(robot, self.motion, tasks)
+        self._stack_identity = identity
         return self._stack
 
     def _snapshot(self, robot: RobotModel, tasks: Sequence[Task]) -> None:
@@ -324,12 +323,11 @@ class TaskQP:
 
     def _solution(self, qdd: Array, iterations: int) -> QPSolution:
         k = self.kernel
-        generalized = k.calA @ qdd + k.Ph
-        actuators = self.M_act @ generalized
+        generalized, actuators, nu_dot = solution_terms(k.calA, k.Ph, self.M_act, k.E, k.e, qdd)
         self._last_actuators = actuators
         return QPSolution(
             qdd=qdd,
-            nu_dot=k.E @ qdd + k.e,
+            nu_dot=nu_dot,
             generalized=generalized,
             actuators=actuators,
             solved=True,
