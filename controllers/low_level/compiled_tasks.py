@@ -216,16 +216,25 @@ def task_rows(
     J_tf: np.ndarray,
     J_theta: np.ndarray,
     scalars: np.ndarray,
-    site_pos: np.ndarray,
-    site_mat: np.ndarray,
+    bodies: np.ndarray,
+    site_ids: np.ndarray,
+    xpos: np.ndarray,
+    site_xpos: np.ndarray,
+    site_xmat: np.ndarray,
     site_jac: np.ndarray,
-    origin: np.ndarray,
     origin_jac: np.ndarray,
-    probe_motion: np.ndarray,
-    probe_pos: np.ndarray,
+    probe_qvel: np.ndarray,
+    probe_qacc0: np.ndarray,
+    probe_xpos: np.ndarray,
+    probe_site_xpos: np.ndarray,
     probe_jac: np.ndarray,
     probe_jac_dot: np.ndarray,
-    com_rows: np.ndarray,
+    probe_subtree_com: np.ndarray,
+    probe_xipos: np.ndarray,
+    probe_subtree_linvel: np.ndarray,
+    probe_cfrc_int: np.ndarray,
+    subtree_mass: np.ndarray,
+    gravity: np.ndarray,
     observer_memory: np.ndarray,
     observer_settings: np.ndarray,
     J: np.ndarray,
@@ -234,29 +243,34 @@ def task_rows(
 ) -> None:
     """Fill ``J``, ``target`` (``xdd*``) and ``jdot_nu`` of the stacked tasks.
 
-    ``scalars``: ``theta, thetad, cos psi, sin psi, psid, index_psi`` (-1 planar). Sites are
-    slots: ``site_*[i]`` at the robot's state, ``probe_*[0]`` the origin and ``probe_*[1 + i]``
-    site ``i`` at the probe's state; ``probe_motion`` = ``[qvel; qacc_0]`` of the probe;
-    ``com_rows`` (4, 3, 3): ``com_rows[0..2]`` the positions (``subtree_com``, ``xipos``),
-    linear velocities (``subtree_linvel``) and ``cfrc_int``'s linear parts of the base subtree
-    and the two wheels, ``com_rows[3]`` = ``[[M, m_l, m_r], gravity, 0]``. A task with
-    ``observers[k] >= 0`` is wrapped by the disturbance observer of that slot.
+    ``scalars``: ``theta, thetad, cos psi, sin psi, psid, index_psi`` (-1 planar).
+    ``bodies``: ``(base, wheel_left, wheel_right)``; ``site_ids[i]``: the MuJoCo id of site
+    slot ``i``. At the robot's state: ``xpos``, ``site_xpos``, ``site_xmat`` (MuJoCo's arrays),
+    ``site_jac[i]`` (``mj_jacSite``), ``origin_jac`` (the base origin's ``jacp``). At the probe's
+    idealised state: ``qvel``, ``qacc_0``, ``xpos``, ``site_xpos``, ``probe_jac[0]`` and its
+    derivative for the origin, ``probe_jac[1 + i]`` for site slot ``i``, and ``subtree_com``,
+    ``xipos``, ``subtree_linvel``, ``cfrc_int`` (read for a theta task only: the CoM drift of
+    ``MotionProbe.com_motion``); ``subtree_mass``, ``gravity`` the model's. A task
+    with ``observers[k] >= 0`` is wrapped by the disturbance observer of that slot.
     """
     theta, thetad, c, s, psid = scalars[0], scalars[1], scalars[2], scalars[3], scalars[4]
     index_psi = int(scalars[5])
-    qvel, qacc0 = probe_motion[0], probe_motion[1]
-    n_sites = site_pos.shape[0]
+    base, left, right = bodies[0], bodies[1], bodies[2]
+    qvel, qacc0 = probe_qvel, probe_qacc0
+    n_sites = len(site_ids)
     n = len(nu)
     rel = np.zeros((n_sites, 3))
     R = np.zeros((n_sites, 3, 3))
     Jp = np.zeros((n_sites, 3, n))
     Jr = np.zeros((n_sites, 3, n))
+    origin = xpos[base]
     for i in range(n_sites):
+        site = site_ids[i]
         rel[i], R[i], Jp[i], Jr[i] = site_in_axle_frame(
-            site_pos[i], site_mat[i], site_jac[i], origin, origin_jac, J_tf, c, s, index_psi
+            site_xpos[site], site_xmat[site], site_jac[i], origin, origin_jac, J_tf, c, s, index_psi
         )
     v_o, a_o = _point_motion(probe_jac[0], probe_jac_dot[0], qvel, qacc0)
-    p_o = probe_pos[0]
+    p_o = probe_xpos[base]
     for k in range(len(kinds)):
         kind, start, stop = kinds[k], row_start[k], row_start[k + 1]
         kp, kv = params[k, 0], params[k, 1]
@@ -266,11 +280,13 @@ def task_rows(
             target[start] = (
                 params[k, 4] - kp * (theta - params[k, 2]) - kv * (thetad - params[k, 3])
             )
-            M, m_l, m_r = com_rows[3, 0, 0], com_rows[3, 0, 1], com_rows[3, 0, 2]
+            M, m_l, m_r = subtree_mass[base], subtree_mass[left], subtree_mass[right]
             mass = M - m_l - m_r
-            position = (M * com_rows[0, 0] - m_l * com_rows[0, 1] - m_r * com_rows[0, 2]) / mass
-            velocity = (M * com_rows[1, 0] - m_l * com_rows[1, 1] - m_r * com_rows[1, 2]) / mass
-            drift = (com_rows[2, 0] - com_rows[2, 1] - com_rows[2, 2]) / mass + com_rows[3, 1]
+            com, xipos, linvel = probe_subtree_com, probe_xipos, probe_subtree_linvel
+            force = probe_cfrc_int
+            position = (M * com[base] - m_l * xipos[left] - m_r * xipos[right]) / mass
+            velocity = (M * linvel[base] - m_l * linvel[left] - m_r * linvel[right]) / mass
+            drift = (force[base, 3:] - force[left, 3:] - force[right, 3:]) / mass + gravity
             cp, cd, cdd = relative_drift(
                 position, velocity, drift, p_o, v_o[:3], a_o[:3], c, s, psid
             )
@@ -297,7 +313,7 @@ def task_rows(
                 task_velocity = matvec(Jp[i], nu)
                 reference = -kp * (rel[i] - targets[k, :3]) - kv * task_velocity
                 jdot_nu[start:stop] = relative_drift(
-                    probe_pos[1 + i], v[:3], a[:3], p_o, v_o[:3], a_o[:3], c, s, psid
+                    probe_site_xpos[site_ids[i]], v[:3], a[:3], p_o, v_o[:3], a_o[:3], c, s, psid
                 )[2]
             else:
                 J[start:stop] = Jr[i]

@@ -119,58 +119,48 @@ class CompiledTaskStack:
         self.scalars = np.zeros(6)
         self.scalars[5] = -1 if lay.index_psi is None else lay.index_psi
         self._planar = lay.planar
-        self.site_pos = np.zeros((n_sites, 3))
-        self.site_mat = np.zeros((n_sites, 9))
         self.site_jac = np.zeros((n_sites, 6, nv))
-        self.probe_motion = np.zeros((2, nv))
-        self.probe_pos = np.zeros((n_sites + 1, 3))
         self.probe_jac = np.zeros((n_sites + 1, 6, nv))
         self.probe_jac_dot = np.zeros((n_sites + 1, 6, nv))
-        self.com_rows = np.zeros((4, 3, 3))
         self._theta = bool((self.kinds == ct.THETA).any())
         self._base = lay.base_body
-        self._subtree_rows = np.array([lay.base_body, *lay.wheel_bodies])
-        self._wheels = np.array(lay.wheel_bodies)
+        self.bodies = np.array([lay.base_body, *lay.wheel_bodies], dtype=np.int64)
         self._site_body = m.site_bodyid[self.site_ids].astype(int).tolist()
         self._site_list = self.site_ids.tolist()
+        # views on MuJoCo's arrays, read by the compiled call as they are (no copies); an
+        # attribute read makes a new view, so they are made once
+        d, pd = robot.data, probe.data
+        self._model_arrays = (m.body_subtreemass, m.opt.gravity)
+        self._robot_arrays = (d.xpos, d.site_xpos, d.site_xmat)
+        self._probe_arrays = (pd.qvel, probe.qacc0, pd.xpos, pd.site_xpos)
+        self._probe_subtree = (pd.subtree_com, pd.xipos, pd.subtree_linvel, pd.cfrc_int)
+        self._probe_qacc = pd.qacc
 
     def _fill_snapshot(self, robot: RobotModel) -> None:
-        """Step 1 of the module docstring."""
+        """Step 1 of the module docstring: the MuJoCo calls (their results stay in MuJoCo's
+        arrays and in the Jacobian buffers)."""
         m, d = robot.model, robot.data
         for i, site in enumerate(self._site_list):
             jac = self.site_jac[i]
             mujoco.mj_jacSite(m, d, jac[:3], jac[3:], site)
-        self.site_pos[:] = d.site_xpos[self.site_ids]
-        self.site_mat[:] = d.site_xmat[self.site_ids]
         probe = self._probe
         probe.update(robot)
         pd = probe.data
-        self.probe_motion[0] = pd.qvel
-        self.probe_motion[1] = probe.qacc0
-        origin = pd.xpos[self._base]
-        self.probe_pos[0] = origin
+        _, _, probe_xpos, probe_site_xpos = self._probe_arrays
+        base = self._base
+        origin = probe_xpos[base]
         jac, jac_dot = self.probe_jac[0], self.probe_jac_dot[0]
-        mujoco.mj_jac(m, pd, jac[:3], jac[3:], origin, self._base)
-        mujoco.mj_jacDot(m, pd, jac_dot[:3], jac_dot[3:], origin, self._base)
-        site_xpos = pd.site_xpos
+        mujoco.mj_jac(m, pd, jac[:3], jac[3:], origin, base)
+        mujoco.mj_jacDot(m, pd, jac_dot[:3], jac_dot[3:], origin, base)
         for i, (site, body) in enumerate(zip(self._site_list, self._site_body, strict=True)):
-            position = site_xpos[site]
-            self.probe_pos[1 + i] = position
+            position = probe_site_xpos[site]
             jac, jac_dot = self.probe_jac[1 + i], self.probe_jac_dot[1 + i]
             mujoco.mj_jac(m, pd, jac[:3], jac[3:], position, body)
             mujoco.mj_jacDot(m, pd, jac_dot[:3], jac_dot[3:], position, body)
         if self._theta:
-            rows = self._subtree_rows
-            com = self.com_rows
-            com[0, 0] = pd.subtree_com[self._base]
-            com[0, 1:] = pd.xipos[self._wheels]
             mujoco.mj_subtreeVel(m, pd)
-            com[1] = pd.subtree_linvel[rows]
-            pd.qacc[:] = probe.qacc0
+            self._probe_qacc[:] = probe.qacc0
             mujoco.mj_rnePostConstraint(m, pd)
-            com[2] = pd.cfrc_int[rows, 3:]
-            com[3, 0] = m.body_subtreemass[rows]
-            com[3, 1] = m.opt.gravity
 
     def _pack_parameters(self, w: Array) -> None:
         """Step 2: gains, targets and weights from the task objects."""
@@ -223,16 +213,16 @@ class CompiledTaskStack:
             robot.J_tf,
             robot.J_theta,
             scalars,
-            self.site_pos,
-            self.site_mat,
+            self.bodies,
+            self.site_ids,
+            *self._robot_arrays,
             self.site_jac,
-            robot.data.xpos[self._base],
             robot.cache["origin_jacobian"],  # type: ignore[arg-type]
-            self.probe_motion,
-            self.probe_pos,
+            *self._probe_arrays,
             self.probe_jac,
             self.probe_jac_dot,
-            self.com_rows,
+            *self._probe_subtree,
+            *self._model_arrays,
             self.observer_memory,
             self.observer_settings,
             J,
