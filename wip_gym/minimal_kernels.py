@@ -1,14 +1,18 @@
 """The arithmetic of ``RobotModel.update`` after its MuJoCo calls, compiled by numba.
 
-Two functions of arrays (``wip_gym.robot_model`` makes the MuJoCo calls and keeps the results):
+Three functions of arrays (``wip_gym.robot_model`` makes the MuJoCo calls and keeps the
+results):
 
+* :func:`minimal_state`: the minimal coordinates ``q``, ``nu`` from MuJoCo's ``qpos``, ``qvel``
+  and the base's rotation, and the state-dependent entries of ``J_tf`` and ``Jdot_tf nu``;
 * :func:`minimal_dynamics`: paper eq. ``dyn``, ``A = J_tf^T M J_tf``,
   ``h = J_tf^T (M Jdot_tf nu + c - f_passive)``, ``B = J_tf^T S``;
 * :func:`body_com`: the body's CoM (wheels excluded) in the axle frame, its Jacobian over
   ``nu``, ``theta = atan2(X, Z)`` and ``J_theta``, ``thetad = J_theta nu``.
 
 The NumPy expressions they replace are kept in ``tests/test_robot_model.py`` and compared on
-random states of every robot.
+random states of every robot (the minimal coordinates also against ``RobotModel.full_state``,
+their inverse).
 """
 
 from __future__ import annotations
@@ -19,6 +23,69 @@ import numpy as np
 from numba import njit
 
 from wip_gym.small_linalg import matmul, matmul_transposed, matvec, matvec_transposed
+
+
+@njit(cache=True)
+def minimal_state(
+    qpos: np.ndarray,
+    qvel: np.ndarray,
+    base_xmat: np.ndarray,
+    layout: np.ndarray,
+    body_qpos: np.ndarray,
+    body_dof: np.ndarray,
+    wheel_radius: float,
+    q: np.ndarray,
+    nu: np.ndarray,
+    J: np.ndarray,
+    Jdot_nu: np.ndarray,
+) -> tuple[float, float, float, float]:
+    """Fill ``q``, ``nu`` (``wip_gym.robot_model``'s minimal coordinates) and, in 3-D, the
+    entries of ``J_tf`` and ``Jdot_tf nu`` that depend on ``psi`` and ``q1``; return ``(psi,
+    psid, cos psi, sin psi)``. ``layout``: ``planar, root_qpos, root_dof, wheel_qpos[0],
+    wheel_qpos[1], wheel_dof[0], wheel_dof[1]``.
+
+    3-D: ``psi = atan2(-R01, R11)``, ``q1 = atan2(c R02 + s R12, R22)`` (base rotation ``R``);
+    the base's world angular velocity ``omega = R w`` gives ``psid = omega_z`` and
+    ``q1d = -s omega_x + c omega_y``; ``x = r (phi_L + phi_R) / 2 + r q1`` (odometry of the
+    absolute wheel angles) and its rate likewise."""
+    planar, o, v = layout[0], layout[1], layout[2]
+    wl, wr, dl, dr = layout[3], layout[4], layout[5], layout[6]
+    r = wheel_radius
+    if planar:
+        psi, psid, c, s = 0.0, 0.0, 1.0, 0.0
+        q[0], q[1] = qpos[o], qpos[o + 2]
+        nu[0], nu[1] = qvel[v], qvel[v + 2]
+        first = 2
+    else:
+        R = base_xmat
+        psi = math.atan2(-R[1], R[4])
+        c, s = math.cos(psi), math.sin(psi)
+        q1 = math.atan2(c * R[2] + s * R[5], R[8])
+        w0, w1, w2 = qvel[v + 3], qvel[v + 4], qvel[v + 5]
+        omega_x = R[0] * w0 + R[1] * w1 + R[2] * w2
+        omega_y = R[3] * w0 + R[4] * w1 + R[5] * w2
+        psid = R[6] * w0 + R[7] * w1 + R[8] * w2
+        q1d = -s * omega_x + c * omega_y
+        xd = r * 0.5 * (qvel[dl] + qvel[dr]) + r * q1d
+        q[0] = r * 0.5 * (qpos[wl] + qpos[wr]) + r * q1
+        q[1], q[2] = psi, q1
+        nu[0], nu[1], nu[2] = xd, psid, q1d
+        first = 3
+        # J_tf's free-joint rows: the axle's linear velocity in world, the base's angular
+        # velocity in its own frame; and their time derivative along nu
+        c1, s1 = math.cos(q1), math.sin(q1)
+        J[v + 0, 0] = c
+        J[v + 1, 0] = s
+        J[v + 3, 1] = -s1
+        J[v + 5, 1] = c1
+        Jdot_nu[v + 0] = -s * psid * xd
+        Jdot_nu[v + 1] = c * psid * xd
+        Jdot_nu[v + 3] = -c1 * q1d * psid
+        Jdot_nu[v + 5] = -s1 * q1d * psid
+    for k in range(len(body_qpos)):
+        q[first + k] = qpos[body_qpos[k]]
+        nu[first + k] = qvel[body_dof[k]]
+    return psi, psid, c, s
 
 
 @njit(cache=True)

@@ -33,7 +33,7 @@ import mujoco
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from wip_gym.minimal_kernels import body_com, minimal_dynamics
+from wip_gym.minimal_kernels import body_com, minimal_dynamics, minimal_state
 
 Array = NDArray[np.float64]
 
@@ -261,6 +261,11 @@ class RobotModel:
         self._mj_body_mass, self._mj_subtree_mass = model.body_mass, model.body_subtreemass
         self._mj_qfrc_passive = self.data.qfrc_passive
         self._body_ids = np.array(lay.body_bodies)
+        self._mj_xmat = self.data.xmat
+        self._layout_ints = np.array(
+            [lay.planar, lay.root_qpos, lay.root_dof, *lay.wheel_qpos, *lay.wheel_dof],
+            dtype=np.int64,
+        )
         self._wheel_ids = np.array(lay.wheel_bodies)
         self._body_qpos = np.array(lay.body_qpos, dtype=int)
         self._body_dof = np.array(lay.body_dof, dtype=int)
@@ -311,8 +316,22 @@ class RobotModel:
         self.cache.clear()
         mujoco.mj_kinematics(m, d)
         mujoco.mj_comPos(m, d)
-        self._update_minimal_coordinates()
-        self._update_transform()
+        psi, psid, c, s = minimal_state(
+            self._mj_qpos,
+            self._mj_qvel,
+            self._mj_xmat[lay.base_body],
+            self._layout_ints,
+            self._body_qpos,
+            self._body_dof,
+            lay.wheel_radius,
+            self._q,
+            self._nu,
+            self._J,
+            self._Jdot_nu,
+        )
+        self._psi, self._psid = psi, psid
+        if not lay.planar:
+            self._heading = _read_only(np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]))
         self._update_com()
         self._updated = True
         self._has_dynamics = dynamics
@@ -326,59 +345,6 @@ class RobotModel:
         self._A, self._h, self._B = minimal_dynamics(
             self._M, self._J, self._Jdot_nu, self._bias, self._mj_qfrc_passive, self._S
         )
-
-    def _update_minimal_coordinates(self) -> None:
-        d, lay = self.data, self.layout
-        r = lay.wheel_radius
-        qpos, qvel = self._mj_qpos, self._mj_qvel
-        wl, wr = lay.wheel_qpos
-        dl, dr = lay.wheel_dof
-        if lay.planar:
-            o, v = lay.root_qpos, lay.root_dof
-            self._psi = 0.0
-            self._psid = 0.0
-            self._q[:2] = qpos[o], qpos[o + 2]
-            self._nu[:2] = qvel[v], qvel[v + 2]
-        else:
-            R00, R01, R02, R10, R11, R12, R20, R21, R22 = d.xmat[lay.base_body].tolist()
-            psi = math.atan2(-R01, R11)
-            c, s = math.cos(psi), math.sin(psi)
-            q1 = math.atan2(c * R02 + s * R12, R22)
-            v = lay.root_dof
-            w0, w1, w2 = qvel[v + 3 : v + 6].tolist()
-            # angular velocity in world = R (base-frame angular velocity)
-            omega_x = R00 * w0 + R01 * w1 + R02 * w2
-            omega_y = R10 * w0 + R11 * w1 + R12 * w2
-            psid = R20 * w0 + R21 * w1 + R22 * w2
-            q1d = -s * omega_x + c * omega_y
-            x = r * 0.5 * (qpos[wl] + qpos[wr]) + r * q1
-            xd = r * 0.5 * (qvel[dl] + qvel[dr]) + r * q1d
-            self._psi, self._psid = psi, psid
-            self._q[:3] = x, psi, q1
-            self._nu[:3] = xd, psid, q1d
-            self._heading = _read_only(np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]))
-        self._q[self._body_cols] = qpos[self._body_qpos]
-        self._nu[self._body_cols] = qvel[self._body_dof]
-
-    def _update_transform(self) -> None:
-        lay = self.layout
-        if lay.planar:
-            return  # J_tf is constant and Jdot_tf is zero for the planar base
-        J, Jd = self._J, self._Jdot_nu
-        psi, q1 = self._psi, float(self._q[2])
-        xd, psid, q1d = self._nu[:3].tolist()
-        c, s = math.cos(psi), math.sin(psi)
-        c1, s1 = math.cos(q1), math.sin(q1)
-        o = lay.root_dof
-        # free joint: linear velocity of the axle midpoint in world, angular velocity in base frame
-        J[o + 0, 0] = c
-        J[o + 1, 0] = s
-        J[o + 3, 1] = -s1
-        J[o + 5, 1] = c1
-        Jd[o + 0] = -s * psid * xd
-        Jd[o + 1] = c * psid * xd
-        Jd[o + 3] = -c1 * q1d * psid
-        Jd[o + 5] = -s1 * q1d * psid
 
     def _update_com(self) -> None:
         """The body CoM, ``theta`` and their Jacobians (``wip_gym.minimal_kernels.body_com``)
