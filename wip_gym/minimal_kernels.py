@@ -1,8 +1,10 @@
 """The arithmetic of ``RobotModel.update`` after its MuJoCo calls, compiled by numba.
 
-Three functions of arrays (``wip_gym.robot_model`` makes the MuJoCo calls and keeps the
+Four functions of arrays (``wip_gym.robot_model`` makes the MuJoCo calls and keeps the
 results):
 
+* :func:`idealised_state`: the inverse, MuJoCo's ``qpos``, ``qvel`` of a minimal state with the
+  wheels on the floor (``RobotModel.full_state``);
 * :func:`minimal_state`: the minimal coordinates ``q``, ``nu`` from MuJoCo's ``qpos``, ``qvel``
   and the base's rotation, and the state-dependent entries of ``J_tf`` and ``Jdot_tf nu``;
 * :func:`minimal_dynamics`: paper eq. ``dyn``, ``A = J_tf^T M J_tf``,
@@ -23,6 +25,55 @@ import numpy as np
 from numba import njit
 
 from wip_gym.small_linalg import matmul, matmul_transposed, matvec, matvec_transposed
+
+
+@njit(cache=True)
+def idealised_state(
+    q: np.ndarray,
+    nu: np.ndarray,
+    axle_x: float,
+    axle_y: float,
+    layout: np.ndarray,
+    body_qpos: np.ndarray,
+    body_dof: np.ndarray,
+    wheel_radius: float,
+    wheel_separation: float,
+    qpos: np.ndarray,
+    qvel: np.ndarray,
+) -> None:
+    """``RobotModel.full_state`` into ``qpos``, ``qvel`` (every entry of the robot's joints
+    written): the wheels on the floor, the axle at the wheel radius and level, in 3-D the axle
+    midpoint at ``(axle_x, axle_y)``; the wheel angles split so that ``x`` is their odometry.
+    ``layout`` as :func:`minimal_state`'s."""
+    planar, o, v = layout[0], layout[1], layout[2]
+    wl, wr, dl, dr = layout[3], layout[4], layout[5], layout[6]
+    r = wheel_radius
+    first = 2 if planar else 3
+    for k in range(len(body_qpos)):
+        qpos[body_qpos[k]] = q[first + k]
+        qvel[body_dof[k]] = nu[first + k]
+    x, q1 = q[0], q[first - 1]
+    xd, q1d = nu[0], nu[first - 1]
+    if planar:
+        qpos[o], qpos[o + 1], qpos[o + 2] = x, r, q1
+        qpos[wl] = qpos[wr] = x / r - q1
+        qvel[v], qvel[v + 1], qvel[v + 2] = xd, 0.0, q1d
+        qvel[dl] = qvel[dr] = xd / r - q1d
+        return
+    psi, psid = q[1], nu[1]
+    qpos[o], qpos[o + 1], qpos[o + 2] = axle_x, axle_y, r
+    # yaw (cos, 0, 0, sin)(psi / 2) times pitch (cos, 0, sin, 0)(q1 / 2), written out
+    cy, sy = math.cos(psi / 2), math.sin(psi / 2)
+    cp, sp = math.cos(q1 / 2), math.sin(q1 / 2)
+    qpos[o + 3], qpos[o + 4], qpos[o + 5], qpos[o + 6] = cy * cp, -(sy * sp), cy * sp, sy * cp
+    half = wheel_separation / (2.0 * r)
+    qpos[wl] = x / r - half * psi - q1
+    qpos[wr] = x / r + half * psi - q1
+    c, s = math.cos(psi), math.sin(psi)
+    qvel[v], qvel[v + 1], qvel[v + 2] = xd * c, xd * s, 0.0
+    qvel[v + 3], qvel[v + 4], qvel[v + 5] = -psid * math.sin(q1), q1d, psid * math.cos(q1)
+    qvel[dl] = xd / r - half * psid - q1d
+    qvel[dr] = xd / r + half * psid - q1d
 
 
 @njit(cache=True)

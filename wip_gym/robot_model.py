@@ -26,14 +26,18 @@ once per control step, and the properties read the cache.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from wip_gym.minimal_kernels import body_com, minimal_dynamics, minimal_state
+from wip_gym.minimal_kernels import (
+    body_com,
+    idealised_state,
+    minimal_dynamics,
+    minimal_state,
+)
 
 Array = NDArray[np.float64]
 
@@ -561,38 +565,30 @@ class RobotModel:
         axle = np.asarray(axle_xy, dtype=float)
         if axle.shape != (2,):
             raise ValueError(f"axle_xy must be (x, y), got {axle_xy!r}")
-        r, sep = lay.wheel_radius, lay.wheel_separation
         qpos = np.zeros(lay.nq)
         qvel = np.zeros(lay.nv)
-        first_body = lay.index_q1 + 1
-        qpos[self._body_qpos] = q[first_body:]
-        qvel[self._body_dof] = nu[first_body:]
-        x, q1 = float(q[0]), float(q[lay.index_q1])
-        xd, q1d = float(nu[0]), float(nu[lay.index_q1])
-        (wl, wr), (dl, dr) = lay.wheel_qpos, lay.wheel_dof
-        if lay.planar:
-            o, v = lay.root_qpos, lay.root_dof
-            qpos[o : o + 3] = x, r, q1
-            qpos[wl] = qpos[wr] = x / r - q1
-            qvel[v : v + 3] = xd, 0.0, q1d
-            qvel[dl] = qvel[dr] = xd / r - q1d
-            return qpos, qvel
-        psi, psid = float(q[1]), float(nu[1])
-        o = lay.root_qpos
-        qpos[o : o + 3] = axle[0], axle[1], r
-        # yaw (cos, 0, 0, sin)(psi / 2) times pitch (cos, 0, sin, 0)(q1 / 2), written out
-        cy, sy = math.cos(psi / 2), math.sin(psi / 2)
-        cp, sp = math.cos(q1 / 2), math.sin(q1 / 2)
-        qpos[o + 3 : o + 7] = cy * cp, -(sy * sp), cy * sp, sy * cp
-        half = sep / (2.0 * r)
-        qpos[wl] = x / r - half * psi - q1
-        qpos[wr] = x / r + half * psi - q1
-        c, s = math.cos(psi), math.sin(psi)
-        v = lay.root_dof
-        qvel[v : v + 6] = xd * c, xd * s, 0.0, -psid * math.sin(q1), q1d, psid * math.cos(q1)
-        qvel[dl] = xd / r - half * psid - q1d
-        qvel[dr] = xd / r + half * psid - q1d
+        self.full_state_into(q, nu, float(axle[0]), float(axle[1]), qpos, qvel)
         return qpos, qvel
+
+    def full_state_into(
+        self, q: Array, nu: Array, axle_x: float, axle_y: float, qpos: Array, qvel: Array
+    ) -> None:
+        """:meth:`full_state` written into ``qpos``, ``qvel`` (the robot's own ``nq``, ``nv``
+        entries; float64 arrays, not checked: the per-step path of the motion probe)."""
+        lay = self.layout
+        idealised_state(
+            q,
+            nu,
+            axle_x,
+            axle_y,
+            self._layout_ints,
+            self._body_qpos,
+            self._body_dof,
+            lay.wheel_radius,
+            lay.wheel_separation,
+            qpos,
+            qvel,
+        )
 
 
 def _read_only(array: Array) -> Array:

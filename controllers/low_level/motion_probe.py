@@ -86,9 +86,10 @@ class MotionProbe:
 
     def update(self, robot: RobotModel) -> None:
         m, d = self.model, self.data
-        qpos, qvel = robot.full_state(robot.q, robot.nu, robot.data.xpos[self._base, :2])
-        self._qpos[: self._nq] = qpos
-        self._qvel[: self._nv] = qvel
+        x, y = robot.data.xpos[self._base, :2].tolist()
+        robot.full_state_into(
+            robot.q, robot.nu, x, y, self._qpos[: self._nq], self._qvel[: self._nv]
+        )
         mujoco.mj_kinematics(m, d)
         mujoco.mj_comPos(m, d)
         mujoco.mj_comVel(m, d)
