@@ -19,12 +19,13 @@ import pytest
 
 import benchmarks.speed.profile as profile_module
 from benchmarks.cli import main
-from benchmarks.scenario import Scenario
 from benchmarks.speed.profile import ROWS, profile_episode
 from benchmarks.speed.yardstick import REFERENCE_ENV, reference_step_us
 
 TOP_KEYS = {
     "env",
+    "preset",
+    "overrides",
     "controller",
     "seed",
     "model",
@@ -109,9 +110,9 @@ def test_a_known_delay_lands_in_its_own_part(monkeypatch: pytest.MonkeyPatch) ->
         policy.robot.update = _delayed(policy.robot.update)
         return policy
 
-    real_make_env = Scenario.make_env
+    real_make_env = profile_module.make_env
     monkeypatch.setattr(profile_module, "make_policy", slow_policy)
-    monkeypatch.setattr(Scenario, "make_env", lambda self: _SlowStep(real_make_env(self)))
+    monkeypatch.setattr(profile_module, "make_env", lambda *args: _SlowStep(real_make_env(*args)))
     result = profile_episode("PlanarTray-v0", "unified", duration=0.2)
     median = {name: stats["median"] * 1e-6 for name, stats in result["per_step_us"].items()}
     before = {name: stats["median"] * 1e-6 for name, stats in plain["per_step_us"].items()}

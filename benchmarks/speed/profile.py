@@ -33,6 +33,7 @@ JSON schema (``--json PATH``; times per control step in microseconds unless name
 
     {
       "env": str, "controller": str, "seed": int, "model": "nominal",
+      "preset": str | null, "overrides": {key: value},   # --preset, --set
       "duration_s": float, "steps": int, "control_dt_s": float, "frame_skip": int,
       "setup_s": float,                   # env reset + policy construction + policy.reset
       "reference_step_us": float,         # the unit (benchmarks.speed.yardstick)
@@ -169,6 +170,11 @@ def _paths(iterations: np.ndarray | None) -> dict[str, int] | None:
     return {"shortcut": int(np.sum(iterations == 0)), "proxqp": int(np.sum(iterations > 0))}
 
 
+def make_env(env_id: str, env_kwargs: dict[str, Any]) -> gym.Env:
+    """The profiled env: no time limit (the episode lasts ``--duration``)."""
+    return gym.make(env_id, max_episode_steps=-1, **env_kwargs)
+
+
 def profile_episode(
     env_id: str,
     controller: str,
@@ -182,8 +188,9 @@ def profile_episode(
     controller's defaults."""
     if duration <= 0:
         raise ValueError(f"duration must be positive, got {duration}")
+    env_id = resolve_env_id(env_id)
     reference_before = reference_step_samples()
-    env = gym.make(env_id, max_episode_steps=-1, **(env_kwargs or {}))
+    env = make_env(env_id, env_kwargs or {})
     setup_start = time.perf_counter()
     observation, info = env.reset(seed=seed)
     policy = make_policy(controller, env, config=config)
@@ -257,6 +264,8 @@ def profile_episode(
     }
     return {
         "env": env_id,
+        "preset": None,
+        "overrides": {},
         "controller": controller,
         "seed": seed,
         "model": getattr(policy.config, "model", "nominal"),
