@@ -161,3 +161,20 @@ def test_unknown_controller_is_a_usage_error() -> None:
     with pytest.raises(SystemExit) as error:
         main(["profile", "--env", "PlanarTray-v0", "--controller", "nope"])
     assert error.value.code == 2
+
+
+def test_profile_takes_compares_settings(tmp_path: Path) -> None:
+    """``--set`` reaches the controller (the delayed MPC's high level) and the env, and the
+    JSON records what was set; a bad key is refused before anything runs."""
+    path = tmp_path / "profile.json"
+    argv = ["profile", "--env", "PlanarTray-v0", "--controller", "unified", "--duration", "0.05"]
+    settings = ["--set", "unified.high_level.mpc_delay_steps=3", "--set", "env.cup_friction=0.3"]
+    assert main([*argv, *settings, "--json", str(path)]) == 0
+    result = json.loads(path.read_text())
+    assert result["overrides"] == {
+        "unified.high_level.mpc_delay_steps": 3,
+        "env.cup_friction": 0.3,
+    }
+    with pytest.raises(SystemExit) as refused:
+        main([*argv, "--set", "unified.high_level.no_such_field=1"])
+    assert refused.value.code == 2
