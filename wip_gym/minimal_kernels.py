@@ -1,7 +1,7 @@
 """The arithmetic of ``RobotModel.update`` after its MuJoCo calls, compiled by numba.
 
-Four functions of arrays (``wip_gym.robot_model`` makes the MuJoCo calls and keeps the
-results):
+Four functions of arrays, and :func:`robot_update`, which makes ``RobotModel.update``'s MuJoCo
+calls (``wip_gym.mujoco_c``) and runs them in one compiled call:
 
 * :func:`idealised_state`: the inverse, MuJoCo's ``qpos``, ``qvel`` of a minimal state with the
   wheels on the floor (``RobotModel.full_state``);
@@ -24,6 +24,7 @@ import math
 import numpy as np
 from numba import njit
 
+from wip_gym import mujoco_c as mjc
 from wip_gym.small_linalg import matmul, matmul_transposed, matvec, matvec_transposed
 
 
@@ -215,3 +216,108 @@ def body_com(
     for i in range(len(nu)):
         thetad += J_theta[i] * nu[i]
     return mass, com, J_rel, theta, thetad, J_theta
+
+
+@njit(cache=True)
+def robot_update(
+    model: int,
+    data: int,
+    qpos: np.ndarray,
+    qvel: np.ndarray,
+    data_qpos: np.ndarray,
+    data_qvel: np.ndarray,
+    xmat: np.ndarray,
+    xpos: np.ndarray,
+    xipos: np.ndarray,
+    qfrc_passive: np.ndarray,
+    body_mass: np.ndarray,
+    subtree_mass: np.ndarray,
+    bodies: np.ndarray,
+    body_ids: np.ndarray,
+    layout: np.ndarray,
+    body_qpos: np.ndarray,
+    body_dof: np.ndarray,
+    wheel_radius: float,
+    q: np.ndarray,
+    nu: np.ndarray,
+    J: np.ndarray,
+    Jdot_nu: np.ndarray,
+    jac_subtree: np.ndarray,
+    jac_wheels: np.ndarray,
+    jac_origin: np.ndarray,
+    M: np.ndarray,
+    bias: np.ndarray,
+    S: np.ndarray,
+    dynamics: bool,
+) -> tuple[
+    float,
+    float,
+    float,
+    float,
+    float,
+    np.ndarray,
+    np.ndarray,
+    float,
+    float,
+    np.ndarray,
+    np.ndarray,
+    np.ndarray,
+    np.ndarray,
+]:
+    """``RobotModel.update`` for the state ``(qpos, qvel)`` (the robot's own entries) on the
+    MuJoCo ``model``, ``data`` (addresses; ``data_*``, ``xmat``, ... are views on its arrays):
+    kinematics and ``mj_comPos``, :func:`minimal_state`, the Jacobians of the base subtree's
+    CoM, of the wheels' CoMs and of the base origin, :func:`body_com`; with ``dynamics`` also
+    ``mj_crb``, the full mass matrix, ``mj_comVel``, ``mj_passive``, ``mj_rne`` and
+    :func:`minimal_dynamics` (else ``A``, ``h``, ``B`` are empty). ``bodies``: ``(base,
+    wheel_left, wheel_right)``. Returns ``(psi, psid, cos psi, sin psi, mass, com, J_com,
+    theta, thetad, J_theta, A, h, B)``."""
+    data_qpos[: len(qpos)] = qpos
+    data_qvel[: len(qvel)] = qvel
+    mjc.mj_kinematics(model, data)
+    mjc.mj_comPos(model, data)
+    base = bodies[0]
+    psi, psid, c, s = minimal_state(
+        data_qpos,
+        data_qvel,
+        xmat[base],
+        layout,
+        body_qpos,
+        body_dof,
+        wheel_radius,
+        q,
+        nu,
+        J,
+        Jdot_nu,
+    )
+    mjc.mj_jacSubtreeCom(model, data, jac_subtree.ctypes.data, base)
+    for k in range(2):
+        wheel = bodies[1 + k]
+        mjc.mj_jac(model, data, jac_wheels[k].ctypes.data, 0, xipos[wheel].ctypes.data, wheel)
+    mjc.mj_jac(model, data, jac_origin.ctypes.data, 0, xpos[base].ctypes.data, base)
+    wheels = bodies[1:]
+    mass, com, J_com, theta, thetad, J_theta = body_com(
+        body_mass[body_ids],
+        xipos[body_ids],
+        xpos[base],
+        jac_subtree,
+        subtree_mass[base],
+        body_mass[wheels],
+        jac_wheels,
+        jac_origin,
+        J,
+        nu,
+        c,
+        s,
+        layout[0] != 0,
+    )
+    if dynamics:
+        mjc.mj_crb(model, data)
+        mjc.mj_fullM(model, data, M.ctypes.data)
+        mjc.mj_comVel(model, data)
+        mjc.mj_passive(model, data)
+        mjc.mj_rne(model, data, 0, bias.ctypes.data)
+        A, h, B = minimal_dynamics(M, J, Jdot_nu, bias, qfrc_passive, S)
+    else:
+        A, h, B = np.zeros((0, 0)), np.zeros(0), np.zeros((0, 0))
+    return psi, psid, c, s, mass, com, J_com, theta, thetad, J_theta, A, h, B

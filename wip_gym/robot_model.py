@@ -32,12 +32,7 @@ import mujoco
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from wip_gym.minimal_kernels import (
-    body_com,
-    idealised_state,
-    minimal_dynamics,
-    minimal_state,
-)
+from wip_gym.minimal_kernels import idealised_state, robot_update
 
 Array = NDArray[np.float64]
 
@@ -271,6 +266,7 @@ class RobotModel:
             dtype=np.int64,
         )
         self._wheel_ids = np.array(lay.wheel_bodies)
+        self._bodies = np.array([lay.base_body, *lay.wheel_bodies], dtype=np.int64)
         self._body_qpos = np.array(lay.body_qpos, dtype=int)
         self._body_dof = np.array(lay.body_dof, dtype=int)
         self._heading = _read_only(np.eye(3))
@@ -315,15 +311,36 @@ class RobotModel:
             )
         if not (np.isfinite(qpos).all() and np.isfinite(qvel).all()):
             raise ValueError("qpos/qvel contain NaN or inf")
-        self._mj_qpos[: lay.nq] = qpos
-        self._mj_qvel[: lay.nv] = qvel
         self.cache.clear()
-        mujoco.mj_kinematics(m, d)
-        mujoco.mj_comPos(m, d)
-        psi, psid, c, s = minimal_state(
+        (
+            self._psi,
+            self._psid,
+            c,
+            s,
+            self._body_mass,
+            self._com,
+            self._J_com,
+            self._theta,
+            self._thetad,
+            self._J_theta,
+            A,
+            h,
+            B,
+        ) = robot_update(
+            m._address,
+            d._address,
+            qpos,
+            qvel,
             self._mj_qpos,
             self._mj_qvel,
-            self._mj_xmat[lay.base_body],
+            self._mj_xmat,
+            self._mj_xpos,
+            self._mj_xipos,
+            self._mj_qfrc_passive,
+            self._mj_body_mass,
+            self._mj_subtree_mass,
+            self._bodies,
+            self._body_ids,
             self._layout_ints,
             self._body_qpos,
             self._body_dof,
@@ -332,61 +349,22 @@ class RobotModel:
             self._nu,
             self._J,
             self._Jdot_nu,
-        )
-        self._psi, self._psid = psi, psid
-        if not lay.planar:
-            self._heading = _read_only(np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]))
-        self._update_com()
-        self._updated = True
-        self._has_dynamics = dynamics
-        if not dynamics:
-            return
-        mujoco.mj_crb(m, d)
-        mujoco.mj_fullM(m, d, self._M)
-        mujoco.mj_comVel(m, d)
-        mujoco.mj_passive(m, d)
-        mujoco.mj_rne(m, d, 0, self._bias)
-        self._A, self._h, self._B = minimal_dynamics(
-            self._M, self._J, self._Jdot_nu, self._bias, self._mj_qfrc_passive, self._S
-        )
-
-    def _update_com(self) -> None:
-        """The body CoM, ``theta`` and their Jacobians (``wip_gym.minimal_kernels.body_com``)
-        from MuJoCo's subtree-CoM Jacobian of the base less the wheels' and the origin's."""
-        m, d, lay = self.model, self.data, self.layout
-        base = lay.base_body
-        mujoco.mj_jacSubtreeCom(m, d, self._jacp, base)
-        xipos = self._mj_xipos
-        for k, wheel in enumerate(lay.wheel_bodies):
-            mujoco.mj_jac(m, d, self._jac_wheels[k], None, xipos[wheel], wheel)
-        origin = self._mj_xpos[base]
-        # axle-origin velocity: the base origin's linear velocity (kept for the tasks)
-        mujoco.mj_jac(m, d, self._jac_origin, None, origin, base)
-        self.cache["origin_jacobian"] = self._jac_origin
-        heading = self._heading
-        body_mass = self._mj_body_mass
-        (
-            self._body_mass,
-            self._com,
-            self._J_com,
-            self._theta,
-            self._thetad,
-            self._J_theta,
-        ) = body_com(
-            body_mass[self._body_ids],
-            xipos[self._body_ids],
-            origin,
             self._jacp,
-            float(self._mj_subtree_mass[base]),
-            body_mass[self._wheel_ids],
             self._jac_wheels,
             self._jac_origin,
-            self._J,
-            self._nu,
-            float(heading[0, 0]),
-            float(heading[1, 0]),
-            lay.planar,
+            self._M,
+            self._bias,
+            self._S,
+            dynamics,
         )
+        if not lay.planar:
+            self._heading = _read_only(np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]))
+        # the base origin's linear Jacobian, kept for the tasks (site_in_axle_frame)
+        self.cache["origin_jacobian"] = self._jac_origin
+        self._updated = True
+        self._has_dynamics = dynamics
+        if dynamics:
+            self._A, self._h, self._B = A, h, B
 
     def _require(self) -> None:
         if not self._updated:

@@ -21,8 +21,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-import mujoco
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 from controllers.low_level import compiled_tasks as ct
@@ -35,9 +35,108 @@ from controllers.low_level.tasks import (
     SpinTask,
     ThetaTask,
 )
+from wip_gym import mujoco_c as mjc
+from wip_gym.minimal_kernels import idealised_state
 from wip_gym.robot_model import RobotModel
 
 Array = NDArray[np.float64]
+
+
+@njit(cache=True)
+def snapshot(
+    model: int,
+    data: int,
+    probe_data: int,
+    q: np.ndarray,
+    nu: np.ndarray,
+    Jdot_tf_nu: np.ndarray,
+    xpos: np.ndarray,
+    layout: np.ndarray,
+    body_qpos: np.ndarray,
+    body_dof: np.ndarray,
+    wheel_radius: float,
+    wheel_separation: float,
+    probe_qpos: np.ndarray,
+    probe_qvel: np.ndarray,
+    probe_qacc: np.ndarray,
+    probe_qacc0: np.ndarray,
+    probe_xpos: np.ndarray,
+    probe_site_xpos: np.ndarray,
+    bodies: np.ndarray,
+    site_ids: np.ndarray,
+    site_bodies: np.ndarray,
+    site_jac: np.ndarray,
+    probe_jac: np.ndarray,
+    probe_jac_dot: np.ndarray,
+    theta: bool,
+) -> None:
+    """Step 1 of the module docstring, compiled (``wip_gym.mujoco_c``): each site's
+    ``[jacp; jacr]`` at the robot's state (``data``); the motion probe's idealised state
+    (``MotionProbe.update``: ``full_state(q, nu)`` at the axle's position, its kinematics,
+    ``mj_comPos``, ``mj_comVel`` and ``qacc_0 = Jdot_tf nu``); there, the origin's and each
+    site's Jacobian and its time derivative, and with a theta task ``mj_subtreeVel`` and
+    ``mj_rnePostConstraint`` at ``qacc = qacc_0`` (the CoM drift)."""
+    for i in range(len(site_ids)):
+        mjc.mj_jacSite(
+            model, data, site_jac[i, :3].ctypes.data, site_jac[i, 3:].ctypes.data, site_ids[i]
+        )
+    base = bodies[0]
+    idealised_state(
+        q,
+        nu,
+        xpos[base, 0],
+        xpos[base, 1],
+        layout,
+        body_qpos,
+        body_dof,
+        wheel_radius,
+        wheel_separation,
+        probe_qpos,
+        probe_qvel,
+    )
+    mjc.mj_kinematics(model, probe_data)
+    mjc.mj_comPos(model, probe_data)
+    mjc.mj_comVel(model, probe_data)
+    probe_qacc0[:] = Jdot_tf_nu
+    mjc.mj_jac(
+        model,
+        probe_data,
+        probe_jac[0, :3].ctypes.data,
+        probe_jac[0, 3:].ctypes.data,
+        probe_xpos[base].ctypes.data,
+        base,
+    )
+    mjc.mj_jacDot(
+        model,
+        probe_data,
+        probe_jac_dot[0, :3].ctypes.data,
+        probe_jac_dot[0, 3:].ctypes.data,
+        probe_xpos[base].ctypes.data,
+        base,
+    )
+    for i in range(len(site_ids)):
+        point = probe_site_xpos[site_ids[i]].ctypes.data
+        mjc.mj_jac(
+            model,
+            probe_data,
+            probe_jac[1 + i, :3].ctypes.data,
+            probe_jac[1 + i, 3:].ctypes.data,
+            point,
+            site_bodies[i],
+        )
+        mjc.mj_jacDot(
+            model,
+            probe_data,
+            probe_jac_dot[1 + i, :3].ctypes.data,
+            probe_jac_dot[1 + i, 3:].ctypes.data,
+            point,
+            site_bodies[i],
+        )
+    if theta:
+        mjc.mj_subtreeVel(model, probe_data)
+        probe_qacc[:] = probe_qacc0
+        mjc.mj_rnePostConstraint(model, probe_data)
+
 
 _KINDS: dict[type, int] = {
     ThetaTask: ct.THETA,
@@ -125,8 +224,6 @@ class CompiledTaskStack:
         self._theta = bool((self.kinds == ct.THETA).any())
         self._base = lay.base_body
         self.bodies = np.array([lay.base_body, *lay.wheel_bodies], dtype=np.int64)
-        self._site_body = m.site_bodyid[self.site_ids].astype(int).tolist()
-        self._site_list = self.site_ids.tolist()
         # views on MuJoCo's arrays, read by the compiled call as they are (no copies); an
         # attribute read makes a new view, so they are made once
         d, pd = robot.data, probe.data
@@ -135,32 +232,47 @@ class CompiledTaskStack:
         self._probe_arrays = (pd.qvel, probe.qacc0, pd.xpos, pd.site_xpos)
         self._probe_subtree = (pd.subtree_com, pd.xipos, pd.subtree_linvel, pd.cfrc_int)
         self._probe_qacc = pd.qacc
+        self._probe_qpos, self._probe_qvel = pd.qpos[: lay.nq], pd.qvel[: lay.nv]
+        self._probe_address = pd._address
+        self._site_bodies = m.site_bodyid[self.site_ids].astype(np.int64)
+        self._layout_ints = np.array(
+            [lay.planar, lay.root_qpos, lay.root_dof, *lay.wheel_qpos, *lay.wheel_dof],
+            dtype=np.int64,
+        )
+        self._body_qpos = np.array(lay.body_qpos, dtype=np.int64)
+        self._body_dof = np.array(lay.body_dof, dtype=np.int64)
+        self._wheel_radius, self._wheel_separation = lay.wheel_radius, lay.wheel_separation
 
     def _fill_snapshot(self, robot: RobotModel) -> None:
-        """Step 1 of the module docstring: the MuJoCo calls (their results stay in MuJoCo's
-        arrays and in the Jacobian buffers)."""
-        m, d = robot.model, robot.data
-        for i, site in enumerate(self._site_list):
-            jac = self.site_jac[i]
-            mujoco.mj_jacSite(m, d, jac[:3], jac[3:], site)
-        probe = self._probe
-        probe.update(robot)
-        pd = probe.data
-        _, _, probe_xpos, probe_site_xpos = self._probe_arrays
-        base = self._base
-        origin = probe_xpos[base]
-        jac, jac_dot = self.probe_jac[0], self.probe_jac_dot[0]
-        mujoco.mj_jac(m, pd, jac[:3], jac[3:], origin, base)
-        mujoco.mj_jacDot(m, pd, jac_dot[:3], jac_dot[3:], origin, base)
-        for i, (site, body) in enumerate(zip(self._site_list, self._site_body, strict=True)):
-            position = probe_site_xpos[site]
-            jac, jac_dot = self.probe_jac[1 + i], self.probe_jac_dot[1 + i]
-            mujoco.mj_jac(m, pd, jac[:3], jac[3:], position, body)
-            mujoco.mj_jacDot(m, pd, jac_dot[:3], jac_dot[3:], position, body)
-        if self._theta:
-            mujoco.mj_subtreeVel(m, pd)
-            self._probe_qacc[:] = probe.qacc0
-            mujoco.mj_rnePostConstraint(m, pd)
+        """Step 1 of the module docstring: one compiled call (:func:`snapshot`); the results
+        stay in MuJoCo's arrays and in the Jacobian buffers."""
+        snapshot(
+            robot.model._address,
+            robot.data._address,
+            self._probe_address,
+            robot.q,
+            robot.nu,
+            robot.Jdot_tf_nu,
+            self._robot_arrays[0],
+            self._layout_ints,
+            self._body_qpos,
+            self._body_dof,
+            self._wheel_radius,
+            self._wheel_separation,
+            self._probe_qpos,
+            self._probe_qvel,
+            self._probe_qacc,
+            self._probe.qacc0,
+            self._probe_arrays[2],
+            self._probe_arrays[3],
+            self.bodies,
+            self.site_ids,
+            self._site_bodies,
+            self.site_jac,
+            self.probe_jac,
+            self.probe_jac_dot,
+            self._theta,
+        )
 
     def _pack_parameters(self, w: Array) -> None:
         """Step 2: gains, targets and weights from the task objects."""

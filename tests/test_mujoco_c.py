@@ -1,0 +1,86 @@
+"""``wip_gym.mujoco_c``: every MuJoCo C function declared for compiled code gives, called from
+numba, exactly what the Python bindings give, on a random state of Krang (the robot with the
+most joints, a free base and sites)."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+from dynamics_reference import random_minimal_state
+from numba import njit
+
+from wip_gym import mujoco_c as mjc
+from wip_gym.assets import mjcf_path
+from wip_gym.robot_model import RobotModel
+
+
+@njit
+def _compiled(model, data, jacs, point, body, site, dst, result) -> None:
+    mjc.mj_kinematics(model, data)
+    mjc.mj_comPos(model, data)
+    mjc.mj_crb(model, data)
+    mjc.mj_comVel(model, data)
+    mjc.mj_passive(model, data)
+    mjc.mj_subtreeVel(model, data)
+    mjc.mj_fullM(model, data, dst.ctypes.data)
+    mjc.mj_rne(model, data, 0, result.ctypes.data)
+    mjc.mj_jac(model, data, jacs[0].ctypes.data, jacs[1].ctypes.data, point.ctypes.data, body)
+    mjc.mj_jacDot(model, data, jacs[2].ctypes.data, jacs[3].ctypes.data, point.ctypes.data, body)
+    mjc.mj_jacSite(model, data, jacs[4].ctypes.data, jacs[5].ctypes.data, site)
+    mjc.mj_jacSubtreeCom(model, data, jacs[6].ctypes.data, body)
+    mjc.mj_jac(model, data, jacs[7].ctypes.data, 0, point.ctypes.data, body)  # null jacr
+    mjc.mj_rnePostConstraint(model, data)
+
+
+def _bindings(m, d, jacs, point, body, site, dst, result) -> None:
+    mujoco.mj_kinematics(m, d)
+    mujoco.mj_comPos(m, d)
+    mujoco.mj_crb(m, d)
+    mujoco.mj_comVel(m, d)
+    mujoco.mj_passive(m, d)
+    mujoco.mj_subtreeVel(m, d)
+    mujoco.mj_fullM(m, d, dst)
+    mujoco.mj_rne(m, d, 0, result)
+    mujoco.mj_jac(m, d, jacs[0], jacs[1], point, body)
+    mujoco.mj_jacDot(m, d, jacs[2], jacs[3], point, body)
+    mujoco.mj_jacSite(m, d, jacs[4], jacs[5], site)
+    mujoco.mj_jacSubtreeCom(m, d, jacs[6], body)
+    mujoco.mj_jac(m, d, jacs[7], None, point, body)
+    mujoco.mj_rnePostConstraint(m, d)
+
+
+def test_compiled_calls_equal_the_bindings() -> None:
+    model = mujoco.MjModel.from_xml_path(str(mjcf_path("scene_krang.xml")))
+    robot = RobotModel(model)
+    qpos, qvel = robot.full_state(*random_minimal_state(robot, np.random.default_rng(2)))
+    body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "base")
+    site = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, "ee")
+    assert body >= 0 and site >= 0
+    results = []
+    for run in (_compiled, _bindings):
+        data = mujoco.MjData(model)
+        data.qpos[: len(qpos)], data.qvel[: len(qvel)] = qpos, qvel
+        data.qacc[:] = np.linspace(-1.0, 1.0, model.nv)
+        jacs = np.full((8, 3, model.nv), np.nan)
+        point = np.array([0.1, -0.2, 0.7])
+        dst, result = np.zeros((model.nv, model.nv)), np.zeros(model.nv)
+        if run is _compiled:
+            run(model._address, data._address, jacs, point, body, site, dst, result)
+        else:
+            run(model, data, jacs, point, body, site, dst, result)
+        results.append(
+            (
+                data.xpos.copy(),
+                data.cdof.copy(),
+                data.cvel.copy(),
+                data.qfrc_passive.copy(),
+                data.subtree_linvel.copy(),
+                data.cfrc_int.copy(),
+                dst,
+                result,
+                jacs,
+            )
+        )
+    for ours, theirs in zip(*results, strict=True):
+        np.testing.assert_array_equal(ours, theirs)
+    assert np.isfinite(results[0][-1]).all() and np.abs(results[0][-1]).max() > 0

@@ -1,0 +1,61 @@
+"""MuJoCo's C functions, callable from numba-compiled code.
+
+The compiled parts of the per-step computation (``wip_gym.minimal_kernels``,
+``controllers.low_level.compiled_tasks``) call MuJoCo's kinematics, Jacobians and dynamics
+directly, so that a control step is a few compiled calls instead of dozens of Python-level
+ones. The shared library that the ``mujoco`` package ships is loaded once (``llvmlite``), and
+each function is declared by its C name and signature (``mujoco/include/mujoco/mujoco.h`` of
+the installed version, 3.x); the call is resolved by symbol when the compiled code is loaded, so
+numba's on-disk cache stays valid across processes.
+
+Arguments are addresses: ``model._address`` and ``data._address`` of the ``mujoco.MjModel`` and
+``mujoco.MjData`` (whose Python objects must outlive the call), ``array.ctypes.data`` of
+C-contiguous float64 arrays of the sizes MuJoCo expects (``3 x nv`` for ``jacp``), 0 for a
+null pointer. ``tests/test_mujoco_c.py`` checks every declaration against the Python bindings.
+"""
+
+from __future__ import annotations
+
+import glob
+import os
+
+import llvmlite.binding as llvm
+import mujoco
+from numba import types
+
+_PATTERNS = ("libmujoco.so*", "libmujoco*.dylib", "mujoco.dll")
+
+
+def library_path() -> str:
+    """The MuJoCo shared library inside the installed ``mujoco`` package."""
+    directory = os.path.dirname(mujoco.__file__)
+    for pattern in _PATTERNS:
+        found = sorted(glob.glob(os.path.join(directory, pattern)))
+        if found:
+            return found[0]
+    raise RuntimeError(f"no MuJoCo shared library ({', '.join(_PATTERNS)}) in {directory}")
+
+
+llvm.load_library_permanently(library_path())
+
+_ptr = types.uint64  # a pointer, passed as its address
+_int = types.intc
+
+
+def _declare(name: str, *args: types.Type) -> types.ExternalFunction:
+    return types.ExternalFunction(name, types.void(*args))
+
+
+mj_kinematics = _declare("mj_kinematics", _ptr, _ptr)
+mj_comPos = _declare("mj_comPos", _ptr, _ptr)
+mj_comVel = _declare("mj_comVel", _ptr, _ptr)
+mj_crb = _declare("mj_crb", _ptr, _ptr)
+mj_passive = _declare("mj_passive", _ptr, _ptr)
+mj_subtreeVel = _declare("mj_subtreeVel", _ptr, _ptr)
+mj_rnePostConstraint = _declare("mj_rnePostConstraint", _ptr, _ptr)
+mj_fullM = _declare("mj_fullM", _ptr, _ptr, _ptr)  # (m, d, dst)
+mj_rne = _declare("mj_rne", _ptr, _ptr, _int, _ptr)  # (m, d, flg_acc, result)
+mj_jac = _declare("mj_jac", _ptr, _ptr, _ptr, _ptr, _ptr, _int)  # (m, d, jacp, jacr, point, body)
+mj_jacDot = _declare("mj_jacDot", _ptr, _ptr, _ptr, _ptr, _ptr, _int)  # as mj_jac
+mj_jacSite = _declare("mj_jacSite", _ptr, _ptr, _ptr, _ptr, _int)  # (m, d, jacp, jacr, site)
+mj_jacSubtreeCom = _declare("mj_jacSubtreeCom", _ptr, _ptr, _ptr, _int)  # (m, d, jacp, body)
