@@ -91,12 +91,9 @@ class LowLevelKernel:
         self.upper = np.zeros(m + n_limit)
         self.x = np.zeros(n)
         self._m = m
-        width = max(m, n_limit)
-        self._bounds = np.zeros((4, width))
-        self._bounds[0, :m] = layout.torque_low
-        self._bounds[1, :m] = layout.torque_high
-        self._bounds[2, :n_limit] = layout.limit_min
-        self._bounds[3, :n_limit] = layout.limit_max
+        self._limits = np.array([layout.limit_min, layout.limit_max], dtype=float).reshape(
+            2, n_limit
+        )
         self._limit_indices = np.asarray(layout.limit_indices, dtype=np.int64)
         self._constants = np.array([layout.limit_horizon, layout.regularization])
 
@@ -116,19 +113,18 @@ class LowLevelKernel:
         every constraint (it is then the QP's optimum). With ``iso`` given, its ``calA``,
         ``Ph``, ``E``, ``e`` are used instead of step 1."""
         lay = self.layout
-        m = self._m
-        self._bounds[0, :m] = lay.torque_low  # read every call: limits may be changed in place
-        self._bounds[1, :m] = lay.torque_high
-        if iso is None:
-            isolated_dynamics_into(
-                A, h, lay.index_q1, lay.wheel_radius, self.calA, self.Ph, self.E, self.e
-            )
-        else:
+        if iso is not None:
             self.calA[:] = iso.calA
             self.Ph[:] = iso.Ph
             self.E[:] = iso.E
             self.e[:] = iso.e
-        return rows_and_solve(
+            A, h = self.calA, self.Ph  # not read: step 1 is skipped
+        return kernel_step(
+            iso is None,
+            A,
+            h,
+            lay.index_q1,
+            lay.wheel_radius,
             J,
             target,
             jdot_nu,
@@ -140,7 +136,9 @@ class LowLevelKernel:
             self.E,
             self.e,
             lay.actuator_map,
-            self._bounds,
+            lay.torque_low,  # read every call: limits may be changed in place
+            lay.torque_high,
+            self._limits,
             self._limit_indices,
             self._constants,
             self.T,
@@ -152,6 +150,70 @@ class LowLevelKernel:
             self.upper,
             self.x,
         )
+
+
+@njit(cache=True)
+def kernel_step(
+    with_iso: bool,
+    A: Array,
+    h: Array,
+    k: int,
+    r: float,
+    J: Array,
+    target: Array,
+    jdot_nu: Array,
+    w: Array,
+    q: Array,
+    nu: Array,
+    calA: Array,
+    Ph: Array,
+    E: Array,
+    e: Array,
+    actuator_map: Array,
+    torque_low: Array,
+    torque_high: Array,
+    limits: Array,
+    limit_indices: Array,
+    constants: Array,
+    T: Array,
+    b: Array,
+    H: Array,
+    g: Array,
+    C: Array,
+    lower: Array,
+    upper: Array,
+    x: Array,
+) -> bool:
+    """Steps 1 (unless ``with_iso`` is False: ``calA``, ``Ph``, ``E``, ``e`` given) to 5 in one
+    call: :func:`isolated_dynamics_into`, then :func:`rows_and_solve`."""
+    if with_iso:
+        isolated_dynamics_into(A, h, k, r, calA, Ph, E, e)
+    return rows_and_solve(
+        J,
+        target,
+        jdot_nu,
+        w,
+        q,
+        nu,
+        calA,
+        Ph,
+        E,
+        e,
+        actuator_map,
+        torque_low,
+        torque_high,
+        limits,
+        limit_indices,
+        constants,
+        T,
+        b,
+        H,
+        g,
+        C,
+        lower,
+        upper,
+        x,
+    )
 
 
 @njit(cache=True)
@@ -232,7 +294,9 @@ def rows_and_solve(
     E: Array,
     e: Array,
     actuator_map: Array,
-    bounds: Array,
+    torque_low: Array,
+    torque_high: Array,
+    limits: Array,
     limit_indices: Array,
     constants: Array,
     T: Array,
@@ -244,8 +308,8 @@ def rows_and_solve(
     upper: Array,
     x: Array,
 ) -> bool:
-    """Steps 2 to 5. ``bounds``: rows torque low, torque high, limit min, limit max (padded);
-    ``constants``: ``(limit_horizon, regularization)``."""
+    """Steps 2 to 5. ``limits``: rows joint-limit min and max; ``constants``:
+    ``(limit_horizon, regularization)``."""
     horizon, regularization = constants[0], constants[1]
     E0, e0 = E[0], e[0]
     rows, n = T.shape
@@ -265,14 +329,14 @@ def rows_and_solve(
     C[:m] = matmul(actuator_map, calA)
     offset = matvec(actuator_map, Ph)
     for i in range(m):
-        lower[i] = bounds[0, i] - offset[i]
-        upper[i] = bounds[1, i] - offset[i]
+        lower[i] = torque_low[i] - offset[i]
+        upper[i] = torque_high[i] - offset[i]
     square = horizon * horizon
     for i in range(len(limit_indices)):
         index = limit_indices[i]
         drift = q[index] + nu[index] * horizon
-        lower[m + i] = (bounds[2, i] - drift) * 2.0 / square
-        upper[m + i] = (bounds[3, i] - drift) * 2.0 / square
+        lower[m + i] = (limits[0, i] - drift) * 2.0 / square
+        upper[m + i] = (limits[1, i] - drift) * 2.0 / square
     # 5. the unconstrained minimiser and its feasibility
     if not _cholesky_solve(H, -g, x):
         return False
