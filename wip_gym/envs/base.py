@@ -345,6 +345,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         self._measures = np.zeros(ms.N_OUT)
         self._values = self._measures.tolist()
         self._no_contacts = (np.zeros((0, 2), np.int32), np.zeros(0, np.int32), np.zeros((0, 9)))
+        ms.compile_once()
         self._bind_views()
 
     def _bind_views(self) -> None:

@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, types
 
 from wip_gym.scene import CUP_HALF_HEIGHT, CUP_RADIUS, TRAY_HALF_SIZE
 
@@ -266,3 +266,29 @@ def step_measures(
         out[CUP_FRICTION_USE] = math.sqrt(tx * tx + ty * ty + tz * tz) / (
             floats[F_CUP_FRICTION] * normal
         )
+
+
+_F1, _F2 = types.float64[::1], types.float64[:, ::1]
+#: the one version the env calls: MuJoCo's arrays (contiguous), the contacts' of any layout
+#: (strided views into MuJoCo's contact structs; numpy calls one row, or none, contiguous)
+SIGNATURE = types.void(
+    *(_F1, _F1),  # qpos, qvel
+    *(_F2,) * 8,  # xpos ... site_xmat
+    *(_F1, _F1),  # body_subtreemass, body_mass
+    types.int32[:, :],
+    types.int32[:],
+    types.float64[:, :],
+    _F1,  # efc_force
+    types.int64[::1],
+    _F1,
+    _F1,
+)
+
+
+def compile_once() -> None:
+    """Compile :func:`step_measures` for :data:`SIGNATURE` (or load it from numba's cache) and
+    no other version: a call with the contacts' arrays contiguous converts to it instead of
+    compiling again (once per process; the env calls it when made)."""
+    if not step_measures.signatures:
+        step_measures.compile(SIGNATURE)
+        step_measures.disable_compile()

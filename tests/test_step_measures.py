@@ -1,0 +1,36 @@
+"""The env's compiled step arithmetic (``wip_gym.envs.measures``) without contacts: the same
+step as the reference step (tests/env_step_reference.py), from one compiled version of the
+kernel for states with and without contacts."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import pytest
+
+import wip_gym  # noqa: F401
+from tests.env_step_reference import reference_step
+from tests.test_env_step_reference import _assert_same
+from wip_gym.envs.measures import step_measures
+
+
+@pytest.mark.parametrize("env_id", ["wip_gym/Planar-v0", "wip_gym/KrangTray-v0"])
+def test_step_in_the_air_matches_the_reference_step(env_id: str) -> None:
+    env, ref = gym.make(env_id), gym.make(env_id)
+    env.reset(seed=1)
+    ref.reset(seed=1)
+    base, ref_base = env.unwrapped, ref.unwrapped
+    assert base.data.ncon > 0
+    for b in (base, ref_base):  # lifted 1 m: nothing touches
+        qpos = b.data.qpos.copy()
+        qpos[base._layout.root_qpos + (1 if base._layout.planar else 2)] += 1.0
+        b.set_state(qpos, b.data.qvel.copy())
+    action = 0.1 * env.action_space.high
+    for step in range(20):
+        new = base.step(action)
+        old = reference_step(ref_base, action)
+        assert base.data.ncon == 0
+        for what, n, o in zip(
+            ("obs", "reward", "terminated", "truncated", "info"), new, old, strict=True
+        ):
+            _assert_same(n, o, f"step {step} {what}")
+    assert len(step_measures.signatures) == 1
