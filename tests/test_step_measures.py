@@ -5,12 +5,13 @@ kernel for states with and without contacts."""
 from __future__ import annotations
 
 import gymnasium as gym
+import numpy as np
 import pytest
 
 import wip_gym  # noqa: F401
 from tests.env_step_reference import reference_step
 from tests.test_env_step_reference import _assert_same
-from wip_gym.envs.measures import step_measures
+from wip_gym.envs.measures import action_effort, step_measures
 
 
 @pytest.mark.parametrize("env_id", ["wip_gym/Planar-v0", "wip_gym/KrangTray-v0"])
@@ -34,3 +35,19 @@ def test_step_in_the_air_matches_the_reference_step(env_id: str) -> None:
         ):
             _assert_same(n, o, f"step {step} {what}")
     assert len(step_measures.signatures) == 1
+
+
+def test_actions_of_any_layout_use_the_one_compiled_check() -> None:
+    env = gym.make("wip_gym/Krang-v0")
+    env.reset(seed=0)
+    high = env.action_space.high.astype(float)
+    read_only = 0.1 * high
+    read_only.flags.writeable = False
+    strided = np.repeat(0.1 * high, 2)[::2]
+    for action in (0.1 * high, read_only, strided, (0.1 * high).astype(np.float32)):
+        env.step(action)
+    with pytest.raises(ValueError, match="beyond the torque limits"):
+        env.step(2.0 * high)
+    with pytest.raises(ValueError, match="NaN"):
+        env.step(np.full_like(high, np.nan))
+    assert len(action_effort.signatures) == 1

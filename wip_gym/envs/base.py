@@ -24,6 +24,7 @@ from wip_gym.envs.measures import (  # noqa: F401  (the cup's and tray's thresho
     CUP_PLATE_GAP,
     CUP_UPRIGHT_DEG,
     TRAY_HAND_GAP,
+    action_effort,
     step_measures,
 )
 from wip_gym.overlay import OverlayValues, draw_overlay
@@ -312,14 +313,8 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         self._payload_attached = True
         # made once for step(): plain Python numbers and the views of the arrays it reads
         self._goal_xy = (float(self._goal[0]), float(self._goal[1]))
-        self._action_lists = list(
-            zip(
-                self._action_band[0].tolist(),
-                self._action_band[1].tolist(),
-                self._action_scale.tolist(),
-                strict=True,
-            )
-        )
+        # the accepted band and the reward's scale, rows of one table (action_effort)
+        self._action_table = np.array([*self._action_band, self._action_scale])
         # the parameters of step_measures (wip_gym.envs.measures) and its results
         ints = np.zeros(ms.N_INTS + m.ngeom, dtype=np.int64)
         ints[ms.I_BASE] = lay.base_body
@@ -536,17 +531,15 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
     def step(  # type: ignore[override]
         self, action: NDArray[np.floating]
     ) -> tuple[dict[str, NDArray[np.float64]], float, bool, bool, dict[str, Any]]:
-        # the action's check and its ctrl cost, one pass over plain floats (_check_action
-        # explains a rejected action)
+        # the action's check and its ctrl cost, one compiled call (_check_action explains a
+        # rejected action)
         a = np.asarray(action, dtype=np.float64)
         if a.shape != self.action_space.shape:
             a = self._check_action(a)
-        effort = 0.0
-        for value, (low, high, scale) in zip(a.tolist(), self._action_lists, strict=True):
-            if not low <= value <= high:  # also for NaN
-                a = self._check_action(a)
-            value /= scale
-            effort += value * value
+        effort = action_effort(a, self._action_table)
+        if effort != effort:  # NaN: a torque beyond the band, or NaN
+            a = self._check_action(a)
+            effort = float(np.sum(np.square(a / self._action_scale)))
         m, d = self.model, self.data
         if self._views_of[1] is not d or self._views_of[0] is not m:
             self._bind_views()

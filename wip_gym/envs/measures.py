@@ -1,4 +1,4 @@
-"""The arithmetic of ``WIPEnv.step`` after its MuJoCo calls, compiled by numba.
+"""The arithmetic of ``WIPEnv.step`` around its MuJoCo calls, compiled by numba.
 
 ``WIPEnv._measure`` runs MuJoCo's kinematics and subtree passes; one call of
 :func:`step_measures` then computes, from the data's arrays, every number of the step's
@@ -268,6 +268,21 @@ def step_measures(
         )
 
 
+@njit(cache=True)
+def action_effort(action: np.ndarray, table: np.ndarray) -> float:
+    """``sum((action / scale)^2)`` (the ctrl cost's effort) if every torque is within its band
+    ``table[0] <= action <= table[1]`` (``scale = table[2]``), else NaN (also for a NaN
+    torque); summed in the actuators' order."""
+    effort = 0.0
+    for i in range(action.shape[0]):
+        value = action[i]
+        if not table[0, i] <= value <= table[1, i]:
+            return math.nan
+        value /= table[2, i]
+        effort += value * value
+    return effort
+
+
 _F1, _F2 = types.float64[::1], types.float64[:, ::1]
 #: the one version the env calls: MuJoCo's arrays (contiguous), the contacts' of any layout
 #: (strided views into MuJoCo's contact structs; numpy calls one row, or none, contiguous)
@@ -285,10 +300,16 @@ SIGNATURE = types.void(
 )
 
 
+#: an action of any layout, read-only too (``np.asarray`` of a JAX array)
+ACTION_SIGNATURE = types.float64(types.Array(types.float64, 1, "A", readonly=True), _F2)
+
+
 def compile_once() -> None:
-    """Compile :func:`step_measures` for :data:`SIGNATURE` (or load it from numba's cache) and
-    no other version: a call with the contacts' arrays contiguous converts to it instead of
-    compiling again (once per process; the env calls it when made)."""
-    if not step_measures.signatures:
-        step_measures.compile(SIGNATURE)
-        step_measures.disable_compile()
+    """Compile :func:`step_measures` for :data:`SIGNATURE` and :func:`action_effort` for
+    :data:`ACTION_SIGNATURE` (or load them from numba's cache) and no other versions: a call
+    with arrays of another layout converts to them instead of compiling again (once per
+    process; the env calls it when made)."""
+    for kernel, signature in ((step_measures, SIGNATURE), (action_effort, ACTION_SIGNATURE)):
+        if not kernel.signatures:
+            kernel.compile(signature)
+            kernel.disable_compile()
