@@ -19,13 +19,20 @@ from numpy.typing import NDArray
 
 from wip_gym.assets import mjcf_path
 from wip_gym.camera import COMPUTED_CAMERAS
+from wip_gym.envs import measures as ms
+from wip_gym.envs.measures import (  # noqa: F401  (the cup's and tray's thresholds, here too)
+    CUP_PLATE_GAP,
+    CUP_UPRIGHT_DEG,
+    TRAY_HAND_GAP,
+    action_effort,
+    step_measures,
+)
 from wip_gym.overlay import OverlayValues, draw_overlay
 from wip_gym.renderer import FrameRenderer
 from wip_gym.robot_model import RobotModel
 from wip_gym.robots import robot_spec
 from wip_gym.scene import (
     CUP_HALF_HEIGHT,
-    CUP_RADIUS,
     TRAY_HALF_SIZE,
     TRAY_RESET_MAX_SPEED,
     TRAY_RESET_SETTLE_TIME,
@@ -36,14 +43,6 @@ from wip_gym.scene import (
 )
 
 DEFAULT_CAMERA_CONFIG: dict[str, Any] = {}
-
-#: a cup counts as upright while its axis is within this angle of the tray's normal (deg)
-CUP_UPRIGHT_DEG = 30.0
-#: a cup counts as on the plate while its lowest point is at most this far above the plate (m)
-CUP_PLATE_GAP = 0.005
-#: a free tray counts as on the hand while its origin is within this distance of its nominal
-#: place along the nominal normal (m), and over the hand (within the plate's half-size)
-TRAY_HAND_GAP = 0.01
 
 
 def _goal_array(goal: Any, planar: bool) -> NDArray[np.float64]:
@@ -314,23 +313,34 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         self._payload_attached = True
         # made once for step(): plain Python numbers and the views of the arrays it reads
         self._goal_xy = (float(self._goal[0]), float(self._goal[1]))
-        self._action_lists = list(
-            zip(
-                self._action_band[0].tolist(),
-                self._action_band[1].tolist(),
-                self._action_scale.tolist(),
-                strict=True,
-            )
-        )
-        self._fall_pairs = frozenset(
-            pair for g in self._body_geom_set for pair in ((self._floor, g), (g, self._floor))
-        )
+        # the accepted band and the reward's scale, rows of one table (action_effort)
+        self._action_table = np.array([*self._action_band, self._action_scale])
+        # the parameters of step_measures (wip_gym.envs.measures) and its results
+        ints = np.zeros(ms.N_INTS + m.ngeom, dtype=np.int64)
+        ints[ms.I_BASE] = lay.base_body
+        ints[ms.I_WHEEL_L], ints[ms.I_WHEEL_R] = lay.wheel_bodies
+        ints[ms.I_PLANAR] = lay.planar
+        ints[ms.I_ROOT_QPOS], ints[ms.I_ROOT_DOF] = lay.root_qpos, lay.root_dof
+        ints[ms.I_QPOS_L], ints[ms.I_QPOS_R] = lay.wheel_qpos
+        ints[ms.I_DOF_L], ints[ms.I_DOF_R] = lay.wheel_dof
+        ints[ms.I_EE_SITE] = self._ee_site
+        ints[ms.I_FLOOR] = self._floor
+        ints[ms.N_INTS + self._body_geoms] |= ms.GEOM_FALL
+        floats = np.zeros(ms.N_FLOATS)
+        floats[ms.F_WHEEL_RADIUS] = lay.wheel_radius
+        floats[ms.F_GOAL_X], floats[ms.F_GOAL_Y] = self._goal_xy
+        floats[ms.F_FALL_ANGLE] = fall_angle
         if tray:
-            self._plate_pairs = frozenset(
-                pair
-                for g in self._cup_geoms
-                for pair in ((self._tray_geom, g), (g, self._tray_geom))
-            )
+            ints[ms.I_TRAY], ints[ms.I_FREE_TRAY] = 1, self._free_tray
+            ints[ms.I_TRAY_BODY], ints[ms.I_CUP_BODY] = self._tray_body, self._cup_body
+            ints[ms.I_REST_SITE], ints[ms.I_TRAY_GEOM] = self._tray_rest_site, self._tray_geom
+            ints[ms.N_INTS + np.array(sorted(self._cup_geoms))] |= ms.GEOM_CUP
+            floats[ms.F_CUP_FRICTION] = self._cup_friction
+        self._measure_ints, self._measure_floats = ints, floats
+        self._measures = np.zeros(ms.N_OUT)
+        self._values = self._measures.tolist()
+        self._no_contacts = (np.zeros((0, 2), np.int32), np.zeros(0, np.int32), np.zeros((0, 9)))
+        ms.compile_once()
         self._bind_views()
 
     def _bind_views(self) -> None:
@@ -338,29 +348,25 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         valid while its MjData or MjModel lives; made again if the env gets new ones)."""
         m, d = self.model, self.data
         self._views_of = (m, d)
-        self._view_qpos, self._view_qvel, self._view_ctrl = d.qpos, d.qvel, d.ctrl
         self._view_robot_qpos, self._view_robot_qvel = d.qpos[: self._nq], d.qvel[: self._nv]
-        self._view_xpos, self._view_xmat, self._view_xquat = d.xpos, d.xmat, d.xquat
-        self._view_xipos, self._view_site_xpos, self._view_site_xmat = (
-            d.xipos,
-            d.site_xpos,
-            d.site_xmat,
-        )
-        self._view_subtree_com, self._view_subtree_linvel = d.subtree_com, d.subtree_linvel
+        self._view_xmat = d.xmat
         self._view_push = d.xfrc_applied[self._push_body]
-        self._view_subtreemass, self._view_body_mass = m.body_subtreemass, m.body_mass
         self._step_dt = float(m.opt.timestep) * self.frame_skip
         self._elliptic = m.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
-        lay = self._layout
-        self._measure_layout = (
-            lay.base_body,
-            *lay.wheel_bodies,
-            float(lay.wheel_radius),
-            lay.planar,
-            lay.root_qpos,
-            lay.root_dof,
-            *lay.wheel_qpos,
-            *lay.wheel_dof,
+        self._measure_ints[ms.I_ELLIPTIC] = self._elliptic
+        self._measure_arrays = (
+            d.qpos,
+            d.qvel,
+            d.xpos,
+            d.xmat,
+            d.xquat,
+            d.xipos,
+            d.subtree_com,
+            d.subtree_linvel,
+            d.site_xpos,
+            d.site_xmat,
+            m.body_subtreemass,
+            m.body_mass,
         )
 
     # ----------------------------------------------------------------- model
@@ -467,9 +473,11 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         self.set_state(qpos, qvel)
         m.site_pos[self._goal_site, :2] = self._goal
         d.xfrc_applied[:] = 0.0
-        self._measure()
-        self._prev_distance = self._goal_distance()
-        self._ee_reference = self._ee_in_axle_frame()
+        values = self._measure()
+        self._prev_distance = values[ms.GOAL_DISTANCE]
+        self._set_ee_reference(self._ee_in_axle_frame())
+        # _measure found ee_error from the previous reference: from this one it is 0
+        self._measures[ms.EE_ERROR] = values[ms.EE_ERROR] = 0.0
         self._cup_lost = False
         return self._get_obs()
 
@@ -512,9 +520,10 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         qpos[a + 3 : a + 7] = quat
 
     def _get_reset_info(self) -> dict[str, Any]:
-        info = self._info(fallen=False)
+        values = self._values  # reset_model's _measure
+        info = self._info(values, fallen=False)
         if self._tray:
-            self._tray_entries(info)
+            self._tray_entries(info, values)
         return info
 
     # ------------------------------------------------------------------ step
@@ -522,17 +531,15 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
     def step(  # type: ignore[override]
         self, action: NDArray[np.floating]
     ) -> tuple[dict[str, NDArray[np.float64]], float, bool, bool, dict[str, Any]]:
-        # the action's check and its ctrl cost, one pass over plain floats (_check_action
-        # explains a rejected action)
+        # the action's check and its ctrl cost, one compiled call (_check_action explains a
+        # rejected action)
         a = np.asarray(action, dtype=np.float64)
         if a.shape != self.action_space.shape:
             a = self._check_action(a)
-        effort = 0.0
-        for value, (low, high, scale) in zip(a.tolist(), self._action_lists, strict=True):
-            if not low <= value <= high:  # also for NaN
-                a = self._check_action(a)
-            value /= scale
-            effort += value * value
+        effort = action_effort(a, self._action_table)
+        if effort != effort:  # NaN: a torque beyond the band, or NaN
+            a = self._check_action(a)
+            effort = float(np.sum(np.square(a / self._action_scale)))
         m, d = self.model, self.data
         if self._views_of[1] is not d or self._views_of[0] is not m:
             self._bind_views()
@@ -549,17 +556,15 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             mujoco.mj_setConst(m, mujoco.MjData(m))
             self._payload_attached = True
         self.do_simulation(a, self.frame_skip)
-        self._measure()
-        pairs = self._contact_pairs()  # read once, for the fall and the cup's friction use
-        info = self._info(pairs=pairs)
-        fallen = info["fallen"]
-        cup_pose = None
+        values = self._measure()
+        fallen = values[ms.FALLEN] != 0.0
+        info = self._info(values, fallen=fallen)
         newly_lost = False
         if self._tray:
-            cup_pose, kept = self._tray_entries(info, pairs)
+            kept = self._tray_entries(info, values)
             newly_lost = not kept and not self._cup_lost
             self._cup_lost = self._cup_lost or not kept
-        distance = info["goal_distance"]
+        distance = values[ms.GOAL_DISTANCE]
         progress_w, ctrl_w, fall_pen, cup_pen = self._weights
         info["reward_progress"] = progress = progress_w * (self._prev_distance - distance)
         info["reward_ctrl"] = ctrl = -ctrl_w * effort * self._step_dt
@@ -570,7 +575,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         terminated = bool(fallen or (self._tray and self._terminate_on_cup_loss and self._cup_lost))
         if self.render_mode == "human":
             self.render()
-        return self._get_obs(cup_pose), reward, terminated, False, info
+        return self._get_obs(), reward, terminated, False, info
 
     def do_simulation(self, ctrl: NDArray[np.float64], n_frames: int) -> None:
         """``n_frames`` MuJoCo steps with the (validated) torques ``ctrl``. Unlike Gymnasium's,
@@ -603,13 +608,16 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         return a
 
     # ------------------------------------------------------------- measures
-    # plain Python floats from the views bound by _bind_views: on 3-vectors they beat NumPy
-    def _measure(self) -> None:
-        """The robot's state measures for the current ``qpos``/``qvel``, from MuJoCo's own
-        kinematics and subtree quantities on the env's data (``mj_step`` leaves its kinematics
-        at the state before the step): heading ``psi``, ``psid``, ``x``, ``xd`` (the minimal
-        coordinates of ``RobotModel``), the axle position, and ``theta``, ``thetad`` of the body
-        CoM (wheels excluded) about the axle in the heading frame (``RobotModel.theta``)."""
+    def _measure(self) -> list[float]:
+        """The step's numbers for the current ``qpos``/``qvel``, from MuJoCo's own kinematics
+        and subtree quantities on the env's data (``mj_step`` leaves its kinematics at the state
+        before the step) and its contacts: one call of ``step_measures``
+        (``wip_gym.envs.measures``: heading ``psi``, ``psid``, ``x``, ``xd`` (the minimal
+        coordinates of ``RobotModel``), the axle position, ``theta``, ``thetad`` of the body CoM
+        (wheels excluded) about the axle in the heading frame (``RobotModel.theta``), the goal
+        distance, the fall, the end effector's drift, a tray task's cup and tray) into
+        ``_measures``; returned as floats (also kept as ``_values``, the robot's also as
+        attributes)."""
         m, d = self.model, self.data
         if self._views_of[1] is not d or self._views_of[0] is not m:
             self._bind_views()
@@ -617,60 +625,40 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         mujoco.mj_comPos(m, d)
         mujoco.mj_comVel(m, d)  # mj_subtreeVel reads the bodies' velocities (cvel)
         mujoco.mj_subtreeVel(m, d)
-        base, wl, wr, r, planar, o, v, ql, qr, dl, dr = self._measure_layout
-        qpos, qvel = self._view_qpos, self._view_qvel
-        ax, ay, az = self._view_xpos[base].tolist()
-        if planar:
-            c, s, psi, psid = 1.0, 0.0, 0.0, 0.0
-            x = qpos.item(o)
-            xd, voz, wy_ = qvel[v : v + 3].tolist()
-            vox, voy = xd, 0.0
-            wx_ = wz_ = 0.0
+        if d.ncon:
+            contact = d.contact
+            geom, address, frame = contact.geom, contact.efc_address, contact.frame
         else:
-            R00, R01, R02, R10, R11, R12, R20, R21, R22 = self._view_xmat[base].tolist()
-            psi = math.atan2(-R01, R11)
-            c, s = math.cos(psi), math.sin(psi)
-            q1 = math.atan2(c * R02 + s * R12, R22)
-            vox, voy, voz, w0, w1, w2 = qvel[v : v + 6].tolist()
-            wx_ = R00 * w0 + R01 * w1 + R02 * w2
-            wy_ = R10 * w0 + R11 * w1 + R12 * w2
-            wz_ = psid = R20 * w0 + R21 * w1 + R22 * w2
-            q1d = -s * wx_ + c * wy_
-            x = r * 0.5 * (qpos.item(ql) + qpos.item(qr)) + r * q1
-            xd = r * 0.5 * (qvel.item(dl) + qvel.item(dr)) + r * q1d
-        # the body's CoM and its velocity: the robot's subtree less the wheels, whose centres
-        # (their CoMs) sit on the axle: planar they move with the base origin, in 3-D also with
-        # the base's rotation (omega x r)
-        mass = self._view_subtreemass.item(base)
-        body_mass = self._view_body_mass
-        ml, mr = body_mass.item(wl), body_mass.item(wr)
-        body = mass - ml - mr
-        xipos = self._view_xipos
-        cx, cy, cz = self._view_subtree_com[base].tolist()
-        lx, ly, lz = xipos[wl].tolist()
-        rx, ry, rz = xipos[wr].tolist()
-        vx, vy, vz = self._view_subtree_linvel[base].tolist()
-        dx = (mass * cx - ml * lx - mr * rx) / body - ax
-        dy = (mass * cy - ml * ly - mr * ry) / body - ay
-        dz = (mass * cz - ml * lz - mr * rz) / body - az
-        # sum over the wheels of m_w (v_o + omega x (p_w - o)) = (ml + mr) v_o + omega x s_w
-        sx = ml * (lx - ax) + mr * (rx - ax)
-        sy = ml * (ly - ay) + mr * (ry - ay)
-        sz = ml * (lz - az) + mr * (rz - az)
-        wheels = ml + mr
-        dvx = (mass * vx - wheels * vox - (wy_ * sz - wz_ * sy)) / body - vox
-        dvy = (mass * vy - wheels * voy - (wz_ * sx - wx_ * sz)) / body - voy
-        dvz = (mass * vz - wheels * voz - (wx_ * sy - wy_ * sx)) / body - voz
-        X, Y, Z = c * dx + s * dy, -s * dx + c * dy, dz
-        Xd = c * dvx + s * dvy + psid * Y
-        Zd = dvz
-        distance_sq = X * X + Z * Z
-        self._theta = math.atan2(X, Z)
-        self._thetad = (Z * Xd - X * Zd) / distance_sq if distance_sq > 1e-18 else 0.0
-        self._x, self._xd, self._psi, self._psid = x, xd, psi, psid
-        self._cos_psi, self._sin_psi = c, s
+            geom, address, frame = self._no_contacts
+        out = self._measures
+        step_measures(
+            *self._measure_arrays,
+            geom,
+            address,
+            frame,
+            d.efc_force,
+            self._measure_ints,
+            self._measure_floats,
+            out,
+        )
+        values = out.tolist()
+        (
+            self._x,
+            self._xd,
+            self._theta,
+            self._thetad,
+            self._psi,
+            self._psid,
+            self._cos_psi,
+            self._sin_psi,
+            ax,
+            ay,
+            az,
+        ) = values[: ms.AXLE + 3]
         self._axle_xyz = (ax, ay, az)
-        self._axle = np.array(self._axle_xyz)
+        self._axle = out[ms.AXLE : ms.AXLE + 3].copy()
+        self._values = values
+        return values
 
     def _goal_distance(self) -> float:
         gx, gy = self._goal_xy
@@ -680,196 +668,77 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         return math.hypot(gx - ax, gy - ay)
 
     def _ee_in_axle_frame(self) -> NDArray[np.float64]:
+        """The end effector in the axle frame at the last ``_measure`` (zeros without one)."""
         if self._ee_site < 0:
             return np.zeros(3)
-        return np.array(self._ee_in_axle_frame_xyz())
+        return self._measures[ms.EE : ms.EE + 3].copy()
 
-    def _ee_in_axle_frame_xyz(self) -> tuple[float, float, float]:
-        ex, ey, ez = self._view_site_xpos[self._ee_site].tolist()
-        ax, ay, az = self._axle_xyz
-        dx, dy, dz = ex - ax, ey - ay, ez - az
-        c, s = self._cos_psi, self._sin_psi
-        return c * dx + s * dy, -s * dx + c * dy, dz
+    def _set_ee_reference(self, reference: NDArray[np.float64]) -> None:
+        """The end effector's place (axle frame) that ``ee_error`` is measured from."""
+        self._ee_reference = reference
+        self._measure_floats[ms.F_EE_REFERENCE : ms.F_EE_REFERENCE + 3] = reference
 
-    def _contact_pairs(self) -> list[tuple[int, int]]:
-        """The geom pairs of the data's contacts, in their order."""
-        d = self.data
-        if d.ncon == 0:
-            return []
-        return list(map(tuple, d.contact.geom[: d.ncon].tolist()))
-
-    def _fallen(self, pairs: list[tuple[int, int]] | None = None) -> bool:
-        """The body pitched beyond ``fall_angle`` or touching the floor (``pairs``: the
-        contacts' geom pairs when the caller has them)."""
-        if abs(self._theta) > self._fall_angle:
-            return True
-        if pairs is None:
-            pairs = self._contact_pairs()
-        return not self._fall_pairs.isdisjoint(pairs)
-
-    def _cup_pose(self) -> list[float]:
-        """The cup's position and orientation (quaternion, ``w >= 0``) in the tray frame, as
-        ``[x, y, z, w, qx, qy, qz]``."""
-        tray, cup = self._tray_body, self._cup_body
-        xpos, xquat = self._view_xpos, self._view_xquat
-        tx, ty, tz = xpos[tray].tolist()
-        cx, cy, cz = xpos[cup].tolist()
-        R00, R01, R02, R10, R11, R12, R20, R21, R22 = self._view_xmat[tray].tolist()
-        dx, dy, dz = cx - tx, cy - ty, cz - tz
-        # the conjugate of the tray's quaternion times the cup's (mju_negQuat, mju_mulQuat)
-        a0, a1, a2, a3 = xquat[tray].tolist()
-        b0, b1, b2, b3 = xquat[cup].tolist()
-        a1, a2, a3 = -a1, -a2, -a3
-        w = a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3
-        qx = a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2
-        qy = a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1
-        qz = a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0
-        if w < 0.0:  # the sign convention of mju_mat2Quat near identity: w >= 0
-            w, qx, qy, qz = -w, -qx, -qy, -qz
-        return [
-            R00 * dx + R10 * dy + R20 * dz,
-            R01 * dx + R11 * dy + R21 * dz,
-            R02 * dx + R12 * dy + R22 * dz,
-            w,
-            qx,
-            qy,
-            qz,
-        ]
-
-    @staticmethod
-    def _cup_state(pose: list[float]) -> tuple[float, bool, bool]:
-        """``(tilt_deg, upright, on_plate)`` of the cup from its pose in the tray frame
-        (``_cup_pose``).
-
-        Tilt: the angle between the cup's axis and the tray's normal. On the plate: the cup's
-        centre is over the plate (within its outline) and above it, and the cup's lowest point
-        is at most ``CUP_PLATE_GAP`` above the plate's top (resting, or within a few mm)."""
-        px, py, pz, _, x, y, _ = pose
-        cos_tilt = min(1.0, max(-1.0, 1.0 - 2.0 * (x * x + y * y)))  # R[2, 2] of the quaternion
-        tilt = math.degrees(math.acos(cos_tilt))
-        sin_tilt = math.sqrt(max(0.0, 1.0 - cos_tilt * cos_tilt))
-        top = 2 * TRAY_HALF_SIZE[2]
-        lowest = pz - CUP_HALF_HEIGHT * abs(cos_tilt) - CUP_RADIUS * sin_tilt
-        on_plate = (
-            abs(px) <= TRAY_HALF_SIZE[0]
-            and abs(py) <= TRAY_HALF_SIZE[1]
-            and pz > top
-            and lowest - top <= CUP_PLATE_GAP
+    def _cup_friction_use(self) -> float:
+        """The cup's friction use on the plate now (see :func:`friction_use`)."""
+        return friction_use(
+            self.model, self.data, self._cup_geoms, self._tray_geom, self._cup_friction
         )
-        return tilt, tilt <= CUP_UPRIGHT_DEG, on_plate
-
-    def _tray_on_hand(self) -> tuple[NDArray[np.float64], bool]:
-        """``(offset, on_hand)``: the tray's displacement from its nominal place on the hand, in
-        that place's frame (the ``tray_rest`` site: zero when welded), and whether it is still
-        on the hand (within ``TRAY_HAND_GAP`` along the normal and within the plate's
-        half-size across it)."""
-        if not self._free_tray:
-            return np.zeros(3), True
-        rest = self._tray_rest_site
-        tx, ty, tz = self._view_xpos[self._tray_body].tolist()
-        sx, sy, sz = self._view_site_xpos[rest].tolist()
-        S00, S01, S02, S10, S11, S12, S20, S21, S22 = self._view_site_xmat[rest].tolist()
-        dx, dy, dz = tx - sx, ty - sy, tz - sz
-        ox = S00 * dx + S10 * dy + S20 * dz
-        oy = S01 * dx + S11 * dy + S21 * dz
-        oz = S02 * dx + S12 * dy + S22 * dz
-        on_hand = (
-            abs(oz) <= TRAY_HAND_GAP
-            and abs(ox) <= TRAY_HALF_SIZE[0]
-            and abs(oy) <= TRAY_HALF_SIZE[1]
-        )
-        return np.array([ox, oy, oz]), on_hand
-
-    def _cup_friction_use(self, pairs: list[tuple[int, int]] | None = None) -> float:
-        """The cup's friction use on the plate (see :func:`friction_use`; ``pairs``: the
-        contacts' geom pairs when the caller has them)."""
-        if not self._elliptic:
-            return friction_use(
-                self.model, self.data, self._cup_geoms, self._tray_geom, self._cup_friction
-            )
-        if pairs is None:
-            pairs = self._contact_pairs()
-        plate = self._plate_pairs
-        rows = [i for i, pair in enumerate(pairs) if pair in plate]
-        if not rows:
-            return 0.0
-        d = self.data
-        contact = d.contact
-        address, frame, force = contact.efc_address, contact.frame, d.efc_force
-        normal = tx = ty = tz = 0.0
-        for i in rows:
-            a = address.item(i)
-            if a < 0:  # excluded from the constraints
-                continue
-            # the contact-frame force (normal, tangent 1, tangent 2) is in efc_force
-            f_n, f_1, f_2 = force[a : a + 3].tolist()
-            # rows of the contact frame: normal, tangent 1, tangent 2
-            _, _, _, a0, a1, a2, b0, b1, b2 = frame[i].tolist()
-            normal += f_n
-            tx += f_1 * a0 + f_2 * b0
-            ty += f_1 * a1 + f_2 * b1
-            tz += f_1 * a2 + f_2 * b2
-        if normal <= 0.0:
-            return 0.0
-        return math.sqrt(tx * tx + ty * ty + tz * tz) / (self._cup_friction * normal)
 
     def _tray_tilt_deg(self) -> float:
         z = self._view_xmat.item(self._tray_body, 8)  # the normal's world z
         return math.degrees(math.acos(min(1.0, max(-1.0, z))))
 
     def _info(
-        self, *, fallen: bool | None = None, pairs: list[tuple[int, int]] | None = None
+        self, values: list[float] | None = None, *, fallen: bool | None = None
     ) -> dict[str, Any]:
-        """The robot's info for the state ``_measure`` made (``fallen``: found by ``_fallen``
-        if None; ``pairs``: the contacts' geom pairs when the caller has them); a tray task's
-        entries are added by ``_tray_entries``."""
+        """The robot's info from ``_measure``'s ``values`` (the last if None; ``fallen``: as
+        found there if None); a tray task's entries are added by ``_tray_entries``."""
+        if values is None:
+            values = self._values
+        if fallen is None:
+            fallen = values[ms.FALLEN] != 0.0
         info: dict[str, Any] = {
-            "x": self._x,
-            "xd": self._xd,
-            "theta": self._theta,
-            "thetad": self._thetad,
+            "x": values[ms.X],
+            "xd": values[ms.XD],
+            "theta": values[ms.THETA],
+            "thetad": values[ms.THETAD],
             "axle_position": self._axle,
-            "goal_distance": self._goal_distance(),
-            "fallen": self._fallen(pairs) if fallen is None else bool(fallen),
+            "goal_distance": values[ms.GOAL_DISTANCE],
+            "fallen": fallen,
         }
         if not self._spec.planar:
-            info["psi"] = self._psi
-            info["psid"] = self._psid
+            info["psi"] = values[ms.PSI]
+            info["psid"] = values[ms.PSID]
         if self._ee_site >= 0:
-            ex, ey, ez = self._ee_in_axle_frame_xyz()
-            rx, ry, rz = self._ee_reference.tolist()
-            ex, ey, ez = ex - rx, ey - ry, ez - rz
-            info["ee_error"] = math.sqrt(ex * ex + ey * ey + ez * ez)
+            info["ee_error"] = values[ms.EE_ERROR]
         return info
 
-    def _tray_entries(
-        self, info: dict[str, Any], pairs: list[tuple[int, int]] | None = None
-    ) -> tuple[list[float], bool]:
-        """Add the tray task's info entries for the state ``_measure`` made; return the cup's
-        pose in the tray frame (``_cup_pose``) and whether the cup is kept (on the tray, and
-        the tray on the hand)."""
-        pose = self._cup_pose()
-        tilt, upright, on_plate = self._cup_state(pose)
-        tray_offset, tray_on_hand = self._tray_on_hand()
-        info["tray_tilt_deg"] = self._tray_tilt_deg()
-        info["cup_offset"] = np.array(pose[:3])
+    def _tray_entries(self, info: dict[str, Any], values: list[float]) -> bool:
+        """Add the tray task's info entries from ``_measure``'s ``values``; return whether the
+        cup is kept (on the tray, and the tray on the hand)."""
+        tilt, upright, on_plate, tray_tilt, _, _, _, on_hand, use = values[ms.CUP_TILT_DEG :]
+        out = self._measures
+        upright, on_plate, on_hand = upright != 0.0, on_plate != 0.0, on_hand != 0.0
+        info["tray_tilt_deg"] = tray_tilt
+        info["cup_offset"] = out[ms.CUP_POSE : ms.CUP_POSE + 3].copy()
         info["cup_tilt_deg"] = tilt
         info["cup_upright"] = upright
         info["cup_on_plate"] = on_plate
         info["cup_on_tray"] = on_tray = on_plate and upright
-        info["cup_friction_use"] = self._cup_friction_use(pairs)
-        info["tray_offset"] = tray_offset
-        info["tray_on_hand"] = tray_on_hand
-        return pose, on_tray and tray_on_hand
+        info["cup_friction_use"] = use if self._elliptic else self._cup_friction_use()
+        info["tray_offset"] = out[ms.TRAY_OFFSET : ms.TRAY_OFFSET + 3].copy()
+        info["tray_on_hand"] = on_hand
+        return on_tray and on_hand
 
-    def _get_obs(self, cup_pose: list[float] | None = None) -> dict[str, NDArray[np.float64]]:
+    def _get_obs(self) -> dict[str, NDArray[np.float64]]:
+        """The observation at the last ``_measure``."""
         obs = {
             "qpos": self._view_robot_qpos.copy(),
             "qvel": self._view_robot_qvel.copy(),
             "goal": self._goal.copy(),
         }
         if self._tray:
-            obs["cup_pose"] = np.array(self._cup_pose() if cup_pose is None else cup_pose)
+            obs["cup_pose"] = self._measures[ms.CUP_POSE : ms.CUP_POSE + 7].copy()
         return obs
 
     # ------------------------------------------------------------- rendering

@@ -1,0 +1,53 @@
+"""The env's compiled step arithmetic (``wip_gym.envs.measures``) without contacts: the same
+step as the reference step (tests/env_step_reference.py), from one compiled version of the
+kernel for states with and without contacts."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import wip_gym  # noqa: F401
+from tests.env_step_reference import reference_step
+from tests.test_env_step_reference import _assert_same
+from wip_gym.envs.measures import action_effort, step_measures
+
+
+@pytest.mark.parametrize("env_id", ["wip_gym/Planar-v0", "wip_gym/KrangTray-v0"])
+def test_step_in_the_air_matches_the_reference_step(env_id: str) -> None:
+    env, ref = gym.make(env_id), gym.make(env_id)
+    env.reset(seed=1)
+    ref.reset(seed=1)
+    base, ref_base = env.unwrapped, ref.unwrapped
+    assert base.data.ncon > 0
+    for b in (base, ref_base):  # lifted 1 m: nothing touches
+        qpos = b.data.qpos.copy()
+        qpos[base._layout.root_qpos + (1 if base._layout.planar else 2)] += 1.0
+        b.set_state(qpos, b.data.qvel.copy())
+    action = 0.1 * env.action_space.high
+    for step in range(20):
+        new = base.step(action)
+        old = reference_step(ref_base, action)
+        assert base.data.ncon == 0
+        for what, n, o in zip(
+            ("obs", "reward", "terminated", "truncated", "info"), new, old, strict=True
+        ):
+            _assert_same(n, o, f"step {step} {what}")
+    assert len(step_measures.signatures) == 1
+
+
+def test_actions_of_any_layout_use_the_one_compiled_check() -> None:
+    env = gym.make("wip_gym/Krang-v0")
+    env.reset(seed=0)
+    high = env.action_space.high.astype(float)
+    read_only = 0.1 * high
+    read_only.flags.writeable = False
+    strided = np.repeat(0.1 * high, 2)[::2]
+    for action in (0.1 * high, read_only, strided, (0.1 * high).astype(np.float32)):
+        env.step(action)
+    with pytest.raises(ValueError, match="beyond the torque limits"):
+        env.step(2.0 * high)
+    with pytest.raises(ValueError, match="NaN"):
+        env.step(np.full_like(high, np.nan))
+    assert len(action_effort.signatures) == 1
