@@ -16,6 +16,7 @@ $(PY):
 
 $(STAMP): pyproject.toml constraints.txt | $(PY)
 	$(PY) -m pip install --quiet -c constraints.txt -e ".[dev,bench,sweep]"
+	$(PY) -m benchmarks.warm_caches   # compile once (numba, JAX), cached on disk
 	touch $(STAMP)
 
 install: $(STAMP)
