@@ -94,6 +94,20 @@ class RobotLayout:
     def index_q1(self) -> int:
         return 1 if self.planar else 2
 
+    def kernel_arrays(self) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+        """The layout as the compiled kernels take it (``wip_gym.minimal_kernels``):
+        ``[planar, root_qpos, root_dof, wheel_qpos..., wheel_dof...]``, ``body_qpos``,
+        ``body_dof`` (new int64 arrays)."""
+        ints = np.array(
+            [self.planar, self.root_qpos, self.root_dof, *self.wheel_qpos, *self.wheel_dof],
+            dtype=np.int64,
+        )
+        return (
+            ints,
+            np.array(self.body_qpos, dtype=np.int64),
+            np.array(self.body_dof, dtype=np.int64),
+        )
+
     @classmethod
     def from_model(cls, model: mujoco.MjModel) -> RobotLayout:
         """Read the layout of the robot in ``model``; raise ``ValueError`` where the contract of
@@ -261,14 +275,9 @@ class RobotModel:
         self._mj_qfrc_passive = self.data.qfrc_passive
         self._body_ids = np.array(lay.body_bodies)
         self._mj_xmat = self.data.xmat
-        self._layout_ints = np.array(
-            [lay.planar, lay.root_qpos, lay.root_dof, *lay.wheel_qpos, *lay.wheel_dof],
-            dtype=np.int64,
-        )
+        self._layout_ints, self._body_qpos, self._body_dof = lay.kernel_arrays()
         self._wheel_ids = np.array(lay.wheel_bodies)
         self._bodies = np.array([lay.base_body, *lay.wheel_bodies], dtype=np.int64)
-        self._body_qpos = np.array(lay.body_qpos, dtype=int)
-        self._body_dof = np.array(lay.body_dof, dtype=int)
         self._heading = _read_only(np.eye(3))
         self._q = np.zeros(n)
         self._nu = np.zeros(n)

@@ -235,12 +235,7 @@ class CompiledTaskStack:
         self._probe_qpos, self._probe_qvel = pd.qpos[: lay.nq], pd.qvel[: lay.nv]
         self._probe_address = pd._address
         self._site_bodies = m.site_bodyid[self.site_ids].astype(np.int64)
-        self._layout_ints = np.array(
-            [lay.planar, lay.root_qpos, lay.root_dof, *lay.wheel_qpos, *lay.wheel_dof],
-            dtype=np.int64,
-        )
-        self._body_qpos = np.array(lay.body_qpos, dtype=np.int64)
-        self._body_dof = np.array(lay.body_dof, dtype=np.int64)
+        self._layout_ints, self._body_qpos, self._body_dof = lay.kernel_arrays()
         self._wheel_radius, self._wheel_separation = lay.wheel_radius, lay.wheel_separation
 
     def _fill_snapshot(self, robot: RobotModel) -> None:
