@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import glob
 import os
+from typing import Any
 
 import llvmlite.binding as llvm
 import mujoco
@@ -42,7 +43,9 @@ _ptr = types.uint64  # a pointer, passed as its address
 _int = types.intc
 
 
-def _declare(name: str, *args: types.Type) -> types.ExternalFunction:
+def _declare(name: str, *args: types.Type) -> Any:
+    """``void name(args)`` as numba's external function (typed ``Any`` for the type checker:
+    it is called only from compiled code, with addresses and ints)."""
     return types.ExternalFunction(name, types.void(*args))
 
 
