@@ -179,7 +179,9 @@ class ClipCounter:
         self.last_excess = 0.0
 
     def clip(self, action: NDArray[np.float64]) -> NDArray[np.float64]:
-        action = np.asarray(action, dtype=float)
+        # a copy: the compiled check sees one array type (a read-only or strided action, a
+        # JAX array's view, would compile it again)
+        action = np.array(action, dtype=np.float64)
         if action.shape != self.low.shape:
             raise ValueError(f"action must have shape {self.low.shape}, got {action.shape}")
         clipped = np.empty_like(action)

@@ -111,7 +111,7 @@ def test_compiled_rows_equal_the_task_objects(name: str, observed: bool) -> None
     reference_robot.update(*robot.full_state(q, nu))
     # two copies of the same tasks: one run compiled, one by the objects
     compiled_tasks, python_tasks = _task_set(robot, observed), _task_set(reference_robot, observed)
-    assert supports(compiled_tasks)
+    assert supports(compiled_tasks, robot.layout.planar)
     stack = CompiledTaskStack(robot, MotionProbe(robot), compiled_tasks)
     probe = MotionProbe(reference_robot)
     rows = stack.rows
@@ -161,3 +161,117 @@ def test_task_qp_compiled_and_python_paths_solve_alike() -> None:
         assert compiled._stack is not None and compiled._stack.tasks == tasks
         _close(a.actuators, b.actuators, 1e-9)
         _close(a.qdd, b.qdd, 1e-9)
+
+
+def _paths(robot: RobotModel) -> tuple[TaskQP, TaskQP]:
+    low, high = robot.model.actuator_ctrlrange.T.copy()
+    return TaskQP(robot, low, high, QPSettings()), TaskQP(
+        robot, low, high, QPSettings(compiled_tasks=False)
+    )
+
+
+def test_a_second_solve_at_one_state_does_not_advance_the_observers_again() -> None:
+    """The observers' Python path memoises their command per state; the compiled path, asked
+    twice at one state, gives the same rows the second time."""
+    robot = RobotModel(_load("krang"))
+    rng = np.random.default_rng(8)
+    compiled, _ = _paths(robot)
+    q, nu = random_minimal_state(robot, rng)
+    robot.update(*robot.full_state(q, nu))
+    tasks = _task_set(robot, observed=True)
+    for step in range(3):
+        robot.update(*robot.full_state(q + 1e-3 * step * nu, nu + 0.1 * step))
+        first = compiled.solve(robot, None, tasks).actuators
+        memory = compiled._stack.observer_memory.copy()
+        again = compiled.solve(robot, None, tasks).actuators
+        np.testing.assert_array_equal(again, first)
+        np.testing.assert_array_equal(compiled._stack.observer_memory, memory)
+
+
+def test_a_changed_site_or_columns_rebuilds_the_compiled_stack() -> None:
+    robot = RobotModel(_load("krang"))
+    compiled, python = _paths(robot)
+    robot.update(*robot.full_state(*random_minimal_state(robot, np.random.default_rng(9))))
+    tasks = _realistic_tasks(robot)
+    compiled.solve(robot, None, tasks)
+    first_stack = compiled._stack
+    right = mujoco.mj_name2id(robot.model, mujoco.mjtObj.mjOBJ_SITE, "ee_right")
+    position = next(t for t in tasks if isinstance(t, FramePositionTask))
+    position.site = right  # the other hand, same task object
+    posture = tasks[-1]
+    posture.columns = posture.columns[1:]  # one joint fewer, same task object
+    posture.target, posture.joint_weights = posture.target[1:], posture.joint_weights[1:]
+    a, b = compiled.solve(robot, None, tasks), python.solve(robot, None, tasks)
+    assert compiled._stack is not first_stack
+    _close(a.actuators, b.actuators, 1e-9)
+
+
+def test_compiled_rows_on_an_oracle_model_with_the_cup() -> None:
+    """A controller's oracle model is the env's own, cup and tray included (free bodies past
+    the robot's joints): both paths run and agree."""
+    import gymnasium as gym
+
+    import wip_gym  # noqa: F401
+    from controllers.policy import controller_model
+
+    env = gym.make("wip_gym/KrangTray-v0")
+    env.reset(seed=3)
+    robot = RobotModel(controller_model(env, "oracle"))
+    assert robot.model.nv > robot.layout.nv  # the cup's free joint
+    compiled, python = _paths(robot)
+    rng = np.random.default_rng(10)
+    for _ in range(3):
+        robot.update(*robot.full_state(*random_minimal_state(robot, rng)))
+        tasks = _realistic_tasks(robot)
+        a, b = compiled.solve(robot, None, tasks), python.solve(robot, None, tasks)
+        assert compiled._stack is not None
+        _close(a.actuators, b.actuators, 1e-9)
+    env.close()
+
+
+def test_read_only_or_strided_states_do_not_compile_the_update_again() -> None:
+    from wip_gym.minimal_kernels import robot_update
+
+    robot = RobotModel(_load("krang"))
+    qpos, qvel = robot.full_state(*random_minimal_state(robot, np.random.default_rng(12)))
+    robot.update(qpos, qvel)
+    signatures = len(robot_update.signatures)
+    frozen = qpos.copy()
+    frozen.flags.writeable = False
+    strided = np.repeat(qvel, 2)[::2]
+    robot.update(frozen, strided)
+    assert len(robot_update.signatures) == signatures
+    reference = RobotModel(robot.model)
+    reference.update(qpos, qvel)
+    np.testing.assert_array_equal(robot.q, reference.q)
+    np.testing.assert_array_equal(robot.A, reference.A)
+
+
+def test_a_copied_controller_steps_on_its_own_data() -> None:
+    """``copy.deepcopy`` of a stepping controller: the copy's compiled calls use its own MuJoCo
+    data (views and addresses are made again), so it gives the original's next action and goes
+    on after the original is gone."""
+    import copy
+    import gc
+
+    import gymnasium as gym
+
+    import wip_gym  # noqa: F401
+    from controllers.hierarchical import HierarchicalController
+
+    env = gym.make("wip_gym/PlanarTray-v0")
+    obs, info = env.reset(seed=5)
+    policy = HierarchicalController.for_env(env)
+    policy.reset(obs, info)
+    for _ in range(15):
+        obs, *_ = env.step(policy(obs))
+    twin = copy.deepcopy(policy)
+    assert twin.robot.data is not policy.robot.data
+    np.testing.assert_array_equal(twin(obs), policy(obs))
+    del policy
+    gc.collect()
+    for _ in range(5):
+        action = twin(obs)
+        assert np.isfinite(action).all()
+        obs, *_ = env.step(action)
+    env.close()

@@ -267,22 +267,18 @@ class RobotModel:
         self._jacp = np.zeros((3, nv))
         self._jac_wheels = np.zeros((2, 3, nv))
         self._jac_origin = np.zeros((3, nv))
-        # views on MuJoCo's buffers (an attribute read makes a new view: ~1 us each); masses
-        # are read at every update (an env may change them: payload, randomisation)
-        self._mj_qpos, self._mj_qvel = self.data.qpos, self.data.qvel
-        self._mj_xpos, self._mj_xipos = self.data.xpos, self.data.xipos
-        self._mj_body_mass, self._mj_subtree_mass = model.body_mass, model.body_subtreemass
-        self._mj_qfrc_passive = self.data.qfrc_passive
+        self._bind_views()
+        # the state, copied in each update: the compiled update sees one array type whatever
+        # the caller passes (read-only or strided arrays would each compile it again)
+        self._qpos_in = np.zeros(lay.nq)
+        self._qvel_in = np.zeros(lay.nv)
         self._body_ids = np.array(lay.body_bodies)
-        self._mj_xmat = self.data.xmat
         self._layout_ints, self._body_qpos, self._body_dof = lay.kernel_arrays()
-        self._wheel_ids = np.array(lay.wheel_bodies)
         self._bodies = np.array([lay.base_body, *lay.wheel_bodies], dtype=np.int64)
         self._heading = _read_only(np.eye(3))
         self._q = np.zeros(n)
         self._nu = np.zeros(n)
         first_body = 3 if not lay.planar else 2
-        self._body_cols = np.arange(first_body, n)
         # constant entries of J_tf
         r, sep = lay.wheel_radius, lay.wheel_separation
         for k, dof in enumerate(lay.body_dof):
@@ -303,6 +299,20 @@ class RobotModel:
         # cleared by every update
         self.cache: dict[object, object] = {}
 
+    def _bind_views(self) -> None:
+        """Views on MuJoCo's buffers (an attribute read makes a new view: ~1 us each), made
+        again after a copy or an unpickling (whose views would point at the old arrays). Masses
+        are read at every update (an env may change them: payload, randomisation)."""
+        d, model = self.data, self.model
+        self._mj_qpos, self._mj_qvel = d.qpos, d.qvel
+        self._mj_xpos, self._mj_xipos, self._mj_xmat = d.xpos, d.xipos, d.xmat
+        self._mj_body_mass, self._mj_subtree_mass = model.body_mass, model.body_subtreemass
+        self._mj_qfrc_passive = d.qfrc_passive
+
+    def __setstate__(self, state: dict[str, object]) -> None:
+        self.__dict__.update(state)
+        self._bind_views()
+
     # ------------------------------------------------------------------ state
     def update(self, qpos: ArrayLike, qvel: ArrayLike, *, dynamics: bool = True) -> None:
         """Compute everything for the state ``(qpos, qvel)`` (the robot's own coordinates).
@@ -320,6 +330,8 @@ class RobotModel:
             )
         if not (np.isfinite(qpos).all() and np.isfinite(qvel).all()):
             raise ValueError("qpos/qvel contain NaN or inf")
+        self._qpos_in[:] = qpos
+        self._qvel_in[:] = qvel
         self.cache.clear()
         (
             self._psi,
@@ -338,8 +350,8 @@ class RobotModel:
         ) = robot_update(
             m._address,
             d._address,
-            qpos,
-            qvel,
+            self._qpos_in,
+            self._qvel_in,
             self._mj_qpos,
             self._mj_qvel,
             self._mj_xmat,

@@ -237,6 +237,7 @@ def task_rows(
     gravity: np.ndarray,
     observer_memory: np.ndarray,
     observer_settings: np.ndarray,
+    observer_advance: np.ndarray,
     J: np.ndarray,
     target: np.ndarray,
     jdot_nu: np.ndarray,
@@ -251,7 +252,9 @@ def task_rows(
     derivative for the origin, ``probe_jac[1 + i]`` for site slot ``i``, and ``subtree_com``,
     ``xipos``, ``subtree_linvel``, ``cfrc_int`` (read for a theta task only: the CoM drift of
     ``MotionProbe.com_motion``); ``subtree_mass``, ``gravity`` the model's. A task
-    with ``observers[k] >= 0`` is wrapped by the disturbance observer of that slot.
+    with ``observers[k] >= 0`` is wrapped by the disturbance observer of that slot, which
+    advances when ``observer_advance[slot]`` is 1 and else gives its last command (the one of
+    this state).
     """
     theta, thetad, c, s, psid = scalars[0], scalars[1], scalars[2], scalars[3], scalars[4]
     index_psi = int(scalars[5])
@@ -327,9 +330,12 @@ def task_rows(
                 jdot_nu[start + 2] = acc[2]
             slot = observers[k]
             if slot >= 0:
-                reference = _observe(
-                    observer_memory[slot], observer_settings[slot], task_velocity, reference
-                )
+                if observer_advance[slot]:
+                    reference = _observe(
+                        observer_memory[slot], observer_settings[slot], task_velocity, reference
+                    )
+                else:
+                    reference = observer_memory[slot, 2].copy()
             target[start:stop] = reference
         else:  # POSTURE
             for row in range(start, stop):

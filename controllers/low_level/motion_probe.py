@@ -73,16 +73,25 @@ class MotionProbe:
         self.heading = np.eye(3)
         self._c, self._s = 1.0, 0.0
         self._memo: dict[object, tuple[Vec, ...]] = {}
-        # views on MuJoCo's buffers (an attribute read makes a new view: ~1 us each)
-        self._qpos, self._qvel, self._qacc = self.data.qpos, self.data.qvel, self.data.qacc
-        self._xpos, self._site_xpos = self.data.xpos, self.data.site_xpos
-        self._xipos, self._subtree_com = self.data.xipos, self.data.subtree_com
-        self._subtree_linvel, self._cfrc_int = self.data.subtree_linvel, self.data.cfrc_int
         self._site_body = m.site_bodyid.copy()
         self._planar = lay.planar
         self._index_psi = lay.index_psi
-        # masses are read at every use: an oracle model's payload may change mid-run
-        self._subtree_mass = m.body_subtreemass
+        self._bind_views()
+
+    def _bind_views(self) -> None:
+        """Views on MuJoCo's buffers (an attribute read makes a new view: ~1 us each); made
+        again after a copy or an unpickling, whose views would point at the old arrays. Masses
+        are read at every use: an oracle model's payload may change mid-run."""
+        d = self.data
+        self._qpos, self._qvel, self._qacc = d.qpos, d.qvel, d.qacc
+        self._xpos, self._site_xpos = d.xpos, d.site_xpos
+        self._xipos, self._subtree_com = d.xipos, d.subtree_com
+        self._subtree_linvel, self._cfrc_int = d.subtree_linvel, d.cfrc_int
+        self._subtree_mass = self.model.body_subtreemass
+
+    def __setstate__(self, state: dict[str, object]) -> None:
+        self.__dict__.update(state)
+        self._bind_views()
 
     def update(self, robot: RobotModel) -> None:
         m, d = self.model, self.data
@@ -95,7 +104,7 @@ class MotionProbe:
         mujoco.mj_comVel(m, d)
         self.qvel = self._qvel
         # qacc = J_tf nu_dot + Jdot_tf nu, at nu_dot = 0 (J_tf depends on psi, q1 only)
-        self.qacc0[: self._nv] = robot.Jdot_tf_nu
+        self.qacc0[:] = robot.Jdot_tf_nu  # over every dof of the model (a cup's too: zero)
         self.psid = 0.0 if self._planar else float(robot.nu[self._index_psi])
         self.heading = robot.heading_rotation
         self._c, self._s = float(self.heading[0, 0]), float(self.heading[1, 0])

@@ -169,7 +169,6 @@ class TaskQP:
         self._rows = -1
         self._feasible = False
         self._stack: CompiledTaskStack | None = None
-        self._stack_identity: tuple[int, ...] = ()
 
     def _buffers(self, rows: int, n_min: int) -> None:
         """(Re)allocate the task-row buffers and the kernel for ``rows`` rows (once per task
@@ -214,14 +213,17 @@ class TaskQP:
         if not self.settings.compiled_tasks:
             return None
         stack = self._stack
-        identity = tuple(map(id, tasks))  # the same task objects, in the same order
-        if stack is not None and identity == self._stack_identity:
+        if stack is not None and stack.matches(tasks):
             return stack
-        if not supports(tasks):
+        if not supports(tasks, robot.layout.planar):
             return None
         self._stack = CompiledTaskStack(robot, self.motion, tasks)
-        self._stack_identity = identity
         return self._stack
+
+    def __getstate__(self) -> dict[str, object]:
+        state = self.__dict__.copy()
+        state["_stack"] = None  # holds views on MuJoCo's arrays: made again on the next step
+        return state
 
     def _snapshot(self, robot: RobotModel, tasks: Sequence[Task]) -> None:
         """The stacked tasks' ``J``, reference accelerations, weights and ``Jdot nu`` into

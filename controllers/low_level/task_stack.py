@@ -153,25 +153,51 @@ def _unwrap(task: object) -> tuple[object, DisturbanceRejectingTask | None]:
     return task, None
 
 
-def supports(tasks: Sequence[object]) -> bool:
+def supports(tasks: Sequence[object], planar: bool) -> bool:
     """Whether every task is of a kind the compiled rows know (exact types: a subclass may
-    change the arithmetic, and then runs the Python path). An observer may wrap a frame task."""
+    change the arithmetic, and then runs the Python path). An observer may wrap a frame task;
+    a planar robot has no heading task."""
     for task in tasks:
         inner, observer = _unwrap(task)
         kind = _KINDS.get(type(inner))
         if kind is None or (observer is not None and kind not in (ct.POSITION, ct.ORIENTATION)):
             return False
+        if planar and kind == ct.SPIN:
+            return False
     return bool(tasks)
+
+
+def structure(tasks: Sequence[object]) -> tuple[object, ...]:
+    """What a compiled stack is built from and reads only then: the task objects, the tasks an
+    observer wraps, each frame task's site, each posture task's columns. A stack serves a task
+    list only while this is unchanged (a target or a gain may change every step)."""
+    parts: list[object] = []
+    for task in tasks:
+        inner, _ = _unwrap(task)
+        columns = getattr(inner, "columns", None)
+        parts.append(
+            (
+                id(task),
+                id(inner),
+                getattr(inner, "site", None),
+                None if columns is None else np.asarray(columns).tobytes(),
+            )
+        )
+    return tuple(parts)
 
 
 class CompiledTaskStack:
     """One task list's arrays and snapshot buffers (module docstring)."""
 
     def __init__(self, robot: RobotModel, probe: MotionProbe, tasks: Sequence[object]) -> None:
-        if not supports(tasks):
+        if not supports(tasks, robot.layout.planar):
             raise ValueError("CompiledTaskStack: a task of a kind the compiled rows do not know")
+        if probe.model is not robot.model:
+            raise ValueError("the motion probe must be on the robot's own model")
         m, lay = robot.model, robot.layout
         self.tasks = list(tasks)
+        self._structure = structure(tasks)
+        self._robot = robot
         self._probe = probe
         inner = [_unwrap(task) for task in tasks]
         self._inner = [task for task, _ in inner]
@@ -194,6 +220,8 @@ class CompiledTaskStack:
         self.observer_memory = np.zeros((max(len(observers), 1), 4, 3))
         self.observer_settings = np.zeros((max(len(observers), 1), 3))
         self.observers = np.full(len(tasks), -1, dtype=np.int64)
+        # 1: the observer advances at this state; 0: it already has (its command is memoised)
+        self.observer_advance = np.ones(max(len(observers), 1), dtype=np.int64)
         slot = 0
         self._observer_rows: list[tuple[object, int, int]] = []
         for k, (_, observer) in enumerate(inner):
@@ -222,7 +250,6 @@ class CompiledTaskStack:
         self.probe_jac = np.zeros((n_sites + 1, 6, nv))
         self.probe_jac_dot = np.zeros((n_sites + 1, 6, nv))
         self._theta = bool((self.kinds == ct.THETA).any())
-        self._base = lay.base_body
         self.bodies = np.array([lay.base_body, *lay.wheel_bodies], dtype=np.int64)
         # views on MuJoCo's arrays, read by the compiled call as they are (no copies); an
         # attribute read makes a new view, so they are made once
@@ -233,10 +260,19 @@ class CompiledTaskStack:
         self._probe_subtree = (pd.subtree_com, pd.xipos, pd.subtree_linvel, pd.cfrc_int)
         self._probe_qacc = pd.qacc
         self._probe_qpos, self._probe_qvel = pd.qpos[: lay.nq], pd.qvel[: lay.nv]
-        self._probe_address = pd._address
         self._site_bodies = m.site_bodyid[self.site_ids].astype(np.int64)
         self._layout_ints, self._body_qpos, self._body_dof = lay.kernel_arrays()
         self._wheel_radius, self._wheel_separation = lay.wheel_radius, lay.wheel_separation
+
+    def matches(self, tasks: Sequence[object]) -> bool:
+        """Whether this stack serves ``tasks`` (:func:`structure` unchanged)."""
+        return structure(tasks) == self._structure
+
+    def __getstate__(self) -> dict[str, object]:
+        raise TypeError(
+            "a compiled task stack holds views on MuJoCo's arrays: build a new one from the "
+            "tasks instead of copying it (TaskQP does so by itself)"
+        )
 
     def _fill_snapshot(self, robot: RobotModel) -> None:
         """Step 1 of the module docstring: one compiled call (:func:`snapshot`); the results
@@ -244,7 +280,7 @@ class CompiledTaskStack:
         snapshot(
             robot.model._address,
             robot.data._address,
-            self._probe_address,
+            self._probe.data._address,
             robot.q,
             robot.nu,
             robot.Jdot_tf_nu,
@@ -296,7 +332,13 @@ class CompiledTaskStack:
     def fill(self, robot: RobotModel, J: Array, target: Array, jdot_nu: Array, w: Array) -> None:
         """The stacked rows ``J``, ``xdd*``, ``Jdot nu`` and weights ``w`` of this state (the
         same as the task objects' ``jacobian``, ``reference_acceleration``, ``jdot_nu`` and
-        ``weights``, tested), advancing the observers once."""
+        ``weights``, tested), advancing the observers once per state (a second call at the
+        same state takes their memoised commands, as their Python path does)."""
+        if robot is not self._robot:
+            raise ValueError("a compiled task stack serves the robot model it was built for")
+        cache = robot.cache
+        for slot, (key, _, _) in enumerate(self._observer_rows):
+            self.observer_advance[slot] = key not in cache
         self._fill_snapshot(robot)
         self._pack_parameters(w)
         scalars = self.scalars
@@ -332,11 +374,11 @@ class CompiledTaskStack:
             *self._model_arrays,
             self.observer_memory,
             self.observer_settings,
+            self.observer_advance,
             J,
             target,
             jdot_nu,
         )
         # an observer advances once per state: its command memoised as its Python path does
-        cache = robot.cache
         for key, start, stop in self._observer_rows:
             cache[key] = target[start:stop].copy()
