@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import dataclasses
 import pickle
+from concurrent.futures import Future
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -12,49 +14,94 @@ import pytest
 
 import wip_gym  # noqa: F401
 from controllers.hierarchical import HierarchicalConfig, HierarchicalController
+from controllers.high_level.mpc import ModelPredictiveController, MPCStep
 from controllers.high_level.receding_horizon import HighLevel, HighLevelConfig
 
 STEPS = 45
 
 
-def _run(delay: int) -> tuple[np.ndarray, list[int]]:
+def _run(delay: int) -> tuple[np.ndarray, list[Any], list[Any], HierarchicalController]:
+    """``STEPS`` steps of PlanarTray; the actions, the MPC solution in use at each step, and
+    every MPC call ``(index, state, params, solution)`` in the order made."""
     env = gym.make("wip_gym/PlanarTray-v0", max_episode_steps=-1)
     obs, info = env.reset(seed=4)
     config = HierarchicalConfig(high_level=HighLevelConfig(mpc_delay_steps=delay))
     policy = HierarchicalController.for_env(env, config)
     policy.reset(obs, info)
-    actions, starts = [], []
+    mpc = policy.high_level.mpc
+    calls: list[Any] = []
+    solve = mpc.step
+
+    def recorded(index: int, state: np.ndarray, params: Any) -> MPCStep:
+        solution = solve(index, state, params)
+        calls.append((index, np.array(state), params, solution))
+        return solution
+
+    mpc.step = recorded  # type: ignore[method-assign]
+    actions, in_use = [], []
     for _ in range(STEPS):
         action = policy(obs)
         actions.append(action)
-        starts.append(policy.high_level._last_start)
+        in_use.append(policy.high_level.last_solution)
         obs, *_ = env.step(action)
     env.close()
-    return np.array(actions), starts
+    return np.array(actions), in_use, calls, policy
 
 
-def test_delayed_solutions_are_used_d_steps_after_their_state() -> None:
+def test_delayed_solutions_are_the_solves_of_d_steps_before() -> None:
     delay = 4
-    actions, starts = _run(delay)
-    # the first solve is synchronous; every later one starts at a multiple of 10 steps and is
-    # in use from d steps after it
-    expected = [0 if k < 10 + delay else 10 * ((k - delay) // 10) for k in range(STEPS)]
-    assert starts == expected
-    again, _ = _run(delay)
-    np.testing.assert_array_equal(actions, again)  # deterministic: threads do not leak timing
-    synchronous, sync_starts = _run(0)
-    assert sync_starts == [10 * (k // 10) for k in range(STEPS)]
-    # the same until the first tick whose solve is delayed; then the older prediction
+    actions, in_use, calls, policy = _run(delay)
+    # one solve per 10 steps; step k uses the one started at the last tick at least d steps
+    # before it (the first solve, at step 0, is synchronous)
+    assert [index for index, *_ in calls] == [0, 1, 2, 3, 4]
+    for k, solution in enumerate(in_use):
+        tick = 0 if k < 10 + delay else (k - delay) // 10
+        assert solution is calls[tick][3], k
+    # the same solves made synchronously in the same order give the same solutions
+    replay = ModelPredictiveController(policy.plan, policy.config.high_level.mpc)
+    for index, state, params, solution in calls:
+        again = replay.step(index, state, params)
+        np.testing.assert_array_equal(again.predicted_states, solution.predicted_states)
+        np.testing.assert_array_equal(again.predicted_controls, solution.predicted_controls)
+    repeat, *_ = _run(delay)
+    np.testing.assert_array_equal(actions, repeat)  # deterministic: no timing leaks in
+    synchronous, *_ = _run(0)
     np.testing.assert_array_equal(actions[:10], synchronous[:10])
-    assert not np.allclose(actions[10:], synchronous[10:])
+    assert np.abs(actions[10:] - synchronous[10:]).max() > 1e-6  # then an older prediction
 
 
-def test_delay_is_validated_and_the_high_level_pickles() -> None:
+def test_reset_with_a_solve_pending_and_rejections_counted_in_use() -> None:
+    actions, in_use, calls, policy = _run(3)
+    high_level = policy.high_level
+    used = {id(solution): solution for solution in in_use}  # every solution taken into use
+    assert high_level.rejections == sum(not s.accepted for s in used.values())
+    env = gym.make("wip_gym/PlanarTray-v0", max_episode_steps=-1)
+    obs, info = env.reset(seed=1)
+    for _ in range(10):  # until a tick's solve is pending
+        obs, *_ = env.step(policy(obs))
+        if high_level._pending is not None:
+            break
+    assert high_level._pending is not None
+    policy.reset(obs, info)
+    assert high_level._pending is None and high_level.rejections == 0
+    high_level.close()
+    env.close()
+
+
+def test_delay_is_validated_and_a_pending_solve_survives_pickling() -> None:
     with pytest.raises(ValueError, match="mpc_delay_steps"):
         HighLevel(HighLevelConfig(mpc_delay_steps=10), 1e-3)
     with pytest.raises(ValueError, match="mpc_delay_steps"):
         HighLevel(dataclasses.replace(HighLevelConfig(), mpc_delay_steps=-1), 1e-3)
+    short = dataclasses.replace(HighLevelConfig().mpc, horizon_s=0.01)
+    with pytest.raises(ValueError, match="at least 2 steps"):
+        HighLevel(HighLevelConfig(mpc=short, mpc_delay_steps=3), 1e-3)
     high_level = HighLevel(HighLevelConfig(mpc_delay_steps=3), 1e-3)
-    high_level._executor = __import__("concurrent.futures").futures.ThreadPoolExecutor(1)
+    solution = MPCStep(np.zeros(1), np.ones((3, 2)), np.zeros((2, 1)), 0.0, True)
+    future: Future[MPCStep] = Future()
+    future.set_result(solution)
+    high_level._pending = (future, 20)
     copy = pickle.loads(pickle.dumps(high_level))
     assert copy._executor is None and copy.config.mpc_delay_steps == 3
+    assert copy._pending is not None and copy._pending[1] == 20
+    np.testing.assert_array_equal(copy._pending[0].result().predicted_states, np.ones((3, 2)))

@@ -23,7 +23,7 @@ import numpy as np
 
 from controllers.high_level.mpc import ModelPredictiveController, MPCConfig, MPCStep
 from controllers.high_level.planning import Plan, PlanConfig, plan_to_goal
-from controllers.simplified.wipm import params_from_lambda
+from controllers.simplified.wipm import WIPMParams, params_from_lambda
 from controllers.simplified.wipm_problem import wipm_state
 from wip_gym.robot_model import RobotModel
 
@@ -80,14 +80,37 @@ class HighLevel:
         self._last_start = 0  # the control step whose state self._last was solved from
         self._pending: tuple[Future[MPCStep], int] | None = None
         self._executor: ThreadPoolExecutor | None = None
+        self._rejections = 0
+        if config.mpc_delay_steps > 0 and config.mpc.steps < 2:
+            raise ValueError(
+                "a delayed MPC reads its prediction one MPC step further: its horizon must hold "
+                f"at least 2 steps, got {config.mpc.steps}"
+            )
+
+    def _discard_pending(self) -> None:
+        """Wait for a background solve and drop it (its episode is over)."""
+        if self._pending is not None:
+            future, _ = self._pending
+            self._pending = None
+            future.exception()  # waits; an error of a finished episode's solve is not raised
 
     def __getstate__(self) -> dict[str, object]:
         state = self.__dict__.copy()
         state["_executor"] = None  # threads do not pickle; made again when needed
-        state["_pending"] = None
+        if self._pending is not None:  # its solution, kept to be used at the same step
+            future, start = self._pending
+            state["_pending"] = (future.result(), start)
         return state
 
-    def _solve_later(self, index: int, state: np.ndarray, params: object) -> None:
+    def __setstate__(self, state: dict[str, object]) -> None:
+        self.__dict__.update(state)
+        if self._pending is not None:
+            solution, start = self._pending
+            done: Future[MPCStep] = Future()
+            done.set_result(solution)  # type: ignore[arg-type]
+            self._pending = (done, start)  # type: ignore[assignment]
+
+    def _solve_later(self, index: int, state: np.ndarray, params: WIPMParams) -> None:
         if self._executor is None:
             self._executor = ThreadPoolExecutor(1, thread_name_prefix="wip-gym-mpc")
         assert self.mpc is not None
@@ -98,11 +121,18 @@ class HighLevel:
         if self._pending is not None:
             future, start = self._pending
             self._pending = None
-            self._last, self._last_start = future.result(), start
+            self._use(future.result(), start)
+
+    def _use(self, solution: MPCStep, start: int) -> None:
+        """``solution``, solved from step ``start``'s state, in use from now on (counted on the
+        control thread: the counters do not depend on the background thread's timing)."""
+        self._last, self._last_start = solution, start
+        self._rejections += not solution.accepted
 
     def reset(self, robot: RobotModel, goal_xy: np.ndarray, cup_friction: float | None) -> Plan:
         """Plan from the robot's current state to the goal, build the MPC and run (and so
         compile) its first step. ``robot`` must be updated with dynamics."""
+        self._discard_pending()  # a solve still running from the last episode
         self.params = params_from_lambda(robot.wipm_parameters())
         state = wipm_state(robot)
         self.plan = plan_to_goal(
@@ -115,10 +145,10 @@ class HighLevel:
         )
         # one solve now compiles the MPC (reset does the slow work); then start afresh
         ModelPredictiveController(self.plan, self.config.mpc).step(0, state, self.params)
-        self._wait_pending()  # a solve still running from the last episode: let it end
         self.mpc = ModelPredictiveController(self.plan, self.config.mpc)
         self._step = 0
         self._last = None
+        self._rejections = 0
         return self.plan
 
     def reference(self, robot: RobotModel) -> HighLevelSetpoint:
@@ -133,7 +163,7 @@ class HighLevel:
             self.params = params_from_lambda(robot.wipm_parameters())
             state = wipm_state(robot)
             if delay == 0 or self._last is None:
-                self._last, self._last_start = self.mpc.step(index, state, self.params), self._step
+                self._use(self.mpc.step(index, state, self.params), self._step)
             else:
                 self._solve_later(index, state, self.params)
         if self._pending is not None and self._step >= self._pending[1] + delay:
@@ -179,5 +209,13 @@ class HighLevel:
 
     @property
     def rejections(self) -> int:
-        """The MPC solutions rejected since ``reset`` (0 before it)."""
-        return 0 if self.mpc is None else self.mpc.rejected
+        """The MPC solutions rejected since ``reset`` (0 before it), counted when a solution is
+        taken into use (a solve still running in the background is not counted yet)."""
+        return self._rejections
+
+    def close(self) -> None:
+        """Let a background solve end and stop the MPC's thread (made again if needed)."""
+        self._wait_pending()
+        if self._executor is not None:
+            self._executor.shutdown()
+            self._executor = None
