@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import mujoco
 import numpy as np
+import pytest
 from dynamics_reference import random_minimal_state
 from numba import njit
 
@@ -84,3 +85,11 @@ def test_compiled_calls_equal_the_bindings() -> None:
     for ours, theirs in zip(*results, strict=True):
         np.testing.assert_array_equal(ours, theirs)
     assert np.isfinite(results[0][-1]).all() and np.abs(results[0][-1]).max() > 0
+
+
+def test_an_untested_mujoco_release_is_refused(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(mujoco, "__version__", "3.99.0")
+    with pytest.raises(ImportError, match=r"3\.99\.0 is not one of the releases"):
+        mjc._check_version()
+    monkeypatch.setattr(mujoco, "__version__", "3.17.2")
+    mjc._check_version()  # a patch release of a tested one is accepted

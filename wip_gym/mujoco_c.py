@@ -5,8 +5,9 @@ The compiled parts of the per-step computation (``wip_gym.minimal_kernels``,
 directly, so that a control step is a few compiled calls instead of dozens of Python-level
 ones. The shared library that the ``mujoco`` package ships is loaded once (``llvmlite``), and
 each function is declared by its C name and signature (``mujoco/include/mujoco/mujoco.h`` of
-the installed version, 3.x); the call is resolved by symbol when the compiled code is loaded, so
-numba's on-disk cache stays valid across processes.
+the releases in :data:`TESTED_VERSIONS`; another release is refused at import); the call is
+resolved by symbol when the compiled code is loaded, so numba's on-disk cache stays valid
+across processes.
 
 Arguments are addresses: ``model._address`` and ``data._address`` of the ``mujoco.MjModel`` and
 ``mujoco.MjData`` (whose Python objects must outlive the call), ``array.ctypes.data`` of
@@ -25,6 +26,20 @@ import mujoco
 from numba import types
 
 _PATTERNS = ("libmujoco.so*", "libmujoco*.dylib", "mujoco.dll")
+TESTED_VERSIONS = ("3.17",)
+"""MuJoCo releases whose ``mujoco.h`` these declarations were checked against: a C signature
+that changed (``mj_fullM``'s did in 3.x) would corrupt memory instead of raising, so another
+release is refused until ``tests/test_mujoco_c.py`` has passed on it and it is added here."""
+
+
+def _check_version() -> None:
+    release = ".".join(mujoco.__version__.split(".")[:2])
+    if release not in TESTED_VERSIONS:
+        raise ImportError(
+            f"wip_gym.mujoco_c: MuJoCo {mujoco.__version__} is not one of the releases its C "
+            f"declarations were checked against ({', '.join(TESTED_VERSIONS)}); install "
+            "mujoco 3.17 (pyproject.toml pins it)"
+        )
 
 
 def library_path() -> str:
@@ -37,6 +52,7 @@ def library_path() -> str:
     raise RuntimeError(f"no MuJoCo shared library ({', '.join(_PATTERNS)}) in {directory}")
 
 
+_check_version()
 llvm.load_library_permanently(library_path())
 
 _ptr = types.uint64  # a pointer, passed as its address
