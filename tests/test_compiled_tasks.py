@@ -158,7 +158,7 @@ def test_task_qp_compiled_and_python_paths_solve_alike() -> None:
         robot.update(*robot.full_state(*random_minimal_state(robot, rng)))
         tasks = _realistic_tasks(robot)
         a, b = compiled.solve(robot, None, tasks), python.solve(robot, None, tasks)
-        assert compiled._stack is not None and compiled._stack.tasks == tasks
+        assert compiled.compiled and not python.compiled and compiled._stack.tasks == tasks
         _close(a.actuators, b.actuators, 1e-9)
         _close(a.qdd, b.qdd, 1e-9)
 
@@ -224,7 +224,7 @@ def test_compiled_rows_on_an_oracle_model_with_the_cup() -> None:
         robot.update(*robot.full_state(*random_minimal_state(robot, rng)))
         tasks = _realistic_tasks(robot)
         a, b = compiled.solve(robot, None, tasks), python.solve(robot, None, tasks)
-        assert compiled._stack is not None
+        assert compiled.compiled
         _close(a.actuators, b.actuators, 1e-9)
     env.close()
 

@@ -59,7 +59,7 @@ class KernelLayout:
     torque_low: Array
     torque_high: Array
     limit_columns: Array
-    limit_indices: Array
+    limit_indices: NDArray[np.int64]
     limit_min: Array
     limit_max: Array
     limit_horizon: float
@@ -91,6 +91,8 @@ class LowLevelKernel:
         self.upper = np.zeros(m + n_limit)
         self.x = np.zeros(n)
         self._m = m
+        # the joints' ranges, fixed when the kernel is made (the model's jnt_range); the torque
+        # limits are read at every call
         self._limits = np.array([layout.limit_min, layout.limit_max], dtype=float).reshape(
             2, n_limit
         )
@@ -173,7 +175,7 @@ def kernel_step(
     torque_low: Array,
     torque_high: Array,
     limits: Array,
-    limit_indices: Array,
+    limit_indices: NDArray[np.int64],
     constants: Array,
     T: Array,
     b: Array,
@@ -297,7 +299,7 @@ def rows_and_solve(
     torque_low: Array,
     torque_high: Array,
     limits: Array,
-    limit_indices: Array,
+    limit_indices: NDArray[np.int64],
     constants: Array,
     T: Array,
     b: Array,

@@ -169,6 +169,7 @@ class TaskQP:
         self._rows = -1
         self._feasible = False
         self._stack: CompiledTaskStack | None = None
+        self.compiled = False  # whether the last step's rows came from the compiled call
 
     def _buffers(self, rows: int, n_min: int) -> None:
         """(Re)allocate the task-row buffers and the kernel for ``rows`` rows (once per task
@@ -229,6 +230,7 @@ class TaskQP:
         """The stacked tasks' ``J``, reference accelerations, weights and ``Jdot nu`` into
         the row buffers: by one compiled call when the tasks allow, else task by task."""
         stack = self._compiled_stack(robot, tasks)
+        self.compiled = stack is not None
         if stack is not None:
             self._ensure_buffers(stack.rows, robot.layout.n_min)
             stack.fill(robot, self._J, self._target, self._bias, self._w)
