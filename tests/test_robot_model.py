@@ -274,3 +274,23 @@ def test_compiled_arithmetic_equals_numpy(robot: RobotModel) -> None:
         assert robot.theta == pytest.approx(np.arctan2(X, Z), abs=1e-14)
         np.testing.assert_allclose(robot.J_theta, J_theta, rtol=0, atol=1e-12)
         assert robot.thetad == pytest.approx(float(J_theta @ robot.nu), abs=1e-12)
+
+
+def test_body_inertia_about_the_axle_equals_the_sum_over_bodies(robot: RobotModel) -> None:
+    """``body_inertia_about_axle`` (compiled) against the parallel-axis sum written with
+    NumPy, on random states; its pitch entry is ``A[q1, q1]`` (eq. ``dyn``'s inertia)."""
+    m, d, lay = robot.model, robot.data, robot.layout
+    rng = np.random.default_rng(23)
+    for _ in range(4):
+        robot.update(*robot.full_state(*random_minimal_state(robot, rng)))
+        ids = np.array(lay.body_bodies)
+        Rh = robot.heading_rotation
+        rot = np.einsum("ji,njk->nik", Rh, d.ximat[ids].reshape(-1, 3, 3))  # Rh^T R_i
+        inertia = np.einsum("nij,nj,nkj->ik", rot, m.body_inertia[ids], rot)
+        p = (d.xipos[ids] - d.xpos[lay.base_body]) @ Rh
+        outer = np.einsum("ni,nj->nij", p, p)
+        squares = np.einsum("ni,ni->n", p, p)[:, None, None] * np.eye(3)
+        inertia += np.einsum("n,nij->ij", m.body_mass[ids], squares - outer)
+        np.testing.assert_allclose(robot.body_inertia_about_axle(), inertia, rtol=0, atol=1e-12)
+        pitch = robot.body_inertia_about_axle()[1, 1]
+        assert pitch == pytest.approx(robot.A[lay.index_q1, lay.index_q1], rel=1e-10)

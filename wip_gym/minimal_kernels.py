@@ -219,6 +219,38 @@ def body_com(
 
 
 @njit(cache=True)
+def inertia_about_point(
+    ximat: np.ndarray,
+    xipos: np.ndarray,
+    body_inertia: np.ndarray,
+    body_mass: np.ndarray,
+    ids: np.ndarray,
+    point: np.ndarray,
+    heading: np.ndarray,
+) -> np.ndarray:
+    """The inertia tensor of the bodies ``ids`` about ``point``, in the frame ``heading``
+    (world from frame): ``sum_i Rh^T R_i diag(I_i) R_i^T Rh + m_i (|p_i|^2 1 - p_i p_i^T)``
+    with ``p_i = Rh^T (c_i - point)`` (``RobotModel.body_inertia_about_axle``)."""
+    out = np.zeros((3, 3))
+    for i in ids:
+        R = ximat[i].reshape(3, 3)
+        rot = heading.T @ R
+        for a in range(3):
+            for b in range(3):
+                total = 0.0
+                for k in range(3):
+                    total += rot[a, k] * body_inertia[i, k] * rot[b, k]
+                out[a, b] += total
+        p = heading.T @ (xipos[i] - point)
+        square = p[0] * p[0] + p[1] * p[1] + p[2] * p[2]
+        m = body_mass[i]
+        for a in range(3):
+            for b in range(3):
+                out[a, b] += m * ((square if a == b else 0.0) - p[a] * p[b])
+    return out
+
+
+@njit(cache=True)
 def robot_update(
     model: int,
     data: int,

@@ -32,7 +32,7 @@ import mujoco
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from wip_gym.minimal_kernels import idealised_state, robot_update
+from wip_gym.minimal_kernels import idealised_state, inertia_about_point, robot_update
 
 Array = NDArray[np.float64]
 
@@ -506,18 +506,15 @@ class RobotModel:
         """The body's (wheels excluded) inertia tensor about the axle midpoint, axle frame."""
         self._require()
         m, d = self.model, self.data
-        ids = self._body_ids
-        Rh = self.heading_rotation
-        rot = np.einsum("ji,njk->nik", Rh, d.ximat[ids].reshape(-1, 3, 3))  # Rh^T R_i
-        inertia = np.einsum("nij,nj,nkj->ik", rot, m.body_inertia[ids], rot)
-        p = (d.xipos[ids] - d.xpos[self.layout.base_body]) @ Rh
-        mass = m.body_mass[ids]
-        inertia += np.einsum(
-            "n,nij->ij",
-            mass,
-            np.einsum("ni,ni->n", p, p)[:, None, None] * np.eye(3) - np.einsum("ni,nj->nij", p, p),
+        return inertia_about_point(
+            d.ximat,
+            d.xipos,
+            m.body_inertia,
+            m.body_mass,
+            self._body_ids,
+            d.xpos[self.layout.base_body],
+            np.ascontiguousarray(self.heading_rotation),
         )
-        return inertia
 
     def wipm_parameters(self) -> WIPMParameters:
         """``lambda(q)`` at the current state (see :class:`WIPMParameters`)."""
