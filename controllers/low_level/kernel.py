@@ -16,7 +16,7 @@ matrix product); 3. ``H = T^T T + eps I``, ``g = -T^T b``;
    solves) and whether it meets every constraint (then it is the convex QP's optimum and no QP
    solver is needed).
 
-Compiled by numba (two calls: step 1, steps 2 to 5). For these sizes (Krang: 18 variables, 31
+Compiled by numba, one call for the five steps. For these sizes (Krang: 18 variables, 31
 task rows, 34 constraint rows) the arithmetic costs less than one call of a jitted JAX
 function, and NumPy spends more in its per-call overhead than in arithmetic:
 ``benchmarks/speed/low_level_kernel_bench.py`` measures the three.
@@ -186,36 +186,46 @@ def kernel_step(
     upper: Array,
     x: Array,
 ) -> bool:
-    """Steps 1 (unless ``with_iso`` is False: ``calA``, ``Ph``, ``E``, ``e`` given) to 5 in one
-    call: :func:`isolated_dynamics_into`, then :func:`rows_and_solve`."""
+    """Steps 1 (:func:`isolated_dynamics_into`; skipped when ``with_iso`` is False: ``calA``,
+    ``Ph``, ``E``, ``e`` given) to 5 in one call. ``limits``: rows joint-limit min and max;
+    ``constants``: ``(limit_horizon, regularization)``."""
     if with_iso:
         isolated_dynamics_into(A, h, k, r, calA, Ph, E, e)
-    return rows_and_solve(
-        J,
-        target,
-        jdot_nu,
-        w,
-        q,
-        nu,
-        calA,
-        Ph,
-        E,
-        e,
-        actuator_map,
-        torque_low,
-        torque_high,
-        limits,
-        limit_indices,
-        constants,
-        T,
-        b,
-        H,
-        g,
-        C,
-        lower,
-        upper,
-        x,
-    )
+    horizon, regularization = constants[0], constants[1]
+    E0, e0 = E[0], e[0]
+    rows, n = T.shape
+    # 2. task rows
+    for i in range(rows):
+        column = J[i, 0]
+        for j in range(n):
+            T[i, j] = (column * E0[j] + J[i, 1 + j]) * w[i]
+        b[i] = (target[i] - jdot_nu[i] - column * e0) * w[i]
+    # 3. the cost
+    H[:] = gram(T)
+    for i in range(n):
+        H[i, i] += regularization
+    g[:] = -matvec_transposed(T, b)
+    # 4. constraints
+    m = actuator_map.shape[0]
+    C[:m] = matmul(actuator_map, calA)
+    offset = matvec(actuator_map, Ph)
+    for i in range(m):
+        lower[i] = torque_low[i] - offset[i]
+        upper[i] = torque_high[i] - offset[i]
+    square = horizon * horizon
+    for i in range(len(limit_indices)):
+        index = limit_indices[i]
+        drift = q[index] + nu[index] * horizon
+        lower[m + i] = (limits[0, i] - drift) * 2.0 / square
+        upper[m + i] = (limits[1, i] - drift) * 2.0 / square
+    # 5. the unconstrained minimiser and its feasibility
+    if not _cholesky_solve(H, -g, x):
+        return False
+    Cx = matvec(C, x)
+    for i in range(len(Cx)):  # noqa: SIM110 (a generator in all() does not compile)
+        if not (np.isfinite(Cx[i]) and lower[i] <= Cx[i] <= upper[i]):
+            return False
+    return True
 
 
 @njit(cache=True)
@@ -280,72 +290,6 @@ def _cholesky_solve(H: Array, rhs: Array, x: Array) -> bool:
         for p in range(i + 1, n):
             v -= L[p, i] * x[p]
         x[i] = v / L[i, i]
-    return True
-
-
-@njit(cache=True)
-def rows_and_solve(
-    J: Array,
-    target: Array,
-    jdot_nu: Array,
-    w: Array,
-    q: Array,
-    nu: Array,
-    calA: Array,
-    Ph: Array,
-    E: Array,
-    e: Array,
-    actuator_map: Array,
-    torque_low: Array,
-    torque_high: Array,
-    limits: Array,
-    limit_indices: NDArray[np.int64],
-    constants: Array,
-    T: Array,
-    b: Array,
-    H: Array,
-    g: Array,
-    C: Array,
-    lower: Array,
-    upper: Array,
-    x: Array,
-) -> bool:
-    """Steps 2 to 5. ``limits``: rows joint-limit min and max; ``constants``:
-    ``(limit_horizon, regularization)``."""
-    horizon, regularization = constants[0], constants[1]
-    E0, e0 = E[0], e[0]
-    rows, n = T.shape
-    # 2. task rows
-    for i in range(rows):
-        column = J[i, 0]
-        for j in range(n):
-            T[i, j] = (column * E0[j] + J[i, 1 + j]) * w[i]
-        b[i] = (target[i] - jdot_nu[i] - column * e0) * w[i]
-    # 3. the cost
-    H[:] = gram(T)
-    for i in range(n):
-        H[i, i] += regularization
-    g[:] = -matvec_transposed(T, b)
-    # 4. constraints
-    m = actuator_map.shape[0]
-    C[:m] = matmul(actuator_map, calA)
-    offset = matvec(actuator_map, Ph)
-    for i in range(m):
-        lower[i] = torque_low[i] - offset[i]
-        upper[i] = torque_high[i] - offset[i]
-    square = horizon * horizon
-    for i in range(len(limit_indices)):
-        index = limit_indices[i]
-        drift = q[index] + nu[index] * horizon
-        lower[m + i] = (limits[0, i] - drift) * 2.0 / square
-        upper[m + i] = (limits[1, i] - drift) * 2.0 / square
-    # 5. the unconstrained minimiser and its feasibility
-    if not _cholesky_solve(H, -g, x):
-        return False
-    Cx = matvec(C, x)
-    for i in range(len(Cx)):  # noqa: SIM110 (a generator in all() does not compile)
-        if not (np.isfinite(Cx[i]) and lower[i] <= Cx[i] <= upper[i]):
-            return False
     return True
 
 
