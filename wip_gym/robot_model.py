@@ -563,20 +563,11 @@ class RobotModel:
             raise ValueError(f"axle_xy must be (x, y), got {axle_xy!r}")
         qpos = np.zeros(lay.nq)
         qvel = np.zeros(lay.nv)
-        self.full_state_into(q, nu, float(axle[0]), float(axle[1]), qpos, qvel)
-        return qpos, qvel
-
-    def full_state_into(
-        self, q: Array, nu: Array, axle_x: float, axle_y: float, qpos: Array, qvel: Array
-    ) -> None:
-        """:meth:`full_state` written into ``qpos``, ``qvel`` (the robot's own ``nq``, ``nv``
-        entries; float64 arrays, not checked: the per-step path of the motion probe)."""
-        lay = self.layout
         idealised_state(
             q,
             nu,
-            axle_x,
-            axle_y,
+            float(axle[0]),
+            float(axle[1]),
             self._layout_ints,
             self._body_qpos,
             self._body_dof,
@@ -585,6 +576,7 @@ class RobotModel:
             qpos,
             qvel,
         )
+        return qpos, qvel
 
 
 def _read_only(array: Array) -> Array:

@@ -23,8 +23,11 @@ from __future__ import annotations
 
 import mujoco
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
+from wip_gym import mujoco_c as mjc
+from wip_gym.minimal_kernels import idealised_state
 from wip_gym.robot_model import RobotModel
 
 Array = NDArray[np.float64]
@@ -43,6 +46,48 @@ def _less_wheels(
         (M * c[1] - m_l * lw[1] - m_r * rw[1]) / mass,
         (M * c[2] - m_l * lw[2] - m_r * rw[2]) / mass,
     )
+
+
+@njit(cache=True)
+def idealise(
+    model: int,
+    probe_data: int,
+    q: np.ndarray,
+    nu: np.ndarray,
+    axle_x: float,
+    axle_y: float,
+    layout: np.ndarray,
+    body_qpos: np.ndarray,
+    body_dof: np.ndarray,
+    wheel_radius: float,
+    wheel_separation: float,
+    probe_qpos: np.ndarray,
+    probe_qvel: np.ndarray,
+    probe_qacc0: np.ndarray,
+    Jdot_tf_nu: np.ndarray,
+) -> None:
+    """The probe's state for the robot's minimal state ``(q, nu)``: ``full_state(q, nu)`` at
+    the axle's position into the probe's ``qpos``, ``qvel`` (the robot's own entries), its
+    kinematics, ``mj_comPos`` and ``mj_comVel`` (``wip_gym.mujoco_c``), and ``qacc_0 = Jdot_tf
+    nu`` (``qacc = J_tf nu_dot + Jdot_tf nu`` at ``nu_dot = 0``; over every dof of the model, a
+    cup's too: zero). Shared by :meth:`MotionProbe.update` and the compiled task snapshot."""
+    idealised_state(
+        q,
+        nu,
+        axle_x,
+        axle_y,
+        layout,
+        body_qpos,
+        body_dof,
+        wheel_radius,
+        wheel_separation,
+        probe_qpos,
+        probe_qvel,
+    )
+    mjc.mj_kinematics(model, probe_data)
+    mjc.mj_comPos(model, probe_data)
+    mjc.mj_comVel(model, probe_data)
+    probe_qacc0[:] = Jdot_tf_nu
 
 
 class MotionProbe:
@@ -76,6 +121,8 @@ class MotionProbe:
         self._site_body = m.site_bodyid.copy()
         self._planar = lay.planar
         self._index_psi = lay.index_psi
+        self._layout_ints, self._body_qpos, self._body_dof = lay.kernel_arrays()
+        self._wheel_radius, self._wheel_separation = lay.wheel_radius, lay.wheel_separation
         self._bind_views()
 
     def _bind_views(self) -> None:
@@ -94,21 +141,33 @@ class MotionProbe:
         self._bind_views()
 
     def update(self, robot: RobotModel) -> None:
-        m, d = self.model, self.data
-        x, y = robot.data.xpos[self._base, :2].tolist()
-        robot.full_state_into(
-            robot.q, robot.nu, x, y, self._qpos[: self._nq], self._qvel[: self._nv]
-        )
-        mujoco.mj_kinematics(m, d)
-        mujoco.mj_comPos(m, d)
-        mujoco.mj_comVel(m, d)
+        self.idealise(robot)
         self.qvel = self._qvel
-        # qacc = J_tf nu_dot + Jdot_tf nu, at nu_dot = 0 (J_tf depends on psi, q1 only)
-        self.qacc0[:] = robot.Jdot_tf_nu  # over every dof of the model (a cup's too: zero)
         self.psid = 0.0 if self._planar else float(robot.nu[self._index_psi])
         self.heading = robot.heading_rotation
         self._c, self._s = float(self.heading[0, 0]), float(self.heading[1, 0])
         self._memo.clear()
+
+    def idealise(self, robot: RobotModel) -> None:
+        """:func:`idealise` for ``robot``'s current state (the MuJoCo part of :meth:`update`)."""
+        x, y = robot.data.xpos[self._base, :2].tolist()
+        idealise(
+            self.model._address,
+            self.data._address,
+            robot.q,
+            robot.nu,
+            x,
+            y,
+            self._layout_ints,
+            self._body_qpos,
+            self._body_dof,
+            self._wheel_radius,
+            self._wheel_separation,
+            self._qpos[: self._nq],
+            self._qvel[: self._nv],
+            self.qacc0,
+            robot.Jdot_tf_nu,
+        )
 
     def _point(self, position: Array, body: int) -> tuple[Vec, Vec, Vec, Vec]:
         """Linear velocity, drift acceleration, angular velocity, angular drift (world) of a

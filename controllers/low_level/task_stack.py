@@ -36,10 +36,21 @@ from controllers.low_level.tasks import (
     ThetaTask,
 )
 from wip_gym import mujoco_c as mjc
-from wip_gym.minimal_kernels import idealised_state
 from wip_gym.robot_model import RobotModel
 
 Array = NDArray[np.float64]
+
+
+@njit(cache=True)
+def _point_jacobians(
+    model: int, data: int, jac: np.ndarray, jac_dot: np.ndarray, point: np.ndarray, body: int
+) -> None:
+    """``[jacp; jacr]`` of a point attached to ``body`` and its time derivative
+    (``mj_jac``, ``mj_jacDot``) into the 6-row ``jac`` and ``jac_dot``."""
+    mjc.mj_jac(model, data, jac[:3].ctypes.data, jac[3:].ctypes.data, point.ctypes.data, body)
+    mjc.mj_jacDot(
+        model, data, jac_dot[:3].ctypes.data, jac_dot[3:].ctypes.data, point.ctypes.data, body
+    )
 
 
 @njit(cache=True)
@@ -47,17 +58,6 @@ def snapshot(
     model: int,
     data: int,
     probe_data: int,
-    q: np.ndarray,
-    nu: np.ndarray,
-    Jdot_tf_nu: np.ndarray,
-    xpos: np.ndarray,
-    layout: np.ndarray,
-    body_qpos: np.ndarray,
-    body_dof: np.ndarray,
-    wheel_radius: float,
-    wheel_separation: float,
-    probe_qpos: np.ndarray,
-    probe_qvel: np.ndarray,
     probe_qacc: np.ndarray,
     probe_qacc0: np.ndarray,
     probe_xpos: np.ndarray,
@@ -70,66 +70,24 @@ def snapshot(
     probe_jac_dot: np.ndarray,
     theta: bool,
 ) -> None:
-    """Step 1 of the module docstring, compiled (``wip_gym.mujoco_c``): each site's
-    ``[jacp; jacr]`` at the robot's state (``data``); the motion probe's idealised state
-    (``MotionProbe.update``: ``full_state(q, nu)`` at the axle's position, its kinematics,
-    ``mj_comPos``, ``mj_comVel`` and ``qacc_0 = Jdot_tf nu``); there, the origin's and each
-    site's Jacobian and its time derivative, and with a theta task ``mj_subtreeVel`` and
-    ``mj_rnePostConstraint`` at ``qacc = qacc_0`` (the CoM drift)."""
+    """Step 1 of the module docstring, compiled (``wip_gym.mujoco_c``), once the motion probe
+    is at its idealised state (``MotionProbe.idealise``): each site's ``[jacp; jacr]`` at the
+    robot's state (``data``); at the probe's, the origin's and each site's Jacobian and its time
+    derivative, and with a theta task ``mj_subtreeVel`` and ``mj_rnePostConstraint`` at
+    ``qacc = qacc_0`` (the CoM drift)."""
     for i in range(len(site_ids)):
         mjc.mj_jacSite(
             model, data, site_jac[i, :3].ctypes.data, site_jac[i, 3:].ctypes.data, site_ids[i]
         )
     base = bodies[0]
-    idealised_state(
-        q,
-        nu,
-        xpos[base, 0],
-        xpos[base, 1],
-        layout,
-        body_qpos,
-        body_dof,
-        wheel_radius,
-        wheel_separation,
-        probe_qpos,
-        probe_qvel,
-    )
-    mjc.mj_kinematics(model, probe_data)
-    mjc.mj_comPos(model, probe_data)
-    mjc.mj_comVel(model, probe_data)
-    probe_qacc0[:] = Jdot_tf_nu
-    mjc.mj_jac(
-        model,
-        probe_data,
-        probe_jac[0, :3].ctypes.data,
-        probe_jac[0, 3:].ctypes.data,
-        probe_xpos[base].ctypes.data,
-        base,
-    )
-    mjc.mj_jacDot(
-        model,
-        probe_data,
-        probe_jac_dot[0, :3].ctypes.data,
-        probe_jac_dot[0, 3:].ctypes.data,
-        probe_xpos[base].ctypes.data,
-        base,
-    )
+    _point_jacobians(model, probe_data, probe_jac[0], probe_jac_dot[0], probe_xpos[base], base)
     for i in range(len(site_ids)):
-        point = probe_site_xpos[site_ids[i]].ctypes.data
-        mjc.mj_jac(
+        _point_jacobians(
             model,
             probe_data,
-            probe_jac[1 + i, :3].ctypes.data,
-            probe_jac[1 + i, 3:].ctypes.data,
-            point,
-            site_bodies[i],
-        )
-        mjc.mj_jacDot(
-            model,
-            probe_data,
-            probe_jac_dot[1 + i, :3].ctypes.data,
-            probe_jac_dot[1 + i, 3:].ctypes.data,
-            point,
+            probe_jac[1 + i],
+            probe_jac_dot[1 + i],
+            probe_site_xpos[site_ids[i]],
             site_bodies[i],
         )
     if theta:
@@ -259,10 +217,7 @@ class CompiledTaskStack:
         self._probe_arrays = (pd.qvel, probe.qacc0, pd.xpos, pd.site_xpos)
         self._probe_subtree = (pd.subtree_com, pd.xipos, pd.subtree_linvel, pd.cfrc_int)
         self._probe_qacc = pd.qacc
-        self._probe_qpos, self._probe_qvel = pd.qpos[: lay.nq], pd.qvel[: lay.nv]
         self._site_bodies = m.site_bodyid[self.site_ids].astype(np.int64)
-        self._layout_ints, self._body_qpos, self._body_dof = lay.kernel_arrays()
-        self._wheel_radius, self._wheel_separation = lay.wheel_radius, lay.wheel_separation
 
     def matches(self, tasks: Sequence[object]) -> bool:
         """Whether this stack serves ``tasks`` (:func:`structure` unchanged)."""
@@ -275,25 +230,16 @@ class CompiledTaskStack:
         )
 
     def _fill_snapshot(self, robot: RobotModel) -> None:
-        """Step 1 of the module docstring: one compiled call (:func:`snapshot`); the results
-        stay in MuJoCo's arrays and in the Jacobian buffers."""
+        """Step 1 of the module docstring: the probe's idealised state, then one compiled call
+        (:func:`snapshot`); the results stay in MuJoCo's arrays and the Jacobian buffers."""
+        probe = self._probe
+        probe.idealise(robot)
         snapshot(
             robot.model._address,
             robot.data._address,
-            self._probe.data._address,
-            robot.q,
-            robot.nu,
-            robot.Jdot_tf_nu,
-            self._robot_arrays[0],
-            self._layout_ints,
-            self._body_qpos,
-            self._body_dof,
-            self._wheel_radius,
-            self._wheel_separation,
-            self._probe_qpos,
-            self._probe_qvel,
+            probe.data._address,
             self._probe_qacc,
-            self._probe.qacc0,
+            probe.qacc0,
             self._probe_arrays[2],
             self._probe_arrays[3],
             self.bodies,
