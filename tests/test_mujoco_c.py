@@ -8,7 +8,7 @@ import mujoco
 import numpy as np
 import pytest
 from dynamics_reference import random_minimal_state
-from numba import njit
+from numba import carray, njit
 
 from wip_gym import mujoco_c as mjc
 from wip_gym.assets import mjcf_path
@@ -93,3 +93,23 @@ def test_an_untested_mujoco_release_is_refused(monkeypatch: pytest.MonkeyPatch) 
         mjc._check_version()
     monkeypatch.setattr(mujoco, "__version__", "3.17.2")
     mjc._check_version()  # a patch release of a tested one is accepted
+
+
+@njit
+def _through_pointer(address, rows, cols, out) -> None:
+    view = carray(mjc.float64_pointer(np.uint64(address)), (rows, cols))
+    for i in range(rows):
+        for j in range(cols):
+            out[i, j] = view[i, j]
+            view[i, j] = -view[i, j]
+
+
+def test_float64_pointer_views_the_array_at_an_address() -> None:
+    model = mujoco.MjModel.from_xml_path(str(mjcf_path("scene_krang.xml")))
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    xpos = data.xpos.copy()
+    seen = np.zeros_like(xpos)
+    _through_pointer(data.xpos.ctypes.data, model.nbody, 3, seen)
+    np.testing.assert_array_equal(seen, xpos)  # read where the data's array is
+    np.testing.assert_array_equal(data.xpos, -xpos)  # and written there

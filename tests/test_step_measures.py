@@ -4,6 +4,9 @@ kernel for states with and without contacts."""
 
 from __future__ import annotations
 
+import copy
+import pickle
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -51,3 +54,25 @@ def test_actions_of_any_layout_use_the_one_compiled_check() -> None:
     with pytest.raises(ValueError, match="NaN"):
         env.step(np.full_like(high, np.nan))
     assert len(action_effort.signatures) == 1
+
+
+def test_a_copied_env_measures_its_own_data() -> None:
+    """``env_measures`` reads MuJoCo's buffers through addresses (``address_table``): a copy of
+    the env (deepcopy, pickle) must read its own data, not the original's."""
+    env = gym.make("wip_gym/KrangTray-v0").unwrapped
+    env.reset(seed=0)
+    action = 0.1 * env.action_space.high
+    for _ in range(5):
+        env.step(action)
+    for copied in (copy.deepcopy(env), pickle.loads(pickle.dumps(env))):
+        assert copied._measure_table[1] == copied.data._address != env.data._address
+        copied.set_state(env.data.qpos.copy(), env.data.qvel.copy())  # the same state
+        copied.data.time = env.data.time
+        copied.data.qacc_warmstart[:] = env.data.qacc_warmstart  # the solver's start too
+        env.set_state(env.data.qpos.copy(), env.data.qvel.copy())
+        obs_copy, *_ = copied.step(action)
+        obs, *_ = env.step(action)
+        np.testing.assert_array_equal(obs_copy["qpos"], obs["qpos"])
+        np.testing.assert_array_equal(obs_copy["cup_pose"], obs["cup_pose"])
+        copied.step(5.0 * action)  # moves the copy alone
+        assert not np.array_equal(copied._measures, env._measures)

@@ -25,7 +25,7 @@ from wip_gym.envs.measures import (  # noqa: F401  (the cup's and tray's thresho
     CUP_UPRIGHT_DEG,
     TRAY_HAND_GAP,
     action_effort,
-    step_measures,
+    env_measures,
 )
 from wip_gym.overlay import OverlayValues, draw_overlay
 from wip_gym.renderer import FrameRenderer
@@ -354,20 +354,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         self._step_dt = float(m.opt.timestep) * self.frame_skip
         self._elliptic = m.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
         self._measure_ints[ms.I_ELLIPTIC] = self._elliptic
-        self._measure_arrays = (
-            d.qpos,
-            d.qvel,
-            d.xpos,
-            d.xmat,
-            d.xquat,
-            d.xipos,
-            d.subtree_com,
-            d.subtree_linvel,
-            d.site_xpos,
-            d.site_xmat,
-            m.body_subtreemass,
-            m.body_mass,
-        )
+        self._measure_table = ms.address_table(m, d)
 
     # ----------------------------------------------------------------- model
     def _initialize_simulation(self) -> tuple[mujoco.MjModel, mujoco.MjData]:
@@ -611,28 +598,24 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
     def _measure(self) -> list[float]:
         """The step's numbers for the current ``qpos``/``qvel``, from MuJoCo's own kinematics
         and subtree quantities on the env's data (``mj_step`` leaves its kinematics at the state
-        before the step) and its contacts: one call of ``step_measures``
-        (``wip_gym.envs.measures``: heading ``psi``, ``psid``, ``x``, ``xd`` (the minimal
-        coordinates of ``RobotModel``), the axle position, ``theta``, ``thetad`` of the body CoM
-        (wheels excluded) about the axle in the heading frame (``RobotModel.theta``), the goal
-        distance, the fall, the end effector's drift, a tray task's cup and tray) into
-        ``_measures``; returned as floats (also kept as ``_values``, the robot's also as
-        attributes)."""
+        before the step) and its contacts: one compiled call, ``env_measures``, which runs those
+        MuJoCo passes and ``step_measures`` (``wip_gym.envs.measures``: heading ``psi``,
+        ``psid``, ``x``, ``xd`` (the minimal coordinates of ``RobotModel``), the axle position,
+        ``theta``, ``thetad`` of the body CoM (wheels excluded) about the axle in the heading
+        frame (``RobotModel.theta``), the goal distance, the fall, the end effector's drift, a
+        tray task's cup and tray) into ``_measures``; returned as floats (also kept as
+        ``_values``, the robot's also as attributes)."""
         m, d = self.model, self.data
         if self._views_of[1] is not d or self._views_of[0] is not m:
             self._bind_views()
-        mujoco.mj_kinematics(m, d)
-        mujoco.mj_comPos(m, d)
-        mujoco.mj_comVel(m, d)  # mj_subtreeVel reads the bodies' velocities (cvel)
-        mujoco.mj_subtreeVel(m, d)
         if d.ncon:
             contact = d.contact
             geom, address, frame = contact.geom, contact.efc_address, contact.frame
         else:
             geom, address, frame = self._no_contacts
         out = self._measures
-        step_measures(
-            *self._measure_arrays,
+        env_measures(
+            self._measure_table,
             geom,
             address,
             frame,

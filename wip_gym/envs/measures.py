@@ -1,7 +1,8 @@
 """The arithmetic of ``WIPEnv.step`` around its MuJoCo calls, compiled by numba.
 
-``WIPEnv._measure`` runs MuJoCo's kinematics and subtree passes; one call of
-:func:`step_measures` then computes, from the data's arrays, every number of the step's
+``WIPEnv._measure`` makes one call of :func:`env_measures`, which runs MuJoCo's kinematics and
+subtree passes on the env's data and then :func:`step_measures`, which computes, from the
+data's arrays, every number of the step's
 observation, reward and info into a preallocated float buffer (indices below): the robot's
 measures (``psi``, ``x``, ``theta`` ... of ``RobotModel``), the goal distance, the fall, the
 end effector's drift, and on a tray task the cup's pose in the tray frame and its state, the
@@ -17,10 +18,12 @@ geom); the float parameters (``floats``) are the task's constants (``F_*``).
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
-from numba import njit, types
+from numba import carray, njit, types
 
+from wip_gym import mujoco_c as mjc
 from wip_gym.scene import CUP_HALF_HEIGHT, CUP_RADIUS, TRAY_HALF_SIZE
 
 #: a cup counts as upright while its axis is within this angle of the tray's normal (deg)
@@ -268,6 +271,94 @@ def step_measures(
         )
 
 
+# the table of addresses of env_measures: the model, the data, the arrays step_measures reads
+# (in its order) and their lengths
+T_MODEL, T_DATA = 0, 1
+T_ARRAYS = 2  # 12 addresses: qpos, qvel, xpos ... site_xmat, body_subtreemass, body_mass
+T_NQ, T_NV, T_NBODY, T_NSITE = 14, 15, 16, 17
+N_TABLE = 18
+
+
+def address_table(model: Any, data: Any) -> np.ndarray:
+    """The table of :func:`env_measures`: the addresses of ``model``, ``data`` and the arrays
+    :func:`step_measures` reads (MuJoCo allocates them once per MjModel/MjData: the table is
+    valid while both live), and their sizes."""
+    arrays = (
+        data.qpos,
+        data.qvel,
+        data.xpos,
+        data.xmat,
+        data.xquat,
+        data.xipos,
+        data.subtree_com,
+        data.subtree_linvel,
+        data.site_xpos,
+        data.site_xmat,
+        model.body_subtreemass,
+        model.body_mass,
+    )
+    table = np.zeros(N_TABLE, np.int64)
+    table[T_MODEL], table[T_DATA] = model._address, data._address
+    for i, array in enumerate(arrays):
+        assert array.dtype == np.float64 and array.flags.c_contiguous
+        table[T_ARRAYS + i] = array.ctypes.data
+    table[T_NQ], table[T_NV], table[T_NBODY], table[T_NSITE] = (
+        model.nq,
+        model.nv,
+        model.nbody,
+        model.nsite,
+    )
+    return table
+
+
+@njit(cache=True)
+def env_measures(
+    table: np.ndarray,
+    contact_geom: np.ndarray,
+    efc_address: np.ndarray,
+    contact_frame: np.ndarray,
+    efc_force: np.ndarray,
+    ints: np.ndarray,
+    floats: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """MuJoCo's kinematics, ``mj_comPos``, ``mj_comVel`` and ``mj_subtreeVel`` on the data of
+    ``table`` (:func:`address_table`), then :func:`step_measures` on its arrays: the env's
+    measures after a step in one compiled call with eight arguments."""
+    model, data = np.uint64(table[T_MODEL]), np.uint64(table[T_DATA])
+    mjc.mj_kinematics(model, data)
+    mjc.mj_comPos(model, data)
+    mjc.mj_comVel(model, data)  # mj_subtreeVel reads the bodies' velocities (cvel)
+    mjc.mj_subtreeVel(model, data)
+    nbody, nsite = table[T_NBODY], table[T_NSITE]
+    a = T_ARRAYS
+
+    def view(i: int, shape: tuple[int, ...]) -> np.ndarray:
+        return carray(mjc.float64_pointer(np.uint64(table[a + i])), shape)
+
+    step_measures(
+        view(0, (table[T_NQ],)),
+        view(1, (table[T_NV],)),
+        view(2, (nbody, 3)),
+        view(3, (nbody, 9)),
+        view(4, (nbody, 4)),
+        view(5, (nbody, 3)),
+        view(6, (nbody, 3)),
+        view(7, (nbody, 3)),
+        view(8, (nsite, 3)),
+        view(9, (nsite, 9)),
+        view(10, (nbody,)),
+        view(11, (nbody,)),
+        contact_geom,
+        efc_address,
+        contact_frame,
+        efc_force,
+        ints,
+        floats,
+        out,
+    )
+
+
 @njit(cache=True)
 def action_effort(action: np.ndarray, table: np.ndarray) -> float:
     """``sum((action / scale)^2)`` (the ctrl cost's effort) if every torque is within its band
@@ -300,6 +391,18 @@ SIGNATURE = types.void(
 )
 
 
+#: the env's version: the contacts as in SIGNATURE
+ENV_SIGNATURE = types.void(
+    types.int64[::1],
+    types.int32[:, :],
+    types.int32[:],
+    types.float64[:, :],
+    _F1,
+    types.int64[::1],
+    _F1,
+    _F1,
+)
+
 #: an action of any layout, read-only too (``np.asarray`` of a JAX array)
 ACTION_SIGNATURE = types.float64(types.Array(types.float64, 1, "A", readonly=True), _F2)
 
@@ -309,7 +412,11 @@ def compile_once() -> None:
     :data:`ACTION_SIGNATURE` (or load them from numba's cache) and no other versions: a call
     with arrays of another layout converts to them instead of compiling again (once per
     process; the env calls it when made)."""
-    for kernel, signature in ((step_measures, SIGNATURE), (action_effort, ACTION_SIGNATURE)):
+    for kernel, signature in (
+        (step_measures, SIGNATURE),
+        (env_measures, ENV_SIGNATURE),
+        (action_effort, ACTION_SIGNATURE),
+    ):
         if not kernel.signatures:
             kernel.compile(signature)
             kernel.disable_compile()
