@@ -3,10 +3,11 @@
 ``WIPEnv._measure`` makes one call of :func:`env_measures`, which runs MuJoCo's kinematics and
 subtree passes on the env's data and then :func:`step_measures`, which computes, from the
 data's arrays, every number of the step's observation, reward and info into a preallocated
-float buffer (indices below): the robot's measures (``psi``, ``x``, ``theta`` ... of ``RobotModel``), the goal distance, the fall, the
-end effector's drift, and on a tray task the cup's pose in the tray frame and its state, the
-tray's place on the hand and the cup's friction use on the plate. The same arithmetic in plain
-Python floats is kept in ``tests/env_step_reference.py`` and compared step by step with the env
+float buffer (indices below): the robot's measures (``psi``, ``x``, ``theta`` ... of
+``RobotModel``), the goal distance, the fall, the end effector's drift, and on a tray task the
+cup's pose in the tray frame and its state, the tray's place on the hand and the cup's friction
+use on the plate. The same arithmetic in plain Python floats is kept in
+``tests/env_step_reference.py`` and compared step by step with the env
 (``tests/test_env_step_reference.py``).
 
 The integer parameters (``ints``) are the model's ids and addresses (``I_*`` below) followed by
