@@ -19,6 +19,7 @@ import pytest
 
 import benchmarks.speed.profile as profile_module
 from benchmarks.cli import main
+from benchmarks.speed.closed_loop_table import table as closed_loop_table
 from benchmarks.speed.profile import ROWS, profile_episode
 from benchmarks.speed.yardstick import REFERENCE_ENV, reference_step_us
 
@@ -96,6 +97,14 @@ def test_short_unified_profile_schema(tmp_path: Path, capsys: pytest.CaptureFixt
     paths = result["qp_paths"]
     assert set(paths) == {"shortcut", "proxqp"} and paths["shortcut"] + paths["proxqp"] == 300
     assert result["setup_s"] > 0 and not result["fell"]
+    # the closed loop's table (benchmarks.speed.closed_loop_table) reads this schema
+    lines = closed_loop_table({"PlanarTray": [result, result]}).splitlines()
+    units = result["control_time_units"]
+    assert lines[2] == f"| control, mean | {units['mean']:.1f}, {units['mean']:.1f} | 5 |"
+    parts = result["per_step_units"]
+    rows_qp = parts["qp_assembly"]["mean"] + parts["qp_solve"]["mean"]
+    assert f"| of which the task rows and QP (mean) | {rows_qp:.1f}, " in lines[5]
+    assert lines[-1].endswith(f"{unit:.1f}, {unit:.1f}")
 
 
 def test_a_known_delay_lands_in_its_own_part(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -1,0 +1,126 @@
+"""The closed loop's table in units, from ``wip-bench profile`` runs in alternating rounds.
+
+    python -m benchmarks.speed.closed_loop_table [--rounds 2] [--duration 8] [--out out/perf]
+
+Each cell of the table is one ``wip-bench profile`` process (a fresh process per run, as a user
+runs it; ``--json`` files kept in ``--out``) of the ``unified`` controller on one env and one
+setting: the paper's timing (the MPC inside every tenth control step) and the MPC beside the
+loop (``--set unified.high_level.mpc_delay_steps=5``). The runs go round by round, every
+column once per round, so that a change of the machine's load spreads over all columns; a cell
+shows its rounds' values side by side. Every figure is in units of a bare ``mj_step`` of
+Krang-v0 timed in the same process (``benchmarks.speed.yardstick``), so the table compares
+across machines; the rows are the issue's targets (docs/performance.md §7 and §8).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+#: (column title, env id, extra ``wip-bench profile`` arguments)
+COLUMNS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
+    ("KrangTray", "wip_gym/KrangTray-v0", ()),
+    ("KrangTray, d = 5", "wip_gym/KrangTray-v0", ("--set", "unified.high_level.mpc_delay_steps=5")),
+    ("PlanarTray", "wip_gym/PlanarTray-v0", ()),
+    (
+        "PlanarTray, d = 5",
+        "wip_gym/PlanarTray-v0",
+        ("--set", "unified.high_level.mpc_delay_steps=5"),
+    ),
+)
+
+#: (row title, the figure's path in ``wip-bench profile --json``, its target in units or None)
+ROWS: tuple[tuple[str, tuple[str, ...], float | None], ...] = (
+    ("control, mean", ("control_time_units", "mean"), 5.0),
+    ("control, p99", ("control_time_units", "p99"), 12.0),
+    ("of which the robot model (mean)", ("per_step_units", "robot_model", "mean"), None),
+    ("of which the task rows and QP (mean)", ("per_step_units", "qp_assembly", "mean"), None),
+    ("of which the high level (mean)", ("per_step_units", "high_level", "mean"), None),
+    ("env step, mean (physics included)", ("per_step_units", "env_step", "mean"), 2.5),
+    ("env's own work, median", ("per_step_units", "env_overhead", "median"), 1.0),
+    ("closed loop, mean", ("per_step_units", "loop", "mean"), 8.0),
+    ("real-time factor", ("real_time_factor",), None),
+)
+
+
+def figure(result: dict[str, Any], path: Sequence[str]) -> float:
+    """The number at ``path`` of one profile's JSON; ``qp_assembly`` also counts ``qp_solve``
+    (the task rows and the QP kernel are one compiled call: the split between them is not
+    meaningful)."""
+    if tuple(path) == ("per_step_units", "qp_assembly", "mean"):
+        parts = result["per_step_units"]
+        return float(sum(parts[k]["mean"] for k in ("qp_assembly", "qp_solve") if parts[k]))
+    value: Any = result
+    for key in path:
+        value = value[key]
+    if value is None:
+        raise ValueError(f"the profile has no figure at {'.'.join(path)}")
+    return float(value)
+
+
+def table(results: dict[str, list[dict[str, Any]]]) -> str:
+    """The markdown table: a row per :data:`ROWS` entry, a column per key of ``results`` (each
+    a list of profile JSONs, one per round), and the targets."""
+    titles = list(results)
+    lines = [
+        "| per 1 ms step, units | " + " | ".join(titles) + " | target |",
+        "|---" * (len(titles) + 2) + "|",
+    ]
+    for title, path, target in ROWS:
+        cells = [", ".join(f"{figure(r, path):.1f}" for r in results[t]) for t in titles]
+        lines.append(
+            f"| {title} | " + " | ".join(cells) + f" | {'' if target is None else f'{target:g}'} |"
+        )
+    units = [f"{r['reference_step_us']:.1f}" for t in titles for r in results[t]]
+    lines.append("")
+    lines.append(f"unit (bare mj_step of Krang-v0, us) per run: {', '.join(units)}")
+    return "\n".join(lines)
+
+
+def _profile(env: str, extra: Sequence[str], duration: float, path: Path) -> dict[str, Any]:
+    command = [
+        sys.executable,
+        "-m",
+        "benchmarks.cli",
+        "profile",
+        "--env",
+        env,
+        "--controller",
+        "unified",
+        "--duration",
+        str(duration),
+        "--json",
+        str(path),
+        *extra,
+    ]
+    subprocess.run(command, check=True, stdout=subprocess.DEVNULL)
+    return dict(json.loads(path.read_text()))
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--rounds", type=int, default=2, help="runs per column (default 2)")
+    parser.add_argument("--duration", type=float, default=8.0, help="episode length, s")
+    parser.add_argument("--out", type=Path, default=Path("out/perf"), help="the JSON files")
+    args = parser.parse_args(argv)
+    if args.rounds < 1 or args.duration <= 0:
+        parser.error("--rounds must be >= 1 and --duration > 0")
+    args.out.mkdir(parents=True, exist_ok=True)
+    results: dict[str, list[dict[str, Any]]] = {title: [] for title, _, _ in COLUMNS}
+    runs = [(r, column) for r in range(args.rounds) for column in COLUMNS]
+    for r, (title, env, extra) in tqdm(runs, desc="profile runs", unit="run"):
+        slug = title.lower().replace(", d = ", "_d").replace(" ", "_")
+        results[title].append(_profile(env, extra, args.duration, args.out / f"{slug}_{r}.json"))
+    print(table(results))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
