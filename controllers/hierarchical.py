@@ -411,6 +411,7 @@ class HierarchicalController(PolicyBase):
             qp_time=qp_time,
             compute_time=time.perf_counter() - start,
         )
+        self.high_level.dispatch()  # a due MPC solve starts beside the env step
         self._step += 1
         return action
 
