@@ -99,6 +99,28 @@ def test_running_derivatives_equal_autodiff(
     assert 4 <= active <= 20  # both branches were exercised
 
 
+@pytest.mark.parametrize("planar", [True, False])
+def test_penalty_depends_only_on_its_inputs(planar: bool, reference: dict[str, np.ndarray]) -> None:
+    # running_derivatives differentiates the penalty along penalty_inputs only
+    params = ddp_recorded.params_from_arrays(reference)
+    problem = mpc_problem(planar, MPCConfig(), a_max=1.0, theta_max=0.25)
+    n = problem.n_state
+
+    def value(v: np.ndarray) -> jax.Array:
+        return problem.penalty(v[:n], v[n:], params)[0]
+
+    gradient = jax.jit(jax.grad(value))
+    others = [i for i in range(n + problem.n_control) if i not in problem.penalty_inputs]
+    rng = np.random.default_rng(5)
+    active = 0
+    for z, w in _random_points(problem, rng, 24):
+        v = np.concatenate([z, w])
+        active += bool(problem.penalty(v[:n], v[n:], params)[1])
+        g = np.asarray(gradient(v))
+        assert np.all(g[others] == 0.0)
+    assert active >= 4
+
+
 def test_mpc_step_is_traced_once(reference: dict[str, np.ndarray]) -> None:
     params = ddp_recorded.params_from_arrays(reference)
     state = ddp_recorded.initial_state("planar", float(reference["theta0"]))

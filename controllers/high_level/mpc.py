@@ -118,14 +118,46 @@ class _CompiledStep:
     plan arrays are inputs), ``lambda(q)`` broadcast along the horizon, the warm start, the DDP,
     the acceptance test with its fallback rollout and the shifted warm start of the next step,
     which stays on the device. ``trace_count`` counts its traces (one per horizon and plan
-    length is the design)."""
+    length is the design).
+
+    The step runs inside a ``lax.while_loop`` that makes one trip (:meth:`_one_trip`), so that
+    XLA:CPU compiles the whole step into one kernel (``controllers.optimizer.jax_setup``'s
+    small-loop option) rather than dispatching each of its ~40 top-level operations (the
+    parameters' broadcasts along the horizon, the window's slices, the acceptance test, the
+    packing) through its runtime one by one. Measured: the 3-D step ~3-4 units faster, the
+    same results bit for bit."""
 
     def __init__(self, problem: WIPMProblem, ddp: DDPConfig, horizon: int) -> None:
         self.solver = ddp_solver_for(problem, ddp)
         self.dynamics = problem.dynamics()
         self.horizon = horizon
         self.trace_count = 0
-        self.jitted = jax.jit(self._step)
+        self.jitted = jax.jit(self._one_trip)
+
+    def _one_trip(
+        self,
+        index: jax.Array,
+        first: jax.Array,
+        state: jax.Array,
+        params: WIPMParams,
+        warm: jax.Array,
+        plan_states: jax.Array,
+        plan_controls: jax.Array,
+    ) -> tuple[jax.Array, jax.Array]:
+        """:meth:`_step` as the body of a ``while`` loop that stops after its first trip (a
+        flag, not a counter: XLA cannot see the trip count and inline the loop away)."""
+        self.trace_count += 1
+        n, (H, m) = plan_states.shape[1], warm.shape
+        dtype = plan_states.dtype
+        packed = jnp.zeros(((H + 1) * n + H * m + 3,), dtype)
+        initial = (packed, jnp.zeros((H, m), dtype), jnp.array(False))
+
+        def body(carry: tuple[jax.Array, ...]) -> tuple[jax.Array, ...]:
+            out = self._step(index, first, state, params, warm, plan_states, plan_controls)
+            return (*out, jnp.array(True))
+
+        packed, next_warm, _ = jax.lax.while_loop(lambda carry: ~carry[2], body, initial)
+        return packed, next_warm
 
     def _step(
         self,
@@ -139,7 +171,6 @@ class _CompiledStep:
     ) -> tuple[jax.Array, jax.Array]:
         """``(packed, next_warm)``: ``packed`` holds ``X`` (N+1, n), ``U`` (N, m), the cost, the
         warm start's cost and the acceptance flag, flattened in that order."""
-        self.trace_count += 1
         H = self.horizon
         window = jax.lax.dynamic_slice_in_dim(plan_states, index, H + 1)
         plan_warm = jax.lax.dynamic_slice_in_dim(plan_controls, index, H)
