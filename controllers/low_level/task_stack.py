@@ -200,6 +200,23 @@ class CompiledTaskStack:
             if isinstance(task, PostureTask):
                 start, stop = self.row_start[k], self.row_start[k + 1]
                 self.row_column[start:stop] = task.columns
+        # what _pack_parameters reads and writes, per task: its kind and object (Python ints),
+        # its parameter row, its target (a view: 3, 3 x 3 or the posture rows) and its rows
+        self._packing: list[tuple[int, object, Array, Array | None, int, int]] = []
+        for k, task in enumerate(self._inner):
+            kind, start, stop = (
+                int(self.kinds[k]),
+                int(self.row_start[k]),
+                int(self.row_start[k + 1]),
+            )
+            target: Array | None = None
+            if kind == ct.POSITION:
+                target = self.targets[k, :3]
+            elif kind == ct.ORIENTATION:
+                target = self.targets[k].reshape(3, 3)
+            elif kind == ct.POSTURE:
+                target = self.row_target[start:stop]
+            self._packing.append((kind, task, self.params[k], target, start, stop))
         n_sites, nv = len(sites), m.nv
         self.scalars = np.zeros(6)
         self.scalars[5] = -1 if lay.index_psi is None else lay.index_psi
@@ -252,28 +269,33 @@ class CompiledTaskStack:
         )
 
     def _pack_parameters(self, w: Array) -> None:
-        """Step 2: gains, targets and weights from the task objects."""
-        params, targets, start = self.params, self.targets, self.row_start
-        for k, task in enumerate(self._inner):
-            kind = self.kinds[k]
-            if kind == ct.THETA:
-                params[k] = (task.kp, task.kv, task.theta_d, task.thetad_d, task.thdd_d)  # type: ignore[attr-defined]
-                w[start[k]] = task.weight  # type: ignore[attr-defined]
-            elif kind == ct.SPIN:
-                params[k] = (task.kp, task.kv, task.psi_d, task.psid_d, task.psidd_d)  # type: ignore[attr-defined]
-                w[start[k]] = task.weight  # type: ignore[attr-defined]
-            elif kind == ct.POSITION:
-                params[k, :2] = (task.kp, task.kv)  # type: ignore[attr-defined]
-                targets[k, :3] = task.target  # type: ignore[attr-defined]
-                w[start[k] : start[k + 1]] = task.weight  # type: ignore[attr-defined]
-            elif kind == ct.ORIENTATION:
-                params[k, :2] = (task.kp, task.kv)  # type: ignore[attr-defined]
-                targets[k] = np.ravel(task.target)  # type: ignore[attr-defined]
-                w[start[k] : start[k + 1]] = task.weight  # type: ignore[attr-defined]
+        """Step 2: gains, targets and weights from the task objects (item by item into views
+        made once: a tuple or a ravel per task cost more than the stores)."""
+        theta, spin, position, orientation = ct.THETA, ct.SPIN, ct.POSITION, ct.ORIENTATION
+        for kind, task, p, target, start, stop in self._packing:
+            if kind == theta:
+                p[0] = task.kp  # type: ignore[attr-defined]
+                p[1] = task.kv  # type: ignore[attr-defined]
+                p[2] = task.theta_d  # type: ignore[attr-defined]
+                p[3] = task.thetad_d  # type: ignore[attr-defined]
+                p[4] = task.thdd_d  # type: ignore[attr-defined]
+                w[start] = task.weight  # type: ignore[attr-defined]
+            elif kind == spin:
+                p[0] = task.kp  # type: ignore[attr-defined]
+                p[1] = task.kv  # type: ignore[attr-defined]
+                p[2] = task.psi_d  # type: ignore[attr-defined]
+                p[3] = task.psid_d  # type: ignore[attr-defined]
+                p[4] = task.psidd_d  # type: ignore[attr-defined]
+                w[start] = task.weight  # type: ignore[attr-defined]
             else:
-                params[k, :2] = (task.kp, task.kv)  # type: ignore[attr-defined]
-                self.row_target[start[k] : start[k + 1]] = task.target  # type: ignore[attr-defined]
-                w[start[k] : start[k + 1]] = task.joint_weights  # type: ignore[attr-defined]
+                p[0] = task.kp  # type: ignore[attr-defined]
+                p[1] = task.kv  # type: ignore[attr-defined]
+                target[...] = task.target  # type: ignore[attr-defined,index]
+                w[start:stop] = (
+                    task.joint_weights  # type: ignore[attr-defined]
+                    if kind != position and kind != orientation
+                    else task.weight  # type: ignore[attr-defined]
+                )
 
     def fill(self, robot: RobotModel, J: Array, target: Array, jdot_nu: Array, w: Array) -> None:
         """The stacked rows ``J``, ``xdd*``, ``Jdot nu`` and weights ``w`` of this state (the
