@@ -192,6 +192,7 @@ class CompiledTaskStack:
                 self.observer_settings[slot] = (s.dt, s.alpha, s.bound)
                 self.observers[k] = slot
                 slot += 1
+        self._observer_keys = [key for key, _, _ in self._observer_rows]
         self.params = np.zeros((len(tasks), ct.PARAMETERS))
         self.targets = np.zeros((len(tasks), 9))
         self.row_column = np.zeros(self.rows, dtype=np.int64)
@@ -237,8 +238,22 @@ class CompiledTaskStack:
         self._site_bodies = m.site_bodyid[self.site_ids].astype(np.int64)
 
     def matches(self, tasks: Sequence[object]) -> bool:
-        """Whether this stack serves ``tasks`` (:func:`structure` unchanged)."""
-        return structure(tasks) == self._structure
+        """Whether this stack serves ``tasks`` (:func:`structure` unchanged; compared entry by
+        entry against the objects it was built from, without building the tuple: it runs
+        every step)."""
+        expected = self._structure
+        if len(tasks) != len(expected):
+            return False
+        for task, (task_id, inner_id, site, columns) in zip(tasks, expected, strict=True):
+            inner = task.task if type(task) is DisturbanceRejectingTask else task
+            if id(task) != task_id or id(inner) != inner_id:
+                return False
+            if getattr(inner, "site", None) != site:
+                return False
+            now = getattr(inner, "columns", None)
+            if (None if now is None else np.asarray(now).tobytes()) != columns:
+                return False
+        return True
 
     def __getstate__(self) -> dict[str, object]:
         raise TypeError(
@@ -305,8 +320,9 @@ class CompiledTaskStack:
         if robot is not self._robot:
             raise ValueError("a compiled task stack serves the robot model it was built for")
         cache = robot.cache
-        for slot, (key, _, _) in enumerate(self._observer_rows):
-            self.observer_advance[slot] = key not in cache
+        advance = self.observer_advance
+        for slot, key in enumerate(self._observer_keys):
+            advance[slot] = key not in cache
         self._fill_snapshot(robot)
         self._pack_parameters(w)
         scalars = self.scalars
@@ -348,5 +364,8 @@ class CompiledTaskStack:
             jdot_nu,
         )
         # an observer advances once per state: its command memoised as its Python path does
-        for key, start, stop in self._observer_rows:
-            cache[key] = target[start:stop].copy()
+        # (views on one private copy of the rows)
+        if self._observer_rows:
+            commands = target.copy()
+            for key, start, stop in self._observer_rows:
+                cache[key] = commands[start:stop]
