@@ -294,6 +294,12 @@ class CompiledTaskStack:
         m, lay = robot.model, robot.layout
         self.tasks = list(tasks)
         self._structure = structure(tasks)
+        # what matches() compares every step: each task object, the task it wraps (itself
+        # unwrapped), a frame task's site, a posture task's columns (as structure() has them)
+        self._expected = [
+            (task, _unwrap(task)[0], site, columns)
+            for task, (_, _, site, columns) in zip(self.tasks, self._structure, strict=True)
+        ]
         self._robot = robot
         self._probe = probe
         inner = [_unwrap(task) for task in tasks]
@@ -389,20 +395,19 @@ class CompiledTaskStack:
         self._probe_state = (pd.qpos, pd.qacc, self._site_bodies)
 
     def matches(self, tasks: Sequence[object]) -> bool:
-        """Whether this stack serves ``tasks`` (:func:`structure` unchanged; compared entry by
-        entry against the objects it was built from, without building the tuple: it runs
-        every step)."""
-        expected = self._structure
+        """Whether this stack serves ``tasks``: :func:`structure` unchanged in what the stack
+        reads of it (the same task objects, the same tasks wrapped by observers, each frame
+        task's site, each posture task's columns), compared against the objects the stack
+        holds, without building the tuple (it runs every step)."""
+        expected = self._expected
         if len(tasks) != len(expected):
             return False
-        for task, (task_id, inner_id, site, columns) in zip(tasks, expected, strict=True):
-            inner = task.task if type(task) is DisturbanceRejectingTask else task
-            if id(task) != task_id or id(inner) != inner_id:
+        for task, (task0, inner, site, columns) in zip(tasks, expected, strict=True):
+            if task is not task0 or (task is not inner and task.task is not inner):  # type: ignore[attr-defined]
                 return False
-            if getattr(inner, "site", None) != site:
+            if site is not None and inner.site != site:  # type: ignore[attr-defined]
                 return False
-            now = getattr(inner, "columns", None)
-            if (None if now is None else np.asarray(now).tobytes()) != columns:
+            if columns is not None and np.asarray(inner.columns).tobytes() != columns:  # type: ignore[attr-defined]
                 return False
         return True
 
