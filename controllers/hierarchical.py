@@ -222,6 +222,28 @@ def tilt_toward(acceleration: Array, max_tilt_deg: float) -> Array:
     return R.reshape(3, 3)
 
 
+# the per-step diagnostics, in the order __call__ records them (DiagnosticsRecorder.record_row)
+_SIGNALS = (
+    "t",
+    "wipm_state",
+    "wipm_reference",
+    "theta_d",
+    "thetad_d",
+    "thdd_ref",
+    "tau_0",
+    "torque",
+    "clip_excess",
+    "qp_solved",
+    "qp_iterations",
+    "qp_failures",
+    "mpc_rejected",
+    "theta_error",
+    "mpc_time",
+    "qp_time",
+    "compute_time",
+)
+
+
 class HierarchicalController(PolicyBase):
     """The paper's controller (see the module docstring)."""
 
@@ -392,24 +414,28 @@ class HierarchicalController(PolicyBase):
             actuators[wl] += shift[0]
             actuators[wr] += shift[1]
         action = self.finish(actuators)
-        self._recorder.record(
-            t=self._step * self.task.control_dt,
-            wipm_state=wipm_state(robot),
-            wipm_reference=plan.state(self._ref.mpc_index),
-            theta_d=self._ref.theta,
-            thetad_d=self._ref.thetad,
-            thdd_ref=self._ref.thdd,
-            tau_0=self._ref.tau_0,
-            torque=action,
-            clip_excess=self._clip.last_excess,
-            qp_solved=solution.solved,
-            qp_iterations=solution.iterations,
-            qp_failures=self.qp.failures,
-            mpc_rejected=self.high_level.rejections,
-            theta_error=robot.theta - self._ref.theta,
-            mpc_time=mpc_time,
-            qp_time=qp_time,
-            compute_time=time.perf_counter() - start,
+        ref = self._ref
+        self._recorder.record_row(
+            _SIGNALS,
+            (
+                self._step * self.task.control_dt,
+                wipm_state(robot),
+                plan.state(ref.mpc_index).copy(),
+                ref.theta,
+                ref.thetad,
+                ref.thdd,
+                ref.tau_0,
+                action.copy(),
+                self._clip.last_excess,
+                solution.solved,
+                solution.iterations,
+                self.qp.failures,
+                self.high_level.rejections,
+                robot.theta - ref.theta,
+                mpc_time,
+                qp_time,
+                time.perf_counter() - start,
+            ),
         )
         self.high_level.dispatch()  # a due MPC solve starts beside the env step
         self._step += 1

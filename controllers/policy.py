@@ -114,21 +114,39 @@ class DiagnosticsRecorder:
     """Per-step signals, appended as floats or arrays, returned as stacked arrays.
 
     ``record`` keeps Python numbers as they are and copies arrays (a float64 array per number
-    cost a microsecond each, a dozen per step); ``as_arrays`` converts to float64 once."""
+    cost a microsecond each, a dozen per step); ``record_row`` appends one step's values of a
+    fixed tuple of names as one tuple (no keywords, no per-value checks: the caller passes
+    arrays it will not change); ``as_arrays`` converts to float64 once."""
 
     def __init__(self) -> None:
         self._signals: dict[str, list[Any]] = defaultdict(list)
+        self._rows: dict[tuple[str, ...], list[tuple[Any, ...]]] = {}
 
     def clear(self) -> None:
         self._signals.clear()
+        self._rows.clear()
 
     def record(self, **signals: Any) -> None:
         signals_ = self._signals
         for name, value in signals.items():
             signals_[name].append(value.copy() if isinstance(value, np.ndarray | list) else value)
 
+    def record_row(self, names: tuple[str, ...], values: tuple[Any, ...]) -> None:
+        """Append ``values`` (one per name of ``names``, the same tuple of names every step)
+        as they are: arrays among them must not change afterwards (pass copies)."""
+        if len(values) != len(names):
+            raise ValueError(f"{len(names)} names, {len(values)} values")
+        rows = self._rows.get(names)
+        if rows is None:
+            rows = self._rows[names] = []
+        rows.append(values)
+
     def as_arrays(self) -> dict[str, NDArray[np.float64]]:
-        return {name: np.array(values, dtype=float) for name, values in self._signals.items()}
+        arrays = {name: np.array(values, dtype=float) for name, values in self._signals.items()}
+        for names, rows in self._rows.items():
+            for i, name in enumerate(names):
+                arrays[name] = np.array([row[i] for row in rows], dtype=float)
+        return arrays
 
 
 @njit(cache=True)

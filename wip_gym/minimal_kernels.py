@@ -1,6 +1,7 @@
 """The arithmetic of ``RobotModel.update`` after its MuJoCo calls, compiled by numba.
 
-Four functions of arrays, and :func:`robot_update`, which makes ``RobotModel.update``'s MuJoCo
+Four functions of arrays, :func:`all_finite` (the update's input check), and
+:func:`robot_update`, which makes ``RobotModel.update``'s MuJoCo
 calls (``wip_gym.mujoco_c``) and runs them in one compiled call:
 
 * :func:`idealised_state`: the inverse, MuJoCo's ``qpos``, ``qvel`` of a minimal state with the
@@ -26,6 +27,18 @@ from numba import njit
 
 from wip_gym import mujoco_c as mjc
 from wip_gym.small_linalg import matmul, matmul_transposed, matvec, matvec_transposed
+
+
+@njit(cache=True)
+def all_finite(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether every entry of the 1-D arrays ``a`` and ``b`` is finite (one compiled call for
+    the four NumPy calls of ``isfinite(a).all() and isfinite(b).all()``)."""
+    finite = True
+    for i in range(len(a)):
+        finite = finite and math.isfinite(a[i])
+    for i in range(len(b)):
+        finite = finite and math.isfinite(b[i])
+    return finite
 
 
 @njit(cache=True)

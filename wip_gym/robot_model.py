@@ -32,7 +32,12 @@ import mujoco
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from wip_gym.minimal_kernels import idealised_state, inertia_about_point, robot_update
+from wip_gym.minimal_kernels import (
+    all_finite,
+    idealised_state,
+    inertia_about_point,
+    robot_update,
+)
 
 Array = NDArray[np.float64]
 
@@ -328,10 +333,12 @@ class RobotModel:
                 f"expected qpos of shape ({lay.nq},) and qvel ({lay.nv},), "
                 f"got {qpos.shape}, {qvel.shape}"
             )
-        if not (np.isfinite(qpos).all() and np.isfinite(qvel).all()):
-            raise ValueError("qpos/qvel contain NaN or inf")
+        # copied first: the compiled check sees one array type (the copies are scratch, read
+        # only by the compiled update below)
         self._qpos_in[:] = qpos
         self._qvel_in[:] = qvel
+        if not all_finite(self._qpos_in, self._qvel_in):
+            raise ValueError("qpos/qvel contain NaN or inf")
         self.cache.clear()
         (
             self._psi,
@@ -379,7 +386,8 @@ class RobotModel:
             dynamics,
         )
         if not lay.planar:
-            self._heading = _read_only(np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]))
+            heading = np.array((c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0)).reshape(3, 3)
+            self._heading = _read_only(heading)
         # the base origin's linear Jacobian, kept for the tasks (site_in_axle_frame)
         self.cache["origin_jacobian"] = self._jac_origin
         self._updated = True

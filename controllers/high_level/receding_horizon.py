@@ -85,6 +85,13 @@ class HighLevel:
         self.mpc: ModelPredictiveController | None = None
         self._last: MPCStep | None = None
         self._last_start = 0  # the control step whose state self._last was solved from
+        # the rows of self._last's prediction that reference() interpolates, as Python floats
+        # (the solution in use is at most one MPC step along its prediction): made once per
+        # solution, not read as NumPy scalars every control step
+        self._rows_used = (
+            2 + (self.steps_per_mpc - 1 + config.mpc_delay_steps) // self.steps_per_mpc
+        )
+        self._last_rows: tuple[list[list[float]], list[list[float]]] = ([], [])
         self._pending: tuple[Future[MPCStep], int] | None = None
         # a solve due but not started yet: (plan index, WIPM state, parameters, its step)
         self._due: tuple[int, np.ndarray, WIPMParams, int] | None = None
@@ -144,6 +151,11 @@ class HighLevel:
         """``solution``, solved from step ``start``'s state, in use from now on (counted on the
         control thread: the counters do not depend on the background thread's timing)."""
         self._last, self._last_start = solution, start
+        rows = self._rows_used
+        self._last_rows = (
+            solution.predicted_states[:rows].tolist(),
+            solution.predicted_controls[: rows - 1].tolist(),
+        )
         self._rejections += not solution.accepted
 
     def reset(self, robot: RobotModel, goal_xy: np.ndarray, cup_friction: float | None) -> Plan:
@@ -173,49 +185,47 @@ class HighLevel:
         current state), and return the references interpolated inside the MPC step."""
         if self.mpc is None or self.plan is None:
             raise RuntimeError("HighLevel.reset() first")
-        self.dispatch()  # a solve the caller did not start
-        phase = self._step % self.steps_per_mpc
-        index = self._step // self.steps_per_mpc
+        if self._due is not None:
+            self.dispatch()  # a solve the caller did not start
+        step, steps_per_mpc = self._step, self.steps_per_mpc
+        index, phase = divmod(step, steps_per_mpc)
         delay = self.config.mpc_delay_steps
         if phase == 0 or self._last is None:
             self.params = params_from_lambda(robot.wipm_parameters())
             state = wipm_state(robot)
             if delay == 0 or self._last is None:
-                self._use(self.mpc.step(index, state, self.params), self._step)
+                self._use(self.mpc.step(index, state, self.params), step)
             else:
-                self._due = (index, state, self.params, self._step)
-        if self._pending is not None and self._step >= self._pending[1] + delay:
+                self._due = (index, state, self.params, step)
+        pending = self._pending
+        if pending is not None and step >= pending[1] + delay:
             self._wait_pending()
-        last = self._last
-        assert last is not None
+        assert self._last is not None
         # where the solution in use is along its own prediction (inside its first MPC step
-        # unless it is delayed)
-        interval, rest = divmod(self._step - self._last_start, self.steps_per_mpc)
-        self._step += 1
-        fraction = rest / self.steps_per_mpc
-        ti, tdi = (0, 1) if robot.layout.planar else (2, 5)
-        s0, s1 = last.predicted_states[interval], last.predicted_states[interval + 1]
-        theta = (1 - fraction) * s0[ti] + fraction * s1[ti]
-        thetad = (1 - fraction) * s0[tdi] + fraction * s1[tdi]
-        control = last.predicted_controls[interval]
-        dt = self.config.mpc.dt
+        # unless it is delayed); its rows as Python floats (_use), the same arithmetic
+        interval, rest = divmod(step - self._last_start, steps_per_mpc)
+        self._step = step + 1
+        fraction = rest / steps_per_mpc
+        states, controls = self._last_rows
+        s0, s1 = states[interval], states[interval + 1]
+        control = controls[interval]
         if robot.layout.planar:
             return HighLevelSetpoint(
-                theta=float(theta),
-                thetad=float(thetad),
-                thdd=float(control[0]),
+                theta=(1 - fraction) * s0[0] + fraction * s1[0],
+                thetad=(1 - fraction) * s0[1] + fraction * s1[1],
+                thdd=control[0],
                 tau_0=0.0,
                 mpc_index=index,
             )
         return HighLevelSetpoint(
-            theta=float(theta),
-            thetad=float(thetad),
-            thdd=float(control[0]),
-            tau_0=float(control[1]),
+            theta=(1 - fraction) * s0[2] + fraction * s1[2],
+            thetad=(1 - fraction) * s0[5] + fraction * s1[5],
+            thdd=control[0],
+            tau_0=control[1],
             mpc_index=index,
-            psi=float((1 - fraction) * s0[1] + fraction * s1[1]),
-            psid=float((1 - fraction) * s0[4] + fraction * s1[4]),
-            psidd=float((s1[4] - s0[4]) / dt),
+            psi=(1 - fraction) * s0[1] + fraction * s1[1],
+            psid=(1 - fraction) * s0[4] + fraction * s1[4],
+            psidd=(s1[4] - s0[4]) / self.config.mpc.dt,
         )
 
     @property

@@ -13,6 +13,8 @@ the two frame tasks optionally wrapped by ``DisturbanceRejectingTask``) into the
    source, so a target changed between steps is seen);
 3. makes one call of the compiled function.
 
+Step 2 runs first, in Python; steps 1 and 3 are then one compiled call (:func:`stack_rows`).
+
 The disturbance observers keep their state in one array of this stack
 (``DisturbanceRejectingTask.adopt_memory``), advanced by the compiled call.
 """
@@ -27,7 +29,7 @@ from numpy.typing import NDArray
 
 from controllers.low_level import compiled_tasks as ct
 from controllers.low_level.disturbance_tasks import DisturbanceRejectingTask
-from controllers.low_level.motion_probe import MotionProbe
+from controllers.low_level.motion_probe import MotionProbe, idealise
 from controllers.low_level.tasks import (
     FrameOrientationTask,
     FramePositionTask,
@@ -96,6 +98,143 @@ def snapshot(
         mjc.mj_rnePostConstraint(model, probe_data)
 
 
+@njit(cache=True)
+def stack_rows(
+    model: int,
+    data: int,
+    probe_data: int,
+    layout: np.ndarray,
+    body_qpos: np.ndarray,
+    body_dof: np.ndarray,
+    wheel_radius: float,
+    wheel_separation: float,
+    Jdot_tf_nu: np.ndarray,
+    probe_qpos: np.ndarray,
+    probe_qacc: np.ndarray,
+    site_bodies: np.ndarray,
+    theta: bool,
+    kinds: np.ndarray,
+    sites: np.ndarray,
+    observers: np.ndarray,
+    row_start: np.ndarray,
+    params: np.ndarray,
+    targets: np.ndarray,
+    row_column: np.ndarray,
+    row_target: np.ndarray,
+    q: np.ndarray,
+    nu: np.ndarray,
+    J_tf: np.ndarray,
+    J_theta: np.ndarray,
+    scalars: np.ndarray,
+    bodies: np.ndarray,
+    site_ids: np.ndarray,
+    xpos: np.ndarray,
+    site_xpos: np.ndarray,
+    site_xmat: np.ndarray,
+    site_jac: np.ndarray,
+    origin_jac: np.ndarray,
+    probe_qvel: np.ndarray,
+    probe_qacc0: np.ndarray,
+    probe_xpos: np.ndarray,
+    probe_site_xpos: np.ndarray,
+    probe_jac: np.ndarray,
+    probe_jac_dot: np.ndarray,
+    probe_subtree_com: np.ndarray,
+    probe_xipos: np.ndarray,
+    probe_subtree_linvel: np.ndarray,
+    probe_cfrc_int: np.ndarray,
+    subtree_mass: np.ndarray,
+    gravity: np.ndarray,
+    observer_memory: np.ndarray,
+    observer_settings: np.ndarray,
+    observer_advance: np.ndarray,
+    J: np.ndarray,
+    target: np.ndarray,
+    jdot_nu: np.ndarray,
+) -> None:
+    """Steps 1 and 3 of the module docstring in one compiled call: the motion probe at its
+    idealised state (:func:`controllers.low_level.motion_probe.idealise`, the axle at the
+    robot's base position ``xpos[bodies[0]]``), :func:`snapshot`, then
+    :func:`controllers.low_level.compiled_tasks.task_rows` (its arguments from ``kinds`` on;
+    ``probe_qpos``, ``probe_qvel`` the probe's whole arrays: only the robot's entries are
+    written). One call instead of three: each array argument costs the dispatcher about
+    0.1 us, and these share most of theirs."""
+    base = bodies[0]
+    idealise(
+        model,
+        probe_data,
+        q,
+        nu,
+        xpos[base, 0],
+        xpos[base, 1],
+        layout,
+        body_qpos,
+        body_dof,
+        wheel_radius,
+        wheel_separation,
+        probe_qpos,
+        probe_qvel,
+        probe_qacc0,
+        Jdot_tf_nu,
+    )
+    snapshot(
+        model,
+        data,
+        probe_data,
+        probe_qacc,
+        probe_qacc0,
+        probe_xpos,
+        probe_site_xpos,
+        bodies,
+        site_ids,
+        site_bodies,
+        site_jac,
+        probe_jac,
+        probe_jac_dot,
+        theta,
+    )
+    ct.task_rows(
+        kinds,
+        sites,
+        observers,
+        row_start,
+        params,
+        targets,
+        row_column,
+        row_target,
+        q,
+        nu,
+        J_tf,
+        J_theta,
+        scalars,
+        bodies,
+        site_ids,
+        xpos,
+        site_xpos,
+        site_xmat,
+        site_jac,
+        origin_jac,
+        probe_qvel,
+        probe_qacc0,
+        probe_xpos,
+        probe_site_xpos,
+        probe_jac,
+        probe_jac_dot,
+        probe_subtree_com,
+        probe_xipos,
+        probe_subtree_linvel,
+        probe_cfrc_int,
+        subtree_mass,
+        gravity,
+        observer_memory,
+        observer_settings,
+        observer_advance,
+        J,
+        target,
+        jdot_nu,
+    )
+
+
 _KINDS: dict[type, int] = {
     ThetaTask: ct.THETA,
     SpinTask: ct.SPIN,
@@ -155,6 +294,12 @@ class CompiledTaskStack:
         m, lay = robot.model, robot.layout
         self.tasks = list(tasks)
         self._structure = structure(tasks)
+        # what matches() compares every step: each task object, the task it wraps (itself
+        # unwrapped), a frame task's site, a posture task's columns (as structure() has them)
+        self._expected = [
+            (task, _unwrap(task)[0], site, columns)
+            for task, (_, _, site, columns) in zip(self.tasks, self._structure, strict=True)
+        ]
         self._robot = robot
         self._probe = probe
         inner = [_unwrap(task) for task in tasks]
@@ -192,6 +337,7 @@ class CompiledTaskStack:
                 self.observer_settings[slot] = (s.dt, s.alpha, s.bound)
                 self.observers[k] = slot
                 slot += 1
+        self._observer_keys = [key for key, _, _ in self._observer_rows]
         self.params = np.zeros((len(tasks), ct.PARAMETERS))
         self.targets = np.zeros((len(tasks), 9))
         self.row_column = np.zeros(self.rows, dtype=np.int64)
@@ -200,6 +346,23 @@ class CompiledTaskStack:
             if isinstance(task, PostureTask):
                 start, stop = self.row_start[k], self.row_start[k + 1]
                 self.row_column[start:stop] = task.columns
+        # what _pack_parameters reads and writes, per task: its kind and object (Python ints),
+        # its parameter row, its target (a view: 3, 3 x 3 or the posture rows) and its rows
+        self._packing: list[tuple[int, object, Array, Array | None, int, int]] = []
+        for k, task in enumerate(self._inner):
+            kind, start, stop = (
+                int(self.kinds[k]),
+                int(self.row_start[k]),
+                int(self.row_start[k + 1]),
+            )
+            target: Array | None = None
+            if kind == ct.POSITION:
+                target = self.targets[k, :3]
+            elif kind == ct.ORIENTATION:
+                target = self.targets[k].reshape(3, 3)
+            elif kind == ct.POSTURE:
+                target = self.row_target[start:stop]
+            self._packing.append((kind, task, self.params[k], target, start, stop))
         n_sites, nv = len(sites), m.nv
         self.scalars = np.zeros(6)
         self.scalars[5] = -1 if lay.index_psi is None else lay.index_psi
@@ -216,12 +379,37 @@ class CompiledTaskStack:
         self._robot_arrays = (d.xpos, d.site_xpos, d.site_xmat)
         self._probe_arrays = (pd.qvel, probe.qacc0, pd.xpos, pd.site_xpos)
         self._probe_subtree = (pd.subtree_com, pd.xipos, pd.subtree_linvel, pd.cfrc_int)
-        self._probe_qacc = pd.qacc
         self._site_bodies = m.site_bodyid[self.site_ids].astype(np.int64)
+        # stack_rows' leading arguments: the models' addresses and the probe's constants, then
+        # (after Jdot_tf nu) the probe's qpos and qacc and the sites' bodies
+        self._probe_constants = (
+            m._address,
+            robot.data._address,
+            pd._address,
+            probe._layout_ints,
+            probe._body_qpos,
+            probe._body_dof,
+            probe._wheel_radius,
+            probe._wheel_separation,
+        )
+        self._probe_state = (pd.qpos, pd.qacc, self._site_bodies)
 
     def matches(self, tasks: Sequence[object]) -> bool:
-        """Whether this stack serves ``tasks`` (:func:`structure` unchanged)."""
-        return structure(tasks) == self._structure
+        """Whether this stack serves ``tasks``: :func:`structure` unchanged in what the stack
+        reads of it (the same task objects, the same tasks wrapped by observers, each frame
+        task's site, each posture task's columns), compared against the objects the stack
+        holds, without building the tuple (it runs every step)."""
+        expected = self._expected
+        if len(tasks) != len(expected):
+            return False
+        for task, (task0, inner, site, columns) in zip(tasks, expected, strict=True):
+            if task is not task0 or (task is not inner and task.task is not inner):  # type: ignore[attr-defined]
+                return False
+            if site is not None and inner.site != site:  # type: ignore[attr-defined]
+                return False
+            if columns is not None and np.asarray(inner.columns).tobytes() != columns:  # type: ignore[attr-defined]
+                return False
+        return True
 
     def __getstate__(self) -> dict[str, object]:
         raise TypeError(
@@ -229,51 +417,34 @@ class CompiledTaskStack:
             "tasks instead of copying it (TaskQP does so by itself)"
         )
 
-    def _fill_snapshot(self, robot: RobotModel) -> None:
-        """Step 1 of the module docstring: the probe's idealised state, then one compiled call
-        (:func:`snapshot`); the results stay in MuJoCo's arrays and the Jacobian buffers."""
-        probe = self._probe
-        probe.idealise(robot)
-        snapshot(
-            robot.model._address,
-            robot.data._address,
-            probe.data._address,
-            self._probe_qacc,
-            probe.qacc0,
-            self._probe_arrays[2],
-            self._probe_arrays[3],
-            self.bodies,
-            self.site_ids,
-            self._site_bodies,
-            self.site_jac,
-            self.probe_jac,
-            self.probe_jac_dot,
-            self._theta,
-        )
-
     def _pack_parameters(self, w: Array) -> None:
-        """Step 2: gains, targets and weights from the task objects."""
-        params, targets, start = self.params, self.targets, self.row_start
-        for k, task in enumerate(self._inner):
-            kind = self.kinds[k]
-            if kind == ct.THETA:
-                params[k] = (task.kp, task.kv, task.theta_d, task.thetad_d, task.thdd_d)  # type: ignore[attr-defined]
-                w[start[k]] = task.weight  # type: ignore[attr-defined]
-            elif kind == ct.SPIN:
-                params[k] = (task.kp, task.kv, task.psi_d, task.psid_d, task.psidd_d)  # type: ignore[attr-defined]
-                w[start[k]] = task.weight  # type: ignore[attr-defined]
-            elif kind == ct.POSITION:
-                params[k, :2] = (task.kp, task.kv)  # type: ignore[attr-defined]
-                targets[k, :3] = task.target  # type: ignore[attr-defined]
-                w[start[k] : start[k + 1]] = task.weight  # type: ignore[attr-defined]
-            elif kind == ct.ORIENTATION:
-                params[k, :2] = (task.kp, task.kv)  # type: ignore[attr-defined]
-                targets[k] = np.ravel(task.target)  # type: ignore[attr-defined]
-                w[start[k] : start[k + 1]] = task.weight  # type: ignore[attr-defined]
+        """Step 2: gains, targets and weights from the task objects (item by item into views
+        made once: a tuple or a ravel per task cost more than the stores)."""
+        theta, spin, position, orientation = ct.THETA, ct.SPIN, ct.POSITION, ct.ORIENTATION
+        for kind, task, p, target, start, stop in self._packing:
+            if kind == theta:
+                p[0] = task.kp  # type: ignore[attr-defined]
+                p[1] = task.kv  # type: ignore[attr-defined]
+                p[2] = task.theta_d  # type: ignore[attr-defined]
+                p[3] = task.thetad_d  # type: ignore[attr-defined]
+                p[4] = task.thdd_d  # type: ignore[attr-defined]
+                w[start] = task.weight  # type: ignore[attr-defined]
+            elif kind == spin:
+                p[0] = task.kp  # type: ignore[attr-defined]
+                p[1] = task.kv  # type: ignore[attr-defined]
+                p[2] = task.psi_d  # type: ignore[attr-defined]
+                p[3] = task.psid_d  # type: ignore[attr-defined]
+                p[4] = task.psidd_d  # type: ignore[attr-defined]
+                w[start] = task.weight  # type: ignore[attr-defined]
             else:
-                params[k, :2] = (task.kp, task.kv)  # type: ignore[attr-defined]
-                self.row_target[start[k] : start[k + 1]] = task.target  # type: ignore[attr-defined]
-                w[start[k] : start[k + 1]] = task.joint_weights  # type: ignore[attr-defined]
+                p[0] = task.kp  # type: ignore[attr-defined]
+                p[1] = task.kv  # type: ignore[attr-defined]
+                target[...] = task.target  # type: ignore[attr-defined,index]
+                w[start:stop] = (
+                    task.joint_weights  # type: ignore[attr-defined]
+                    if kind != position and kind != orientation
+                    else task.weight  # type: ignore[attr-defined]
+                )
 
     def fill(self, robot: RobotModel, J: Array, target: Array, jdot_nu: Array, w: Array) -> None:
         """The stacked rows ``J``, ``xdd*``, ``Jdot nu`` and weights ``w`` of this state (the
@@ -283,9 +454,9 @@ class CompiledTaskStack:
         if robot is not self._robot:
             raise ValueError("a compiled task stack serves the robot model it was built for")
         cache = robot.cache
-        for slot, (key, _, _) in enumerate(self._observer_rows):
-            self.observer_advance[slot] = key not in cache
-        self._fill_snapshot(robot)
+        advance = self.observer_advance
+        for slot, key in enumerate(self._observer_keys):
+            advance[slot] = key not in cache
         self._pack_parameters(w)
         scalars = self.scalars
         heading = robot.heading_rotation
@@ -294,7 +465,11 @@ class CompiledTaskStack:
         scalars[2] = heading[0, 0]
         scalars[3] = heading[1, 0]
         scalars[4] = 0.0 if self._planar else robot.nu[int(scalars[5])]
-        ct.task_rows(
+        stack_rows(
+            *self._probe_constants,
+            robot.Jdot_tf_nu,
+            *self._probe_state,
+            self._theta,
             self.kinds,
             self.sites,
             self.observers,
@@ -326,5 +501,8 @@ class CompiledTaskStack:
             jdot_nu,
         )
         # an observer advances once per state: its command memoised as its Python path does
-        for key, start, stop in self._observer_rows:
-            cache[key] = target[start:stop].copy()
+        # (views on one private copy of the rows)
+        if self._observer_rows:
+            commands = target.copy()
+            for key, start, stop in self._observer_rows:
+                cache[key] = commands[start:stop]
