@@ -437,7 +437,6 @@ class HierarchicalController(PolicyBase):
                 time.perf_counter() - start,
             ),
         )
-        self.high_level.dispatch()  # a due MPC solve starts beside the env step
         self._step += 1
         return action
 

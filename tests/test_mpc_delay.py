@@ -105,33 +105,3 @@ def test_delay_is_validated_and_a_pending_solve_survives_pickling() -> None:
     assert copy._executor is None and copy.config.mpc_delay_steps == 3
     assert copy._pending is not None and copy._pending[1] == 20
     np.testing.assert_array_equal(copy._pending[0].result().predicted_states, np.ones((3, 2)))
-
-
-def test_the_solve_starts_after_the_step_and_without_dispatch_nothing_changes() -> None:
-    """The controller starts a tick's solve at the end of its step (``HighLevel.dispatch``, so
-    that the thread's dispatch overlaps the env's ``mj_step``); a caller that never calls
-    ``dispatch`` gets the same references, its solve started by the next ``reference``."""
-    delay = 4
-    env = gym.make("wip_gym/PlanarTray-v0", max_episode_steps=-1)
-    obs, info = env.reset(seed=4)
-    config = HierarchicalConfig(high_level=HighLevelConfig(mpc_delay_steps=delay))
-    policy = HierarchicalController.for_env(env, config)
-    policy.reset(obs, info)
-    lazy = HighLevel(config.high_level, policy.task.control_dt)
-    lazy.reset(policy.robot, policy.task.goal, policy.task.cup_friction)
-    started = 0
-    for step in range(STEPS):
-        action = policy(obs)
-        high_level = policy.high_level
-        if step % 10 == 0 and step > 0:  # a tick: its solve already runs
-            assert high_level._due is None and high_level._pending is not None
-            assert high_level._pending[1] == step
-            started += 1
-        ref = lazy.reference(policy.robot)  # the state the policy's step saw
-        assert (lazy._due is not None) == (step % 10 == 0 and step > 0)
-        assert ref == policy._ref, step
-        obs, *_ = env.step(action)
-    assert started == (STEPS - 1) // 10
-    lazy.close()
-    policy.high_level.close()
-    env.close()

@@ -147,7 +147,6 @@ class DecoupledMPCController(PolicyBase):
             mpc_cost=last.cost,
             compute_time=time.perf_counter() - start,
         )
-        self.high_level.dispatch()  # a due MPC solve starts beside the env step
         self._step += 1
         return applied
 

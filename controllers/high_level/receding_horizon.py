@@ -12,13 +12,6 @@ level follows the previous solution further along its prediction. Step ``k + d``
 solve if it is not done, so an episode is the same whatever the machine's speed (deterministic),
 and the control step's worst case no longer holds a whole MPC solve. ``d = 0`` (the default,
 the paper's timing) solves in the control step that uses it.
-
-The solve due at step ``k`` starts when the controller calls :meth:`HighLevel.dispatch`, after
-it has computed step ``k``'s torques: the thread's Python work (JAX's dispatch of the compiled
-step) then overlaps the env's ``mj_step``, which releases the GIL, instead of the control
-step's own Python. A caller that does not call it loses nothing but that overlap: the next
-:meth:`HighLevel.reference` starts the solve first (from the same state, so with the same
-result).
 """
 
 from __future__ import annotations
@@ -93,8 +86,6 @@ class HighLevel:
         )
         self._last_rows: tuple[list[list[float]], list[list[float]]] = ([], [])
         self._pending: tuple[Future[MPCStep], int] | None = None
-        # a solve due but not started yet: (plan index, WIPM state, parameters, its step)
-        self._due: tuple[int, np.ndarray, WIPMParams, int] | None = None
         self._executor: ThreadPoolExecutor | None = None
         self._rejections = 0
         if config.mpc_delay_steps > 0 and config.mpc.steps < 2:
@@ -105,7 +96,6 @@ class HighLevel:
 
     def _discard_pending(self) -> None:
         """Wait for a background solve and drop it (its episode is over)."""
-        self._due = None
         if self._pending is not None:
             future, _ = self._pending
             self._pending = None
@@ -127,18 +117,11 @@ class HighLevel:
             done.set_result(solution)  # type: ignore[arg-type]
             self._pending = (done, start)  # type: ignore[assignment]
 
-    def dispatch(self) -> None:
-        """Start the MPC solve due at this control step, if any, in the background thread
-        (``mpc_delay_steps > 0``; module docstring): call it once the step's torques are
-        computed."""
-        if self._due is None:
-            return
-        index, state, params, start = self._due
-        self._due = None
+    def _solve_later(self, index: int, state: np.ndarray, params: WIPMParams) -> None:
         if self._executor is None:
             self._executor = ThreadPoolExecutor(1, thread_name_prefix="wip-gym-mpc")
         assert self.mpc is not None
-        self._pending = (self._executor.submit(self.mpc.step, index, state, params), start)
+        self._pending = (self._executor.submit(self.mpc.step, index, state, params), self._step)
 
     def _wait_pending(self) -> None:
         """Take the pending solve's solution (waiting for it) as the one in use."""
@@ -185,8 +168,6 @@ class HighLevel:
         current state), and return the references interpolated inside the MPC step."""
         if self.mpc is None or self.plan is None:
             raise RuntimeError("HighLevel.reset() first")
-        if self._due is not None:
-            self.dispatch()  # a solve the caller did not start
         step, steps_per_mpc = self._step, self.steps_per_mpc
         index, phase = divmod(step, steps_per_mpc)
         delay = self.config.mpc_delay_steps
@@ -196,7 +177,7 @@ class HighLevel:
             if delay == 0 or self._last is None:
                 self._use(self.mpc.step(index, state, self.params), step)
             else:
-                self._due = (index, state, self.params, step)
+                self._solve_later(index, state, self.params)
         pending = self._pending
         if pending is not None and step >= pending[1] + delay:
             self._wait_pending()
