@@ -19,6 +19,7 @@ import pytest
 
 import benchmarks.speed.profile as profile_module
 from benchmarks.cli import main
+from benchmarks.speed.closed_loop_table import figure as closed_loop_figure
 from benchmarks.speed.closed_loop_table import table as closed_loop_table
 from benchmarks.speed.profile import ROWS, profile_episode
 from benchmarks.speed.yardstick import REFERENCE_ENV, reference_step_us
@@ -187,3 +188,9 @@ def test_profile_takes_compares_settings(tmp_path: Path) -> None:
     with pytest.raises(SystemExit) as refused:
         main([*argv, "--set", "unified.high_level.no_such_field=1"])
     assert refused.value.code == 2
+
+
+def test_closed_loop_table_refuses_a_profile_without_a_task_qp() -> None:
+    result = {"per_step_units": {"qp_assembly": None, "qp_solve": None}}
+    with pytest.raises(ValueError, match="no task QP"):
+        closed_loop_figure(result, ("per_step_units", "qp_assembly", "mean"))

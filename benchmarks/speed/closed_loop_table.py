@@ -55,8 +55,10 @@ def figure(result: dict[str, Any], path: Sequence[str]) -> float:
     (the task rows and the QP kernel are one compiled call: the split between them is not
     meaningful)."""
     if tuple(path) == ("per_step_units", "qp_assembly", "mean"):
-        parts = result["per_step_units"]
-        return float(sum(parts[k]["mean"] for k in ("qp_assembly", "qp_solve") if parts[k]))
+        parts = [result["per_step_units"][k] for k in ("qp_assembly", "qp_solve")]
+        if any(part is None for part in parts):
+            raise ValueError("the profile has no task QP (qp_assembly, qp_solve)")
+        return float(sum(part["mean"] for part in parts))
     value: Any = result
     for key in path:
         value = value[key]

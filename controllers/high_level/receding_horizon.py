@@ -183,7 +183,8 @@ class HighLevel:
             self._wait_pending()
         assert self._last is not None
         # where the solution in use is along its own prediction (inside its first MPC step
-        # unless it is delayed); its rows as Python floats (_use), the same arithmetic
+        # unless it is delayed); its rows as Python floats (_use): the same arithmetic as on
+        # the solution's float64 arrays (in float64 even if JAX ran without jax_setup's x64)
         interval, rest = divmod(step - self._last_start, steps_per_mpc)
         self._step = step + 1
         fraction = rest / steps_per_mpc
