@@ -21,6 +21,7 @@ import benchmarks.speed.profile as profile_module
 from benchmarks.cli import main
 from benchmarks.speed.closed_loop_table import figure as closed_loop_figure
 from benchmarks.speed.closed_loop_table import table as closed_loop_table
+from benchmarks.speed.env_own_work import own_work_us
 from benchmarks.speed.profile import ROWS, profile_episode
 from benchmarks.speed.yardstick import REFERENCE_ENV, reference_step_us
 
@@ -194,3 +195,12 @@ def test_closed_loop_table_refuses_a_profile_without_a_task_qp() -> None:
     result = {"per_step_units": {"qp_assembly": None, "qp_solve": None}}
     with pytest.raises(ValueError, match="no task QP"):
         closed_loop_figure(result, ("per_step_units", "qp_assembly", "mean"))
+
+
+def test_env_own_work_is_the_step_beyond_its_physics() -> None:
+    """``benchmarks.speed.env_own_work``: positive (the env does work beyond ``mj_step``: its
+    measures, observation and info) and finite; bad arguments refused."""
+    own = own_work_us("wip_gym/Planar-v0", states=3, repeats=20)
+    assert 0.0 < own < math.inf
+    with pytest.raises(ValueError, match=">= 1"):
+        own_work_us("wip_gym/Planar-v0", states=0)
