@@ -19,7 +19,9 @@ import pytest
 
 import benchmarks.speed.profile as profile_module
 from benchmarks.cli import main
+from benchmarks.speed.closed_loop_table import comparison as closed_loop_comparison
 from benchmarks.speed.closed_loop_table import figure as closed_loop_figure
+from benchmarks.speed.closed_loop_table import main as closed_loop_main
 from benchmarks.speed.closed_loop_table import table as closed_loop_table
 from benchmarks.speed.env_own_work import own_work_us
 from benchmarks.speed.profile import ROWS, profile_episode
@@ -204,3 +206,32 @@ def test_env_own_work_is_the_step_beyond_its_physics() -> None:
     assert 0.0 < own < math.inf
     with pytest.raises(ValueError, match=">= 1"):
         own_work_us("wip_gym/Planar-v0", states=0)
+
+
+def test_closed_loop_comparison_shows_each_columns_rounds_before_and_after() -> None:
+    def profile(control: float, unit: float) -> dict[str, Any]:
+        part = {"mean": 1.0, "median": 1.0}
+        parts = dict.fromkeys(("robot_model", "qp_assembly", "qp_solve", "high_level"), part)
+        parts |= dict.fromkeys(("env_step", "env_overhead", "loop"), part)
+        return {
+            "control_time_units": {"mean": control, "p99": 3 * control},
+            "per_step_units": parts,
+            "real_time_factor": 2.0,
+            "reference_step_us": unit,
+        }
+
+    before = {"KrangTray": [profile(20.0, 15.0), profile(18.0, 16.0), profile(19.0, 14.0)]}
+    after = {"KrangTray": [profile(15.0, 15.5)]}
+    lines = closed_loop_comparison(before, after).splitlines()
+    assert lines[0] == "| per 1 ms step, units | KrangTray before | KrangTray after | target |"
+    assert lines[2] == "| control, mean | 19.0 [18.0, 20.0] | 15.0 | 5 |"
+    assert lines[3] == "| control, p99 | 57.0 [54.0, 60.0] | 45.0 | 12 |"
+    assert "| of which the task rows and QP (mean) | 2.0 [2.0, 2.0] | 2.0 |  |" in lines
+    assert lines[-1] == "unit (bare mj_step of Krang-v0): 14.0 to 16.0 us"
+
+
+def test_closed_loop_table_refuses_an_unknown_base(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as raised:
+        closed_loop_main(["--base", "no-such-revision-here", "--rounds", "1"])
+    assert raised.value.code == 2
+    assert "no-such-revision-here" in capsys.readouterr().err

@@ -1,6 +1,7 @@
 """The closed loop's table in units, from ``wip-bench profile`` runs in alternating rounds.
 
     python -m benchmarks.speed.closed_loop_table [--rounds 2] [--duration 8] [--out out/perf]
+    python -m benchmarks.speed.closed_loop_table --base REV [--rounds 5] ...
 
 Each cell of the table is one ``wip-bench profile`` process (a fresh process per run, as a user
 runs it; ``--json`` files kept in ``--out``) of the ``unified`` controller on one env and one
@@ -9,15 +10,24 @@ loop (``--set unified.high_level.mpc_delay_steps=5``). The runs go round by roun
 column once per round, so that a change of the machine's load spreads over all columns; a cell
 shows its rounds' values side by side. Every figure is in units of a bare ``mj_step`` of
 Krang-v0 timed in the same process (``benchmarks.speed.yardstick``), so the table compares
-across machines; the rows are the issue's targets (docs/performance.md §7 and §8).
+across machines; the rows are the issue's targets (docs/performance.md §7 to §9).
+
+``--base REV`` measures a change: the git revision ``REV`` is checked out into a temporary
+worktree, and every round runs each column once at ``REV`` and once in this checkout; the table
+shows, per column, the median [min, max] over the rounds before and after. The revision's runs
+start in its worktree: ``python -m`` puts the working directory first on ``sys.path``, ahead
+of ``PYTHONPATH``, so a run started here would import this checkout's code instead.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
+import statistics
 import subprocess
 import sys
+import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -86,8 +96,12 @@ def table(results: dict[str, list[dict[str, Any]]]) -> str:
     return "\n".join(lines)
 
 
-def _profile(env: str, extra: Sequence[str], duration: float, path: Path) -> dict[str, Any]:
-    command = [
+REPO = Path(__file__).resolve().parents[2]
+
+
+def profile_command(env: str, extra: Sequence[str], duration: float, path: Path) -> list[str]:
+    """The ``wip-bench profile`` process of one cell (its JSON written to ``path``)."""
+    return [
         sys.executable,
         "-m",
         "benchmarks.cli",
@@ -102,8 +116,65 @@ def _profile(env: str, extra: Sequence[str], duration: float, path: Path) -> dic
         str(path),
         *extra,
     ]
-    subprocess.run(command, check=True, stdout=subprocess.DEVNULL)
+
+
+def _profile(
+    env: str, extra: Sequence[str], duration: float, path: Path, tree: Path = REPO
+) -> dict[str, Any]:
+    """One cell, run with ``tree``'s code (started in ``tree``, ``tree`` on ``PYTHONPATH``)."""
+    environment = {**os.environ, "PYTHONPATH": str(tree)}
+    subprocess.run(
+        profile_command(env, extra, duration, path.resolve()),
+        check=True,
+        stdout=subprocess.DEVNULL,
+        cwd=tree,
+        env=environment,
+    )
     return dict(json.loads(path.read_text()))
+
+
+def spread(values: Sequence[float]) -> str:
+    """``median [min, max]`` (one value: itself)."""
+    if len(values) == 1:
+        return f"{values[0]:.1f}"
+    return f"{statistics.median(values):.1f} [{min(values):.1f}, {max(values):.1f}]"
+
+
+def comparison(
+    before: dict[str, list[dict[str, Any]]], after: dict[str, list[dict[str, Any]]]
+) -> str:
+    """The markdown table of ``--base``: per :data:`ROWS` entry and column, the rounds' median
+    [min, max] before and after."""
+    titles = list(after)
+    header = " | ".join(f"{t} before | {t} after" for t in titles)
+    lines = [f"| per 1 ms step, units | {header} | target |", "|---" * (2 * len(titles) + 2) + "|"]
+    for title, path, target in ROWS:
+        cells = [
+            spread([figure(r, path) for r in runs[t]]) for t in titles for runs in (before, after)
+        ]
+        lines.append(
+            f"| {title} | " + " | ".join(cells) + f" | {'' if target is None else f'{target:g}'} |"
+        )
+    units = [r["reference_step_us"] for runs in (before, after) for t in titles for r in runs[t]]
+    lines.append("")
+    lines.append(f"unit (bare mj_step of Krang-v0): {min(units):.1f} to {max(units):.1f} us")
+    return "\n".join(lines)
+
+
+def _worktree(revision: str, directory: Path) -> None:
+    subprocess.run(
+        ["git", "-C", str(REPO), "worktree", "add", "--detach", str(directory), revision],
+        check=True,
+        capture_output=True,
+    )
+
+
+def _remove_worktree(directory: Path) -> None:
+    subprocess.run(
+        ["git", "-C", str(REPO), "worktree", "remove", "--force", str(directory)],
+        check=False,
+        capture_output=True,
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -111,16 +182,41 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rounds", type=int, default=2, help="runs per column (default 2)")
     parser.add_argument("--duration", type=float, default=8.0, help="episode length, s")
     parser.add_argument("--out", type=Path, default=Path("out/perf"), help="the JSON files")
+    parser.add_argument("--base", help="a git revision to compare this checkout with")
     args = parser.parse_args(argv)
     if args.rounds < 1 or args.duration <= 0:
         parser.error("--rounds must be >= 1 and --duration > 0")
     args.out.mkdir(parents=True, exist_ok=True)
-    results: dict[str, list[dict[str, Any]]] = {title: [] for title, _, _ in COLUMNS}
-    runs = [(r, column) for r in range(args.rounds) for column in COLUMNS]
-    for r, (title, env, extra) in tqdm(runs, desc="profile runs", unit="run"):
-        slug = title.lower().replace(", d = ", "_d").replace(" ", "_")
-        results[title].append(_profile(env, extra, args.duration, args.out / f"{slug}_{r}.json"))
-    print(table(results))
+    trees: dict[str, Path] = {"after": REPO}
+    with tempfile.TemporaryDirectory(prefix="wip-gym-base-") as scratch:
+        if args.base is not None:
+            trees = {"before": Path(scratch) / "tree", "after": REPO}
+            try:
+                _worktree(args.base, trees["before"])
+            except subprocess.CalledProcessError as error:
+                parser.error(f"--base {args.base!r}: {error.stderr.decode().strip()}")
+        try:
+            results: dict[str, dict[str, list[dict[str, Any]]]] = {
+                version: {title: [] for title, _, _ in COLUMNS} for version in trees
+            }
+            runs = [
+                (r, version, column)
+                for r in range(args.rounds)
+                for column in COLUMNS
+                for version in trees
+            ]
+            for r, version, (title, env, extra) in tqdm(runs, desc="profile runs", unit="run"):
+                slug = title.lower().replace(", d = ", "_d").replace(" ", "_")
+                path = args.out / f"{version}_{slug}_{r}.json"
+                result = _profile(env, extra, args.duration, path, trees[version])
+                results[version][title].append(result)
+        finally:
+            if args.base is not None:
+                _remove_worktree(trees["before"])
+    if args.base is None:
+        print(table(results["after"]))
+    else:
+        print(comparison(results["before"], results["after"]))
     return 0
 
 
