@@ -162,11 +162,22 @@ def comparison(
 
 
 def _worktree(revision: str, directory: Path) -> None:
+    """``revision`` checked out at ``directory``, its compiled code cached there before the
+    first timed run (``benchmarks.warm_caches``, if the revision has it): numba's caches live
+    beside the sources, and a first run would otherwise compile inside its episode."""
     subprocess.run(
         ["git", "-C", str(REPO), "worktree", "add", "--detach", str(directory), revision],
         check=True,
         capture_output=True,
     )
+    if (directory / "benchmarks" / "warm_caches.py").exists():
+        subprocess.run(
+            [sys.executable, "-m", "benchmarks.warm_caches"],
+            check=True,
+            stdout=subprocess.DEVNULL,
+            cwd=directory,
+            env={**os.environ, "PYTHONPATH": str(directory)},
+        )
 
 
 def _remove_worktree(directory: Path) -> None:
