@@ -147,14 +147,13 @@ class _CompiledStep:
         """:meth:`_step` as the body of a ``while`` loop that stops after its first trip (a
         flag, not a counter: XLA cannot see the trip count and inline the loop away)."""
         self.trace_count += 1
-        n, (H, m) = plan_states.shape[1], warm.shape
-        dtype = plan_states.dtype
-        packed = jnp.zeros(((H + 1) * n + H * m + 3,), dtype)
-        initial = (packed, jnp.zeros((H, m), dtype), jnp.array(False))
+        args = (index, first, state, params, warm, plan_states, plan_controls)
+        # the loop's carry before its trip: zeros shaped as _step's outputs
+        shapes = jax.eval_shape(self._step, *args)
+        initial = (*(jnp.zeros(a.shape, a.dtype) for a in shapes), jnp.array(False))
 
         def body(carry: tuple[jax.Array, ...]) -> tuple[jax.Array, ...]:
-            out = self._step(index, first, state, params, warm, plan_states, plan_controls)
-            return (*out, jnp.array(True))
+            return (*self._step(*args), jnp.array(True))
 
         packed, next_warm, _ = jax.lax.while_loop(lambda carry: ~carry[2], body, initial)
         return packed, next_warm
