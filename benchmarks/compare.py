@@ -43,7 +43,7 @@ from benchmarks.overrides import (
     resolve_run,
     valid_settings,
 )
-from benchmarks.presets import PRESET_NAMES
+from benchmarks.presets import add_configuration_arguments
 from benchmarks.render import VideoJobs, add_video_arguments, recording_file, video_options
 from benchmarks.scenario import (
     DEFAULT_DURATION_S,
@@ -87,19 +87,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--episodes", type=int, default=1)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument(
-        "--preset",
-        choices=PRESET_NAMES,
-        help="a named configuration: paper = the authors' (5 m straight, free tray with rim, "
-        "the configs' .paper())",
-    )
-    parser.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        dest="overrides",
-        help="env.<argument>, plan.<field> or <controller>.<field.path>; JSON value "
+    add_configuration_arguments(
+        parser,
+        set_help="env.<argument>, plan.<field> or <controller>.<field.path>; JSON value "
         "(repeatable; see --list-keys)",
     )
     parser.add_argument(

@@ -9,10 +9,27 @@ no acceleration cap, the unified controller's task weights) come from ``Config.p
 
 from __future__ import annotations
 
+import argparse
 from collections.abc import Mapping
 from typing import Any
 
 PRESET_NAMES = ("paper",)
+
+
+def add_configuration_arguments(parser: argparse.ArgumentParser, set_help: str) -> None:
+    """``--preset`` and the repeatable ``--set KEY=VALUE`` (into ``args.overrides``), the
+    configuration arguments of ``wip-bench compare`` and of every tool that takes its keys
+    (``wip-bench profile``, ``tools/lurch_trace.py``); ``set_help`` says which keys."""
+    parser.add_argument(
+        "--preset",
+        choices=PRESET_NAMES,
+        help="a named configuration: paper = the authors' (5 m straight, free tray with rim, "
+        "the configs' .paper())",
+    )
+    parser.add_argument(
+        "--set", action="append", default=[], metavar="KEY=VALUE", dest="overrides", help=set_help
+    )
+
 
 PAPER_GOAL_M = 5.0  # docs/AUTHORS_CONFIG.md §5.3: 5 m straight ahead
 PAPER_TRAY = {  # docs/AUTHORS_CONFIG.md §5.3: the authors' tray and cup

@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.overrides import parse_assignment, resolve_run
+from benchmarks.presets import add_configuration_arguments
 from benchmarks.rollout import rollout
 from benchmarks.scenario import resolve_env_id
 
@@ -109,15 +110,7 @@ def main() -> None:
     parser.add_argument("--a-max", type=float, help="plan.a_max, m/s^2 (default: cup-safe)")
     parser.add_argument("--q-position", type=float, help="plan.q_position")
     parser.add_argument("--theta-max", type=float, help="plan.theta_max, rad")
-    parser.add_argument("--preset", help="a wip-bench compare preset (paper)")
-    parser.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        dest="overrides",
-        help="a wip-bench compare --set key",
-    )
+    add_configuration_arguments(parser, set_help="a wip-bench compare --set key")
     parser.add_argument("--trace", default="", help="controllers whose time series to print")
     parser.add_argument("--window", default="0:2", help="START:STOP s of the time series")
     parser.add_argument("--every", type=float, default=0.05, help="s between rows")

@@ -85,7 +85,7 @@ import mujoco
 import numpy as np
 
 from benchmarks.overrides import parse_assignment, resolve_run
-from benchmarks.presets import PRESET_NAMES
+from benchmarks.presets import add_configuration_arguments
 from benchmarks.scenario import resolve_env_id
 from benchmarks.speed.yardstick import ReferenceStep, reference_step_samples
 from controllers.registry import controller_names, make_policy
@@ -349,14 +349,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--duration", type=float, default=5.0, help="episode length (s)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--json", type=Path, default=None, help="write the profile here")
-    parser.add_argument("--preset", choices=PRESET_NAMES, help="a named configuration")
-    parser.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        dest="overrides",
-        help="env.<argument> or <controller>.<field.path>, as in compare (repeatable)",
+    add_configuration_arguments(
+        parser, set_help="env.<argument> or <controller>.<field.path>, as in compare (repeatable)"
     )
 
 
