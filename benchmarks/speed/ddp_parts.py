@@ -29,25 +29,14 @@ why ``controllers.optimizer.ddp`` runs the warm start's rollout inside its itera
 from __future__ import annotations
 
 import argparse
-import time
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
-from benchmarks.speed.yardstick import ReferenceStep
+from benchmarks.speed.yardstick import ReferenceStep, median_call_us
 
 PIECES = ("empty_call", "rollout", "cost", "backward", "solve_0", "solve_1", "solve_2")
-
-
-def _median_us(function: Callable[[], Any], calls: int = 200) -> float:
-    function()
-    times = []
-    for _ in range(calls):
-        start = time.perf_counter()
-        function()
-        times.append(time.perf_counter() - start)
-    return float(np.median(times) * 1e6)
 
 
 def _problem_calls(problem: str, params: Any, theta0: float) -> dict[str, Callable[[], Any]]:
@@ -109,7 +98,7 @@ def measure(rounds: int = 3) -> dict[str, dict[str, float]]:
         units: list[float] = []
         for _ in range(rounds):
             for name in PIECES:
-                samples[name].append(_median_us(calls[name]))
+                samples[name].append(median_call_us(calls[name]))
                 units.append(float(np.median([reference.sample() for _ in range(50)]) * 1e6))
         unit = float(np.median(units))
         out[problem] = {name: float(np.median(v)) / unit for name, v in samples.items()}

@@ -15,26 +15,15 @@ caches), it measures the env alone, warm.
 from __future__ import annotations
 
 import argparse
-import time
-from collections.abc import Callable
 
 import gymnasium as gym
 import mujoco
 import numpy as np
 
 import wip_gym  # noqa: F401  (registers the envs)
-from benchmarks.speed.yardstick import reference_step_us
+from benchmarks.speed.yardstick import median_call_us, reference_step_us
 
 ENVS = ("wip_gym/KrangTray-v0", "wip_gym/PlanarTray-v0", "wip_gym/Krang-v0", "wip_gym/Planar-v0")
-
-
-def _median_us(function: Callable[[], object], repeats: int) -> float:
-    times = np.empty(repeats)
-    for i in range(repeats):
-        start = time.perf_counter()
-        function()
-        times[i] = time.perf_counter() - start
-    return float(np.median(times) * 1e6)
 
 
 def own_work_us(env_id: str, states: int = 40, repeats: int = 100) -> float:
@@ -63,7 +52,7 @@ def own_work_us(env_id: str, states: int = 40, repeats: int = 100) -> float:
             mujoco.mj_copyData(d, m, snapshot)
             mujoco.mj_step(m, d)
 
-        differences.append(_median_us(full, repeats) - _median_us(bare, repeats))
+        differences.append(median_call_us(full, repeats) - median_call_us(bare, repeats))
     env.close()
     return float(np.median(differences))
 

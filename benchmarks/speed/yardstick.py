@@ -15,6 +15,7 @@ figures also in its units.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 
 import gymnasium as gym
 import mujoco
@@ -63,3 +64,16 @@ def reference_step_samples(repeats: int = 400, warmup: int = 50) -> np.ndarray:
 def reference_step_us(repeats: int = 400, warmup: int = 50) -> float:
     """The unit (module docstring) in microseconds."""
     return float(np.median(reference_step_samples(repeats, warmup)) * 1e6)
+
+
+def median_call_us(function: Callable[[], object], calls: int = 200) -> float:
+    """The median wall time (us) of ``calls`` calls of ``function``, after one untimed call."""
+    if calls < 1:
+        raise ValueError(f"calls must be >= 1, got {calls}")
+    function()
+    times = np.empty(calls)
+    for i in range(calls):
+        start = time.perf_counter()
+        function()
+        times[i] = time.perf_counter() - start
+    return float(np.median(times) * 1e6)
