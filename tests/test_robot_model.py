@@ -276,6 +276,51 @@ def test_compiled_arithmetic_equals_numpy(robot: RobotModel) -> None:
         assert robot.thetad == pytest.approx(float(J_theta @ robot.nu), abs=1e-12)
 
 
+def test_transform_jacobian_is_nonzero_only_in_its_pattern(robot: RobotModel) -> None:
+    """``J_tf_pattern``, which the compiled products with ``J_tf`` visit, holds every nonzero
+    entry of ``J_tf`` at random states (headings and pitches of every quadrant in 3-D), and
+    every entry it holds is nonzero at some state (no wasted work)."""
+    rng = np.random.default_rng(23)
+    rows, columns = robot.J_tf_pattern
+    outside = np.ones(robot.J_tf.shape, dtype=bool)
+    outside[rows, columns] = False
+    seen = np.zeros(robot.J_tf.shape, dtype=bool)
+    for _ in range(20):
+        q, nu = random_minimal_state(robot, rng)
+        if not robot.layout.planar:
+            q[1], q[2] = rng.uniform(-np.pi, np.pi, 2)
+        robot.update(*robot.full_state(q, nu))
+        assert not robot.J_tf[outside].any()
+        seen |= robot.J_tf != 0.0
+    assert seen[rows, columns].all()
+    assert (np.diff(columns) >= 0).all()
+    with pytest.raises(ValueError, match="read-only"):
+        robot.J_tf_pattern[0, 0] = 1
+
+
+def test_pattern_products_equal_dense_products() -> None:
+    """``wip_gym.small_linalg``'s products over a sparsity pattern against NumPy's dense
+    products, on a random matrix with zeros outside its pattern (and the pattern's columns in
+    any order, repeated columns included)."""
+    from wip_gym.small_linalg import (  # noqa: PLC0415
+        matmul_pattern,
+        matmul_transposed_pattern,
+        matvec_transposed_pattern,
+    )
+
+    rng = np.random.default_rng(5)
+    S = np.zeros((24, 19))
+    rows, columns = rng.integers(0, 24, 40), rng.integers(0, 19, 40)
+    S[rows, columns] = rng.normal(size=40)
+    pattern = np.array(np.nonzero(S), dtype=np.int64)[:, rng.permutation(np.count_nonzero(S))]
+    A, B, x = rng.normal(size=(7, 24)), rng.normal(size=(24, 5)), rng.normal(size=24)
+    np.testing.assert_allclose(matmul_pattern(A, S, pattern), A @ S, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(
+        matmul_transposed_pattern(S, pattern, B), S.T @ B, rtol=0, atol=1e-13
+    )
+    np.testing.assert_allclose(matvec_transposed_pattern(S, pattern, x), S.T @ x, atol=1e-13)
+
+
 def test_body_inertia_about_the_axle_equals_the_sum_over_bodies(robot: RobotModel) -> None:
     """``body_inertia_about_axle`` (compiled) against the parallel-axis sum written with
     NumPy, on random states; its pitch entry is ``A[q1, q1]`` (eq. ``dyn``'s inertia)."""

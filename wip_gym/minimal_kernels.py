@@ -26,7 +26,12 @@ import numpy as np
 from numba import njit
 
 from wip_gym import mujoco_c as mjc
-from wip_gym.small_linalg import matmul, matmul_transposed, matvec, matvec_transposed
+from wip_gym.small_linalg import (
+    matmul_pattern,
+    matmul_transposed_pattern,
+    matvec,
+    matvec_transposed_pattern,
+)
 
 
 @njit(cache=True)
@@ -157,15 +162,17 @@ def minimal_state(
 def minimal_dynamics(
     M: np.ndarray,
     J: np.ndarray,
+    J_pattern: np.ndarray,
     Jdot_nu: np.ndarray,
     bias: np.ndarray,
     passive: np.ndarray,
     S: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(A, h, B)`` of paper eq. ``dyn`` (new arrays)."""
-    A = matmul_transposed(J, matmul(M, J))
-    h = matvec_transposed(J, matvec(M, Jdot_nu) + bias - passive)
-    B = matmul_transposed(J, S)
+    """``(A, h, B)`` of paper eq. ``dyn`` (new arrays), the products with ``J = J_tf`` over its
+    nonzero pattern ``J_pattern`` (``RobotModel.J_tf_pattern``)."""
+    A = matmul_transposed_pattern(J, J_pattern, matmul_pattern(M, J, J_pattern))
+    h = matvec_transposed_pattern(J, J_pattern, matvec(M, Jdot_nu) + bias - passive)
+    B = matmul_transposed_pattern(J, J_pattern, S)
     return A, h, B
 
 
@@ -180,6 +187,7 @@ def body_com(
     jac_wheels: np.ndarray,
     jac_origin: np.ndarray,
     J: np.ndarray,
+    J_pattern: np.ndarray,
     nu: np.ndarray,
     c: float,
     s: float,
@@ -188,7 +196,8 @@ def body_com(
     """``(mass, com, J_com, theta, thetad, J_theta)`` of the body (every robot body but the
     wheels: ``masses``, ``positions`` their CoMs in world) about the axle ``origin``, in the
     axle frame (``Rz(psi)``, ``c``, ``s``; the world's when planar). ``J_com`` from the base
-    subtree's CoM Jacobian less the wheels', relative to the origin's, over ``nu`` (``J``);
+    subtree's CoM Jacobian less the wheels', relative to the origin's, over ``nu`` (``J``, nonzero
+    only in ``J_pattern``);
     in 3-D the frame's turning adds ``-psid e_z x com`` (column 1, ``psi``)."""
     mass = 0.0
     for i in range(len(masses)):
@@ -203,7 +212,7 @@ def body_com(
     for w in range(len(wheel_masses)):
         Jc -= wheel_masses[w] * jac_wheels[w]
     Jc /= mass
-    J_rel = matmul(Jc - jac_origin, J)
+    J_rel = matmul_pattern(Jc - jac_origin, J, J_pattern)
     if planar:
         com = offset
     else:
@@ -286,6 +295,7 @@ def robot_update(
     q: np.ndarray,
     nu: np.ndarray,
     J: np.ndarray,
+    J_pattern: np.ndarray,
     Jdot_nu: np.ndarray,
     jac_subtree: np.ndarray,
     jac_wheels: np.ndarray,
@@ -315,7 +325,8 @@ def robot_update(
     CoM, of the wheels' CoMs and of the base origin, :func:`body_com`; with ``dynamics`` also
     ``mj_crb``, the full mass matrix, ``mj_comVel``, ``mj_passive``, ``mj_rne`` and
     :func:`minimal_dynamics` (else ``A``, ``h``, ``B`` are empty). ``bodies``: ``(base,
-    wheel_left, wheel_right)``. Returns ``(psi, psid, cos psi, sin psi, mass, com, J_com,
+    wheel_left, wheel_right)``; ``J_pattern``: where ``J`` (``J_tf``) may be nonzero. Returns
+    ``(psi, psid, cos psi, sin psi, mass, com, J_com,
     theta, thetad, J_theta, A, h, B)``."""
     data_qpos[: len(qpos)] = qpos
     data_qvel[: len(qvel)] = qvel
@@ -351,6 +362,7 @@ def robot_update(
         jac_wheels,
         jac_origin,
         J,
+        J_pattern,
         nu,
         c,
         s,
@@ -362,7 +374,7 @@ def robot_update(
         mjc.mj_comVel(model, data)
         mjc.mj_passive(model, data)
         mjc.mj_rne(model, data, 0, bias.ctypes.data)
-        A, h, B = minimal_dynamics(M, J, Jdot_nu, bias, qfrc_passive, S)
+        A, h, B = minimal_dynamics(M, J, J_pattern, Jdot_nu, bias, qfrc_passive, S)
     else:
         A, h, B = np.zeros((0, 0)), np.zeros(0), np.zeros((0, 0))
     return psi, psid, c, s, mass, com, J_com, theta, thetad, J_theta, A, h, B

@@ -298,6 +298,7 @@ class RobotModel:
             self._J[lay.wheel_dof[0], 1] = -sep / (2.0 * r)
             self._J[lay.wheel_dof[1], 1] = sep / (2.0 * r)
             self._J[lay.root_dof + 4, 2] = 1.0
+        self._J_pattern = _read_only(transform_pattern(self._J, lay))
         self._updated = False
         self._has_dynamics = False
         # per-state memo for quantities computed by users of this model (task Jacobians, ...);
@@ -376,6 +377,7 @@ class RobotModel:
             self._q,
             self._nu,
             self._J,
+            self._J_pattern,
             self._Jdot_nu,
             self._jacp,
             self._jac_wheels,
@@ -422,6 +424,12 @@ class RobotModel:
         """Transform Jacobian, ``qvel = J_tf @ nu`` (``nv x n_min``)."""
         self._require()
         return self._J
+
+    @property
+    def J_tf_pattern(self) -> NDArray[np.int64]:
+        """Where :attr:`J_tf` may be nonzero, at any state: ``(2, nnz)`` row and column indices,
+        column by column (read-only; the compiled products with ``J_tf`` visit only these)."""
+        return self._J_pattern
 
     @property
     def Jdot_tf_nu(self) -> Array:
@@ -585,6 +593,20 @@ class RobotModel:
             qvel,
         )
         return qpos, qvel
+
+
+def transform_pattern(J_constant: Array, layout: RobotLayout) -> NDArray[np.int64]:
+    """``J_tf``'s nonzero pattern, ``(2, nnz)`` rows and columns sorted by column: its constant
+    entries (``J_constant``, as ``RobotModel`` sets them) and, in 3-D, the four entries
+    ``minimal_state`` writes at each state (the free joint's linear x, y rows in column
+    ``x``; its angular x, z rows in column ``psi``)."""
+    mask = J_constant != 0.0
+    if not layout.planar:
+        v = layout.root_dof
+        for row, column in ((v + 0, 0), (v + 1, 0), (v + 3, 1), (v + 5, 1)):
+            mask[row, column] = True
+    rows, columns = np.nonzero(mask.T)[::-1]
+    return np.array([rows, columns], dtype=np.int64)
 
 
 def _read_only(array: Array) -> Array:

@@ -30,7 +30,7 @@ import math
 import numpy as np
 from numba import njit
 
-from wip_gym.small_linalg import matmul, matvec
+from wip_gym.small_linalg import matmul, matmul_pattern, matvec
 
 THETA, SPIN, POSITION, ORIENTATION, POSTURE = 0, 1, 2, 3, 4
 """Task kinds (``kinds`` of :func:`task_rows`)."""
@@ -147,16 +147,17 @@ def site_in_axle_frame(
     origin_pos: np.ndarray,
     origin_jac: np.ndarray,
     J_tf: np.ndarray,
+    J_pattern: np.ndarray,
     c: float,
     s: float,
     index_psi: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``controllers.low_level.tasks.site_in_axle_frame`` from the site's world pose, its
     ``[jacp; jacr]`` and the origin's: ``(rel, R, Jp, Jr)`` over ``nu`` (``index_psi`` -1:
-    planar, the axle frame is the world's)."""
+    planar, the axle frame is the world's; ``J_pattern``: ``RobotModel.J_tf_pattern``)."""
     jac = site_jac.copy()
     jac[:3] -= origin_jac
-    JJ = matmul(jac, J_tf)
+    JJ = matmul_pattern(jac, J_tf, J_pattern)
     R_world = site_mat.reshape(3, 3)
     if index_psi < 0:
         return site_pos - origin_pos, R_world.copy(), JJ[:3].copy(), JJ[3:].copy()
@@ -214,6 +215,7 @@ def task_rows(
     q: np.ndarray,
     nu: np.ndarray,
     J_tf: np.ndarray,
+    J_pattern: np.ndarray,
     J_theta: np.ndarray,
     scalars: np.ndarray,
     bodies: np.ndarray,
@@ -270,7 +272,16 @@ def task_rows(
     for i in range(n_sites):
         site = site_ids[i]
         rel[i], R[i], Jp[i], Jr[i] = site_in_axle_frame(
-            site_xpos[site], site_xmat[site], site_jac[i], origin, origin_jac, J_tf, c, s, index_psi
+            site_xpos[site],
+            site_xmat[site],
+            site_jac[i],
+            origin,
+            origin_jac,
+            J_tf,
+            J_pattern,
+            c,
+            s,
+            index_psi,
         )
     v_o, a_o = _point_motion(probe_jac[0], probe_jac_dot[0], qvel, qacc0)
     p_o = probe_xpos[base]
