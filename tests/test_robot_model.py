@@ -301,11 +301,13 @@ def test_transform_jacobian_is_nonzero_only_in_its_pattern(robot: RobotModel) ->
 def test_pattern_products_equal_dense_products() -> None:
     """``wip_gym.small_linalg``'s products over a sparsity pattern against NumPy's dense
     products, on a random matrix with zeros outside its pattern (and the pattern's columns in
-    any order, repeated columns included)."""
+    any order, repeated columns included); its loops for small operands likewise."""
     from wip_gym.small_linalg import (  # noqa: PLC0415
         matmul_pattern,
         matmul_transposed_pattern,
         matvec_transposed_pattern,
+        small_matmul,
+        small_matvec,
     )
 
     rng = np.random.default_rng(5)
@@ -319,6 +321,10 @@ def test_pattern_products_equal_dense_products() -> None:
         matmul_transposed_pattern(S, pattern, B), S.T @ B, rtol=0, atol=1e-13
     )
     np.testing.assert_allclose(matvec_transposed_pattern(S, pattern, x), S.T @ x, atol=1e-13)
+    # and the loops for small operands
+    y, R = rng.normal(size=19), rng.normal(size=(3, 7))
+    np.testing.assert_allclose(small_matvec(S, y), S @ y, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(small_matmul(R, A), R @ A, rtol=0, atol=1e-13)
 
 
 def test_body_inertia_about_the_axle_equals_the_sum_over_bodies(robot: RobotModel) -> None:

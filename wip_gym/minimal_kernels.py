@@ -29,8 +29,8 @@ from wip_gym import mujoco_c as mjc
 from wip_gym.small_linalg import (
     matmul_pattern,
     matmul_transposed_pattern,
-    matvec,
     matvec_transposed_pattern,
+    small_matvec,
 )
 
 
@@ -171,7 +171,7 @@ def minimal_dynamics(
     """``(A, h, B)`` of paper eq. ``dyn`` (new arrays), the products with ``J = J_tf`` over its
     nonzero pattern ``J_pattern`` (``RobotModel.J_tf_pattern``)."""
     A = matmul_transposed_pattern(J, J_pattern, matmul_pattern(M, J, J_pattern))
-    h = matvec_transposed_pattern(J, J_pattern, matvec(M, Jdot_nu) + bias - passive)
+    h = matvec_transposed_pattern(J, J_pattern, small_matvec(M, Jdot_nu) + bias - passive)
     B = matmul_transposed_pattern(J, J_pattern, S)
     return A, h, B
 

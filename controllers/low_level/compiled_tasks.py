@@ -30,7 +30,7 @@ import math
 import numpy as np
 from numba import njit
 
-from wip_gym.small_linalg import matmul, matmul_pattern, matvec
+from wip_gym.small_linalg import matmul_pattern, small_matmul, small_matvec
 
 THETA, SPIN, POSITION, ORIENTATION, POSTURE = 0, 1, 2, 3, 4
 """Task kinds (``kinds`` of :func:`task_rows`)."""
@@ -95,7 +95,7 @@ def quat2vel(quat: np.ndarray) -> np.ndarray:
 @njit(cache=True)
 def rotation_error(R: np.ndarray, R_target: np.ndarray) -> np.ndarray:
     """``log(R R_target^T)`` as ``controllers.low_level.tasks.rotation_error``."""
-    quat = mat2quat(matmul(R, R_target.T))
+    quat = mat2quat(small_matmul(R, R_target.T))
     if quat[0] < 0:
         quat = -quat
     return quat2vel(quat)
@@ -163,13 +163,13 @@ def site_in_axle_frame(
         return site_pos - origin_pos, R_world.copy(), JJ[:3].copy(), JJ[3:].copy()
     Rt = np.zeros((3, 3))
     Rt[0, 0], Rt[0, 1], Rt[1, 0], Rt[1, 1], Rt[2, 2] = c, s, -s, c, 1.0
-    rel = matvec(Rt, site_pos - origin_pos)
-    Jp = matmul(Rt, JJ[:3])
-    Jr = matmul(Rt, JJ[3:])
+    rel = small_matvec(Rt, site_pos - origin_pos)
+    Jp = small_matmul(Rt, JJ[:3])
+    Jr = small_matmul(Rt, JJ[3:])
     Jp[0, index_psi] += rel[1]
     Jp[1, index_psi] -= rel[0]
     Jr[2, index_psi] -= 1.0
-    return rel, matmul(Rt, R_world), Jp, Jr
+    return rel, small_matmul(Rt, R_world), Jp, Jr
 
 
 @njit(cache=True)
@@ -199,7 +199,7 @@ def _point_motion(
 ) -> tuple[np.ndarray, np.ndarray]:
     """``MotionProbe._point``: ``jac qvel`` and ``jac qacc_0 + jacDot qvel`` (6-vectors:
     linear then angular)."""
-    return matvec(jac, qvel), matvec(jac, qacc0) + matvec(jac_dot, qvel)
+    return small_matvec(jac, qvel), small_matvec(jac, qacc0) + small_matvec(jac_dot, qvel)
 
 
 @njit(cache=True)
@@ -324,14 +324,14 @@ def task_rows(
             v, a = _point_motion(probe_jac[1 + i], probe_jac_dot[1 + i], qvel, qacc0)
             if kind == POSITION:
                 J[start:stop] = Jp[i]
-                task_velocity = matvec(Jp[i], nu)
+                task_velocity = small_matvec(Jp[i], nu)
                 reference = -kp * (rel[i] - targets[k, :3]) - kv * task_velocity
                 jdot_nu[start:stop] = relative_drift(
                     probe_site_xpos[site_ids[i]], v[:3], a[:3], p_o, v_o[:3], a_o[:3], c, s, psid
                 )[2]
             else:
                 J[start:stop] = Jr[i]
-                task_velocity = matvec(Jr[i], nu)
+                task_velocity = small_matvec(Jr[i], nu)
                 error = rotation_error(R[i], targets[k].reshape(3, 3))
                 reference = -kp * error - kv * task_velocity
                 u = _to_axle(v[3:], c, s)
