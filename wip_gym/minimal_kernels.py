@@ -243,18 +243,32 @@ def inertia_about_point(
 ) -> np.ndarray:
     """The inertia tensor of the bodies ``ids`` about ``point``, in the frame ``heading``
     (world from frame): ``sum_i Rh^T R_i diag(I_i) R_i^T Rh + m_i (|p_i|^2 1 - p_i p_i^T)``
-    with ``p_i = Rh^T (c_i - point)`` (``RobotModel.body_inertia_about_axle``)."""
+    with ``p_i = Rh^T (c_i - point)`` (``RobotModel.body_inertia_about_axle``). Written as
+    loops into two scratch arrays: a BLAS product, a matrix-vector product and two new arrays
+    per body cost about 0.7 us a body (Krang's 18 bodies: medians of 16 us against 3.6 us,
+    side by side on this shared 2-core machine, 2026-11-26)."""
     out = np.zeros((3, 3))
-    for i in ids:
-        R = ximat[i].reshape(3, 3)
-        rot = heading.T @ R
+    rot = np.empty((3, 3))
+    p = np.empty(3)
+    for n in range(len(ids)):
+        i = ids[n]
+        for a in range(3):  # rot = Rh^T R_i (ximat: R_i row-major)
+            for b in range(3):
+                total = 0.0
+                for k in range(3):
+                    total += heading[k, a] * ximat[i, 3 * k + b]
+                rot[a, b] = total
         for a in range(3):
             for b in range(3):
                 total = 0.0
                 for k in range(3):
                     total += rot[a, k] * body_inertia[i, k] * rot[b, k]
                 out[a, b] += total
-        p = heading.T @ (xipos[i] - point)
+        for a in range(3):
+            total = 0.0
+            for k in range(3):
+                total += heading[k, a] * (xipos[i, k] - point[k])
+            p[a] = total
         square = p[0] * p[0] + p[1] * p[1] + p[2] * p[2]
         m = body_mass[i]
         for a in range(3):
