@@ -391,6 +391,146 @@ def test_wrong_inertia_rotation_breaks_the_skewed_wip() -> None:
     assert wrong_error > 1e-3 * scale
 
 
+# ------------------------------------------------ parameters from the robot, one compiled call
+def _robot(name: str) -> RobotModel:
+    if name == "wip-skewed":
+        return RobotModel(_wip_model(skewed=True))
+    return RobotModel(mujoco.MjModel.from_xml_path(str(mjcf_path(f"scene_{name}.xml"))))
+
+
+# the fields computed with the same arithmetic on both paths (copies, libm's hypot): equal to
+# the bit; the others come from NumPy's (BLAS) matrix products on the reference path
+_BIT_EQUAL = set(wipm.WIPMParams._fields) - {
+    "inertia_body",
+    "wheel_inertia",
+    "wheel_inertia_transverse",
+}
+
+
+def _assert_same_params(fast: wipm.WIPMParams, reference: wipm.WIPMParams) -> None:
+    """``fast`` has ``reference``'s leaves (NumPy float64 scalars, a 3x3 float64 array: what
+    the jitted MPC step is traced for) and its values: to the bit where the arithmetic is the
+    same, else to 1e-12 of the largest entry."""
+    for name, a, b in zip(wipm.WIPMParams._fields, fast, reference, strict=True):
+        assert type(a) is type(b), (name, type(a), type(b))
+        assert np.shape(a) == np.shape(b) and np.asarray(a).dtype == np.asarray(b).dtype, name
+        if name in _BIT_EQUAL:
+            assert a == b, (name, a, b)
+        else:
+            scale = float(np.abs(b).max())
+            np.testing.assert_allclose(a, b, rtol=0.0, atol=1e-12 * scale, err_msg=name)
+    assert type(reference.body_mass) is np.float64
+    assert type(reference.inertia_body) is np.ndarray and reference.inertia_body.shape == (3, 3)
+
+
+def test_wipm_scalars_are_the_params_fields() -> None:
+    from wip_gym.robot_model import WIPM_SCALARS
+
+    fields = list(wipm.WIPMParams._fields)
+    fields.remove("inertia_body")
+    assert tuple(fields) == WIPM_SCALARS
+    assert wipm.WIPMParams._fields.index("inertia_body") == 3  # params_from_robot's unpacking
+
+
+@pytest.mark.parametrize("name", ["wip", "wip-skewed", "planar7", "krang"])
+def test_params_from_robot_equals_params_from_lambda(name: str) -> None:
+    """The one compiled call the MPC makes per step gives ``params_from_lambda`` of
+    ``wipm_parameters()`` on random states (turning, with the body joints anywhere in their
+    range), with or without the update's dynamics."""
+    robot = _robot(name)
+    rng = np.random.default_rng(31)
+    for k in range(12):
+        qpos, qvel = robot.full_state(*random_minimal_state(robot, rng))
+        robot.update(qpos, qvel)
+        reference = wipm.params_from_lambda(robot.wipm_parameters())
+        _assert_same_params(wipm.params_from_robot(robot), reference)
+        if k % 3 == 0:
+            robot.update(qpos, qvel, dynamics=False)
+            _assert_same_params(wipm.params_from_robot(robot), reference)
+
+
+def _change_model(model: mujoco.MjModel, robot: RobotModel, rng: np.random.Generator) -> None:
+    """What an env may change between two MPC steps: a payload's mass and inertia, a
+    randomised wheel (mass, inertia, its inertial frame), its damping, gravity."""
+    lay = robot.layout
+    body = lay.body_bodies[-1]
+    model.body_mass[body] += rng.uniform(0.5, 2.0)
+    model.body_inertia[body] *= rng.uniform(1.1, 1.5, 3)
+    wheel = lay.wheel_bodies[0]
+    model.body_mass[wheel] *= rng.uniform(1.1, 1.5)
+    model.body_inertia[wheel] = (0.09, 0.11, 0.08) * rng.uniform(1.0, 1.2, 3)
+    quat = rng.normal(size=4)
+    model.body_iquat[wheel] = quat / np.linalg.norm(quat)
+    model.dof_damping[lay.wheel_dof[0]] += rng.uniform(0.1, 1.0)
+    model.opt.gravity[2] -= rng.uniform(0.1, 0.5)
+
+
+@pytest.mark.parametrize("name", ["wip", "planar7", "krang"])
+def test_params_from_robot_reads_the_model_at_each_call(name: str) -> None:
+    """Nothing of the model is cached: after a change of masses, inertias, the wheel's frame,
+    its damping and gravity, the next call gives the new values (before the next update, the
+    body mass, CoM and theta are the last update's, as on the reference path)."""
+    robot = _robot(name)
+    rng = np.random.default_rng(32)
+    qpos, qvel = robot.full_state(*random_minimal_state(robot, rng))
+    robot.update(qpos, qvel)
+    before = wipm.params_from_robot(robot)
+    for _ in range(3):
+        _change_model(robot.model, robot, rng)
+        changed = wipm.params_from_robot(robot)
+        _assert_same_params(changed, wipm.params_from_lambda(robot.wipm_parameters()))
+        robot.update(qpos, qvel)
+        updated = wipm.params_from_robot(robot)
+        _assert_same_params(updated, wipm.params_from_lambda(robot.wipm_parameters()))
+        for field in ("wheel_mass", "wheel_inertia", "wheel_damping", "gravity"):
+            assert getattr(changed, field) != getattr(before, field), field
+        assert not np.allclose(changed.inertia_body, before.inertia_body, rtol=1e-6)
+        assert changed.body_mass == before.body_mass  # the update's, until the next update
+        assert updated.body_mass > before.body_mass
+        before = updated
+
+
+def test_params_from_robot_after_pickling_and_copying() -> None:
+    """An unpickled (or deep-copied) robot model reads its own MuJoCo model, not the original's:
+    its address table is made again with its views (``RobotModel.__setstate__``)."""
+    import copy
+    import pickle
+
+    robot = _robot("krang")
+    rng = np.random.default_rng(33)
+    qpos, qvel = robot.full_state(*random_minimal_state(robot, rng))
+    robot.update(qpos, qvel)
+    original = wipm.params_from_robot(robot)
+    for twin in (pickle.loads(pickle.dumps(robot)), copy.deepcopy(robot)):
+        assert twin.model is not robot.model
+        _assert_same_params(wipm.params_from_robot(twin), original)
+        twin.update(qpos, qvel)
+        _change_model(twin.model, twin, rng)
+        twin.update(qpos, qvel)
+        _assert_same_params(
+            wipm.params_from_robot(twin), wipm.params_from_lambda(twin.wipm_parameters())
+        )
+        assert wipm.params_from_robot(twin).wheel_mass != original.wheel_mass
+        _assert_same_params(wipm.params_from_robot(robot), original)  # the original untouched
+
+
+def test_params_from_robot_does_not_retrace_a_jitted_step() -> None:
+    """A jitted function of the parameters (the MPC step) traced on ``params_from_lambda``'s
+    is not traced again for ``params_from_robot``'s."""
+    traces = []
+
+    @jax.jit
+    def f(params: wipm.WIPMParams) -> jax.Array:
+        traces.append(1)
+        return sum(jnp.sum(jnp.asarray(leaf)) for leaf in params)
+
+    robot = _robot("krang")
+    robot.update(*robot.full_state(*random_minimal_state(robot, np.random.default_rng(34))))
+    f(wipm.params_from_lambda(robot.wipm_parameters()))
+    f(wipm.params_from_robot(robot))
+    assert len(traces) == 1
+
+
 # ------------------------------------------------------------------------------ damping
 def test_wheel_damping_cancels_from_the_zero_dynamics_only(wip: RobotModel) -> None:
     """Damping acts on the wheels' rotation relative to the body, like the motor torque: it

@@ -13,9 +13,15 @@ calls (``wip_gym.mujoco_c``) and runs them in one compiled call:
 * :func:`body_com`: the body's CoM (wheels excluded) in the axle frame, its Jacobian over
   ``nu``, ``theta = atan2(X, Z)`` and ``J_theta``, ``thetad = J_theta nu``.
 
+and, outside the update, :func:`wipm_values`: the WIPM's parameters ``lambda(q)`` (paper section
+"Simplified Model") at the updated state, in one compiled call
+(``RobotModel.wipm_values``, once per MPC step), with :func:`inertia_about_point` and
+:func:`quaternion_matrix`.
+
 The NumPy expressions they replace are kept in ``tests/test_robot_model.py`` and compared on
 random states of every robot (the minimal coordinates also against ``RobotModel.full_state``,
-their inverse).
+their inverse); :func:`wipm_values` with ``params_from_lambda(RobotModel.wipm_parameters())``,
+the path it replaces in the controllers, in ``tests/test_wipm.py``.
 """
 
 from __future__ import annotations
@@ -23,7 +29,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import carray, njit
 
 from wip_gym import mujoco_c as mjc
 from wip_gym.small_linalg import (
@@ -252,24 +258,155 @@ def inertia_about_point(
 ) -> np.ndarray:
     """The inertia tensor of the bodies ``ids`` about ``point``, in the frame ``heading``
     (world from frame): ``sum_i Rh^T R_i diag(I_i) R_i^T Rh + m_i (|p_i|^2 1 - p_i p_i^T)``
-    with ``p_i = Rh^T (c_i - point)`` (``RobotModel.body_inertia_about_axle``)."""
+    with ``p_i = Rh^T (c_i - point)`` (``RobotModel.body_inertia_about_axle``). Written as
+    loops into two scratch arrays: a BLAS product, a matrix-vector product and two new arrays
+    per body cost about 0.7 us a body (Krang's 18 bodies: medians of 16 us against 3.6 us,
+    side by side on this shared 2-core machine, 2026-11-26)."""
     out = np.zeros((3, 3))
-    for i in ids:
-        R = ximat[i].reshape(3, 3)
-        rot = heading.T @ R
+    rot = np.empty((3, 3))
+    p = np.empty(3)
+    for n in range(len(ids)):
+        i = ids[n]
+        for a in range(3):  # rot = Rh^T R_i (ximat: R_i row-major)
+            for b in range(3):
+                total = 0.0
+                for k in range(3):
+                    total += heading[k, a] * ximat[i, 3 * k + b]
+                rot[a, b] = total
         for a in range(3):
             for b in range(3):
                 total = 0.0
                 for k in range(3):
                     total += rot[a, k] * body_inertia[i, k] * rot[b, k]
                 out[a, b] += total
-        p = heading.T @ (xipos[i] - point)
+        for a in range(3):
+            total = 0.0
+            for k in range(3):
+                total += heading[k, a] * (xipos[i, k] - point[k])
+            p[a] = total
         square = p[0] * p[0] + p[1] * p[1] + p[2] * p[2]
         m = body_mass[i]
         for a in range(3):
             for b in range(3):
                 out[a, b] += m * ((square if a == b else 0.0) - p[a] * p[b])
     return out
+
+
+#: the address table of :func:`wipm_values` (``RobotModel`` makes it once per MjModel/MjData):
+#: the addresses of MuJoCo's ``ximat``, ``xipos``, ``xpos``, ``body_inertia``, ``body_iquat``,
+#: ``body_mass``, ``dof_damping`` and ``opt.gravity``, then ``nbody``, ``nv``, the base body, the
+#: left wheel body, its dof, and from ``W_BODIES`` on the ids of the body's bodies (the robot's
+#: bodies but the wheels)
+W_XIMAT, W_XIPOS, W_XPOS, W_INERTIA, W_IQUAT, W_MASS, W_DAMPING, W_GRAVITY = range(8)
+W_NBODY, W_NV, W_BASE, W_WHEEL, W_WHEEL_DOF, W_BODIES = range(8, 14)
+
+
+@njit(cache=True)
+def quaternion_matrix(quat: np.ndarray, out: np.ndarray) -> None:
+    """The rotation matrix of the unit quaternion ``quat = (w, x, y, z)`` into ``out`` (3x3),
+    with the arithmetic of MuJoCo's ``mju_quat2Mat`` (its shortcut for ``(1, 0, 0, 0)``
+    included)."""
+    if quat[0] == 1 and quat[1] == 0 and quat[2] == 0 and quat[3] == 0:
+        for a in range(3):
+            for b in range(3):
+                out[a, b] = 1.0 if a == b else 0.0
+        return
+    q00, q01, q02, q03 = quat[0] * quat[0], quat[0] * quat[1], quat[0] * quat[2], quat[0] * quat[3]
+    q11, q12, q13 = quat[1] * quat[1], quat[1] * quat[2], quat[1] * quat[3]
+    q22, q23, q33 = quat[2] * quat[2], quat[2] * quat[3], quat[3] * quat[3]
+    out[0, 0] = q00 + q11 - q22 - q33
+    out[1, 1] = q00 - q11 + q22 - q33
+    out[2, 2] = q00 - q11 - q22 + q33
+    out[0, 1] = 2 * (q12 - q03)
+    out[0, 2] = 2 * (q13 + q02)
+    out[1, 0] = 2 * (q12 + q03)
+    out[1, 2] = 2 * (q23 - q01)
+    out[2, 0] = 2 * (q13 - q02)
+    out[2, 1] = 2 * (q23 + q01)
+
+
+@njit(cache=True)
+def wipm_values(
+    table: np.ndarray,
+    heading: np.ndarray,
+    com: np.ndarray,
+    body_mass: float,
+    theta: float,
+    wheel_radius: float,
+    wheel_separation: float,
+) -> tuple[tuple[float, ...], np.ndarray]:
+    """``lambda(q)`` as the WIPM takes it (paper section "Simplified Model";
+    ``controllers.simplified.wipm.params_from_lambda`` of ``RobotModel.wipm_parameters``) in one
+    compiled call, from MuJoCo's arrays at ``table`` (``W_*``; read at this call: a mass or
+    inertia changed in the model since the last update is seen, as by ``wipm_parameters``) and
+    the body's ``com`` (axle frame), ``body_mass`` and ``theta`` of the last update.
+
+    Returns ``(values, inertia_body)``: ``values`` = ``(M, L, com_y, m_w, I_a, I_t, d, R, sep,
+    g)`` (``wip_gym.robot_model.WIPM_SCALARS``; a tuple of floats: boxing it costs less than
+    an array and the scalars taken out of it), with ``L = hypot(X_com, Z_com)``, one wheel's
+    mass, axial and transverse inertia ``(Rw diag(I_w) Rw^T)[1, 1]`` and ``[0, 0]`` (``Rw`` the
+    wheel's inertial frame, :func:`quaternion_matrix` of ``body_iquat``), its joint's damping
+    and ``g = -gravity_z``; ``inertia_body`` = ``I_B = Ry(theta)^T I_axle Ry(theta)``,
+    symmetrised, with ``I_axle`` the body's inertia about the axle midpoint in the axle frame
+    (:func:`inertia_about_point`)."""
+    nbody, nv = table[W_NBODY], table[W_NV]
+
+    def view(i: int, shape: tuple[int, ...]) -> np.ndarray:
+        return carray(mjc.float64_pointer(np.uint64(table[i])), shape)
+
+    ximat, xipos, xpos = (
+        view(W_XIMAT, (nbody, 9)),
+        view(W_XIPOS, (nbody, 3)),
+        view(W_XPOS, (nbody, 3)),
+    )
+    inertia, iquat = view(W_INERTIA, (nbody, 3)), view(W_IQUAT, (nbody, 4))
+    mass, damping, gravity = view(W_MASS, (nbody,)), view(W_DAMPING, (nv,)), view(W_GRAVITY, (3,))
+    axle = inertia_about_point(
+        ximat, xipos, inertia, mass, table[W_BODIES:], xpos[table[W_BASE]], heading
+    )
+    # Ry(theta)^T I_axle Ry(theta), the products written out in full (zeros too)
+    c, s = math.cos(theta), math.sin(theta)
+    rot = np.zeros((3, 3))
+    rot[0, 0], rot[0, 2], rot[1, 1], rot[2, 0], rot[2, 2] = c, s, 1.0, -s, c
+    left = np.empty((3, 3))  # Ry^T I_axle
+    for a in range(3):
+        for b in range(3):
+            total = 0.0
+            for k in range(3):
+                total += rot[k, a] * axle[k, b]
+            left[a, b] = total
+    rotated = np.empty((3, 3))
+    for a in range(3):
+        for b in range(3):
+            total = 0.0
+            for k in range(3):
+                total += left[a, k] * rot[k, b]
+            rotated[a, b] = total
+    inertia_body = np.empty((3, 3))
+    for a in range(3):
+        for b in range(3):
+            inertia_body[a, b] = 0.5 * (rotated[a, b] + rotated[b, a])
+    # one wheel: its principal inertia turned into its body frame (hinge about y)
+    wheel = table[W_WHEEL]
+    frame = np.empty((3, 3))
+    quaternion_matrix(iquat[wheel], frame)
+    axial, transverse = 0.0, 0.0
+    for k in range(3):
+        axial += frame[1, k] * inertia[wheel, k] * frame[1, k]
+        transverse += frame[0, k] * inertia[wheel, k] * frame[0, k]
+    values = (
+        body_mass,
+        math.hypot(com[0], com[2]),
+        com[1],
+        mass[wheel],
+        axial,
+        transverse,
+        damping[table[W_WHEEL_DOF]],
+        wheel_radius,
+        wheel_separation,
+        -gravity[2],
+    )
+    return values, inertia_body
 
 
 @njit(cache=True)

@@ -32,6 +32,7 @@ import mujoco
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from wip_gym import minimal_kernels as kernels
 from wip_gym.minimal_kernels import (
     all_finite,
     idealised_state,
@@ -44,6 +45,21 @@ Array = NDArray[np.float64]
 _FREE = int(mujoco.mjtJoint.mjJNT_FREE)
 _SLIDE = int(mujoco.mjtJoint.mjJNT_SLIDE)
 _HINGE = int(mujoco.mjtJoint.mjJNT_HINGE)
+
+#: the order of the scalars of :meth:`RobotModel.wipm_values`: the fields of
+#: ``controllers.simplified.wipm.WIPMParams`` but its ``inertia_body``
+WIPM_SCALARS = (
+    "body_mass",
+    "com_distance",
+    "com_lateral",
+    "wheel_mass",
+    "wheel_inertia",
+    "wheel_inertia_transverse",
+    "wheel_damping",
+    "wheel_radius",
+    "wheel_separation",
+    "gravity",
+)
 
 
 @dataclass(frozen=True)
@@ -306,14 +322,35 @@ class RobotModel:
         self.cache: dict[object, object] = {}
 
     def _bind_views(self) -> None:
-        """Views on MuJoCo's buffers (an attribute read makes a new view: ~1 us each), made
-        again after a copy or an unpickling (whose views would point at the old arrays). Masses
-        are read at every update (an env may change them: payload, randomisation)."""
-        d, model = self.data, self.model
+        """Views on MuJoCo's buffers (an attribute read makes a new view: ~1 us each) and the
+        address table of :meth:`wipm_values`, made again after a copy or an unpickling (whose
+        views would point at the old arrays, its addresses at the old model). Masses are read at
+        every update (an env may change them: payload, randomisation)."""
+        d, model, lay = self.data, self.model, self.layout
         self._mj_qpos, self._mj_qvel = d.qpos, d.qvel
         self._mj_xpos, self._mj_xipos, self._mj_xmat = d.xpos, d.xipos, d.xmat
         self._mj_body_mass, self._mj_subtree_mass = model.body_mass, model.body_subtreemass
         self._mj_qfrc_passive = d.qfrc_passive
+        arrays = (
+            d.ximat,
+            d.xipos,
+            d.xpos,
+            model.body_inertia,
+            model.body_iquat,
+            model.body_mass,
+            model.dof_damping,
+            model.opt.gravity,
+        )
+        table = np.zeros(kernels.W_BODIES + len(lay.body_bodies), dtype=np.int64)
+        for i, array in enumerate(arrays):
+            assert array.dtype == np.float64 and array.flags.c_contiguous
+            table[i] = array.ctypes.data
+        table[kernels.W_NBODY], table[kernels.W_NV] = model.nbody, model.nv
+        table[kernels.W_BASE], table[kernels.W_WHEEL] = lay.base_body, lay.wheel_bodies[0]
+        table[kernels.W_WHEEL_DOF] = lay.wheel_dof[0]
+        table[kernels.W_BODIES :] = lay.body_bodies
+        # addresses into MuJoCo's buffers, valid while self.model and self.data live
+        self._wipm_table = table
 
     def __setstate__(self, state: dict[str, object]) -> None:
         self.__dict__.update(state)
@@ -533,7 +570,8 @@ class RobotModel:
         )
 
     def wipm_parameters(self) -> WIPMParameters:
-        """``lambda(q)`` at the current state (see :class:`WIPMParameters`)."""
+        """``lambda(q)`` at the current state (see :class:`WIPMParameters`); the reference
+        for :meth:`wipm_values`, the controllers' path once per MPC step."""
         self._require()
         m, lay = self.model, self.layout
         w = lay.wheel_bodies[0]
@@ -559,6 +597,31 @@ class RobotModel:
             wheel_radius=lay.wheel_radius,
             wheel_separation=lay.wheel_separation,
             gravity=float(-m.opt.gravity[2]),
+        )
+
+    def wipm_values(self) -> tuple[tuple[float, ...], Array]:
+        """``lambda(q)`` as the WIPM takes it (paper section "Simplified Model";
+        ``controllers.simplified.wipm.params_from_robot``) in one compiled call: the values of
+        ``params_from_lambda(self.wipm_parameters())`` without the dataclass, the NumPy calls
+        and the ~1 us views of each MuJoCo attribute read (Krang, through ``params_from_robot``:
+        7 us against 67 us, medians in a tight loop).
+
+        Returns ``(values, inertia_body)``: the scalars (floats) in :data:`WIPM_SCALARS`
+        order, and the body's inertia about the axle midpoint in its CoM frame ``B`` (a new
+        3x3 array). Masses, inertias, the wheel damping and gravity are read from the model at
+        this call (as by :meth:`wipm_parameters`); the body mass, CoM and ``theta`` are the
+        last update's. Needs an update (with or without dynamics).
+        """
+        self._require()
+        lay = self.layout
+        return kernels.wipm_values(
+            self._wipm_table,
+            self._heading,
+            self._com,
+            self._body_mass,
+            self._theta,
+            lay.wheel_radius,
+            lay.wheel_separation,
         )
 
     # ------------------------------------------------------- full state

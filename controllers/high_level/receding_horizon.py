@@ -23,7 +23,7 @@ import numpy as np
 
 from controllers.high_level.mpc import ModelPredictiveController, MPCConfig, MPCStep
 from controllers.high_level.planning import Plan, PlanConfig, plan_to_goal
-from controllers.simplified.wipm import WIPMParams, params_from_lambda
+from controllers.simplified.wipm import WIPMParams, params_from_robot
 from controllers.simplified.wipm_problem import wipm_state
 from wip_gym.robot_model import RobotModel
 
@@ -145,7 +145,7 @@ class HighLevel:
         """Plan from the robot's current state to the goal, build the MPC and run (and so
         compile) its first step. ``robot`` must be updated with dynamics."""
         self._discard_pending()  # a solve still running from the last episode
-        self.params = params_from_lambda(robot.wipm_parameters())
+        self.params = params_from_robot(robot)
         state = wipm_state(robot)
         self.plan = plan_to_goal(
             state,
@@ -172,7 +172,7 @@ class HighLevel:
         index, phase = divmod(step, steps_per_mpc)
         delay = self.config.mpc_delay_steps
         if phase == 0 or self._last is None:
-            self.params = params_from_lambda(robot.wipm_parameters())
+            self.params = params_from_robot(robot)  # one compiled call (a few us)
             state = wipm_state(robot)
             if delay == 0 or self._last is None:
                 self._use(self.mpc.step(index, state, self.params), step)
