@@ -27,6 +27,7 @@ once per control step, and the properties read the cache.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TypeVar
 
 import mujoco
 import numpy as np
@@ -41,6 +42,7 @@ from wip_gym.minimal_kernels import (
 )
 
 Array = NDArray[np.float64]
+_ArrayT = TypeVar("_ArrayT", bound=np.ndarray)
 
 _FREE = int(mujoco.mjtJoint.mjJNT_FREE)
 _SLIDE = int(mujoco.mjtJoint.mjJNT_SLIDE)
@@ -672,6 +674,6 @@ def transform_pattern(J_constant: Array, layout: RobotLayout) -> NDArray[np.int6
     return np.array([rows, columns], dtype=np.int64)
 
 
-def _read_only(array: Array) -> Array:
+def _read_only(array: _ArrayT) -> _ArrayT:
     array.flags.writeable = False
     return array
