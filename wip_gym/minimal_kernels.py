@@ -36,6 +36,7 @@ from wip_gym.small_linalg import (
     matmul_pattern,
     matmul_transposed_pattern,
     matvec_transposed_pattern,
+    small_matmul,
     small_matvec,
 )
 
@@ -364,24 +365,11 @@ def wipm_values(
     axle = inertia_about_point(
         ximat, xipos, inertia, mass, table[W_BODIES:], xpos[table[W_BASE]], heading
     )
-    # Ry(theta)^T I_axle Ry(theta), the products written out in full (zeros too)
+    # Ry(theta)^T I_axle Ry(theta) (small_matmul: every product, zeros too)
     c, s = math.cos(theta), math.sin(theta)
     rot = np.zeros((3, 3))
     rot[0, 0], rot[0, 2], rot[1, 1], rot[2, 0], rot[2, 2] = c, s, 1.0, -s, c
-    left = np.empty((3, 3))  # Ry^T I_axle
-    for a in range(3):
-        for b in range(3):
-            total = 0.0
-            for k in range(3):
-                total += rot[k, a] * axle[k, b]
-            left[a, b] = total
-    rotated = np.empty((3, 3))
-    for a in range(3):
-        for b in range(3):
-            total = 0.0
-            for k in range(3):
-                total += left[a, k] * rot[k, b]
-            rotated[a, b] = total
+    rotated = small_matmul(small_matmul(rot.T, axle), rot)
     inertia_body = np.empty((3, 3))
     for a in range(3):
         for b in range(3):
