@@ -277,27 +277,59 @@ def test_compiled_arithmetic_equals_numpy(robot: RobotModel) -> None:
         assert robot.thetad == pytest.approx(float(J_theta @ robot.nu), abs=1e-12)
 
 
-def test_transform_jacobian_is_nonzero_only_in_its_pattern(robot: RobotModel) -> None:
+@pytest.mark.parametrize("source", [*ROBOTS, "wip_gym/KrangTray-v0", "wip_gym/PlanarTray-v0"])
+def test_transform_jacobian_is_nonzero_only_in_its_pattern(source: str) -> None:
     """``J_tf_pattern``, which the compiled products with ``J_tf`` visit, holds every nonzero
-    entry of ``J_tf`` at random states (headings and pitches of every quadrant in 3-D), and
-    every entry it holds is nonzero at some state (no wasted work)."""
+    entry of ``J_tf`` at random states, on and off the rolling manifold (a random base
+    orientation: headings and pitches of every quadrant, roll), of every robot and of the tray
+    envs' models (a cup's free joint among the dofs); each entry once, each nonzero at some
+    state (no wasted work), column by column, int64, read-only."""
+    if source in ROBOTS:
+        robot = RobotModel(mujoco.MjModel.from_xml_path(str(mjcf_path(f"scene_{source}.xml"))))
+    else:
+        import gymnasium as gym  # noqa: PLC0415 (only these cases need an env)
+
+        import wip_gym  # noqa: F401, PLC0415 (registers the envs)
+
+        env = gym.make(source)
+        robot = RobotModel(env.unwrapped.model)
+        env.close()
     rng = np.random.default_rng(23)
-    rows, columns = robot.J_tf_pattern
+    pattern = robot.J_tf_pattern
+    assert pattern.dtype == np.int64 and pattern.ndim == 2 and pattern.shape[0] == 2
+    rows, columns = pattern
     shape = (robot.model.nv, robot.layout.n_min)
+    assert np.unique(rows * shape[1] + columns).size == rows.size
     outside = np.ones(shape, dtype=bool)
     outside[rows, columns] = False
     seen = np.zeros(shape, dtype=bool)
-    for _ in range(20):
+    lay = robot.layout
+    for k in range(40):
         q, nu = random_minimal_state(robot, rng)
-        if not robot.layout.planar:
-            q[1], q[2] = rng.uniform(-np.pi, np.pi, 2)
-        robot.update(*robot.full_state(q, nu))
+        qpos, qvel = robot.full_state(q, nu)
+        if k % 2:
+            qpos = qpos + 1e-2 * rng.normal(size=qpos.shape)
+            qvel = qvel + rng.normal(size=qvel.shape)
+            if not lay.planar:
+                quat = qpos[lay.root_qpos + 3 : lay.root_qpos + 7]
+                quat[:] = rng.normal(size=4)
+                quat /= np.linalg.norm(quat)
+        robot.update(qpos, qvel)
         assert not robot.J_tf[outside].any()
         seen |= robot.J_tf != 0.0
     assert seen[rows, columns].all()
     assert (np.diff(columns) >= 0).all()
     with pytest.raises(ValueError, match="read-only"):
         robot.J_tf_pattern[0, 0] = 1
+
+
+def test_model_and_data_are_fixed(robot: RobotModel) -> None:
+    """A robot model's MuJoCo model and data cannot be swapped (its compiled calls hold views
+    and addresses of their buffers)."""
+    with pytest.raises(AttributeError):
+        robot.model = robot.model  # type: ignore[misc]
+    with pytest.raises(AttributeError):
+        robot.data = mujoco.MjData(robot.model)  # type: ignore[misc]
 
 
 def test_pattern_products_equal_dense_products() -> None:
@@ -317,12 +349,16 @@ def test_pattern_products_equal_dense_products() -> None:
     rows, columns = rng.integers(0, 24, 40), rng.integers(0, 19, 40)
     S[rows, columns] = rng.normal(size=40)
     pattern = np.array(np.nonzero(S), dtype=np.int64)[:, rng.permutation(np.count_nonzero(S))]
+    pattern = np.ascontiguousarray(pattern)
+    pattern.flags.writeable = False  # as RobotModel.J_tf_pattern: the signature it runs with
     A, B, x = rng.normal(size=(7, 24)), rng.normal(size=(24, 5)), rng.normal(size=24)
     np.testing.assert_allclose(matmul_pattern(A, S, pattern), A @ S, rtol=0, atol=1e-13)
     np.testing.assert_allclose(
         matmul_transposed_pattern(S, pattern, B), S.T @ B, rtol=0, atol=1e-13
     )
-    np.testing.assert_allclose(matvec_transposed_pattern(S, pattern, x), S.T @ x, atol=1e-13)
+    np.testing.assert_allclose(
+        matvec_transposed_pattern(S, pattern, x), S.T @ x, rtol=0, atol=1e-13
+    )
     # and the loops for small operands
     y, R = rng.normal(size=19), rng.normal(size=(3, 7))
     np.testing.assert_allclose(small_matvec(S, y), S @ y, rtol=0, atol=1e-13)

@@ -23,6 +23,7 @@ from dynamics_reference import (
 
 from controllers.simplified import wipm
 from wip_gym.assets import mjcf_path
+from wip_gym.minimal_kernels import robot_update, wipm_values
 from wip_gym.robot_model import RobotModel
 from wip_gym.wheel_torques import generalized_to_wheel, wheel_to_generalized
 
@@ -398,12 +399,14 @@ def _robot(name: str) -> RobotModel:
     return RobotModel(mujoco.MjModel.from_xml_path(str(mjcf_path(f"scene_{name}.xml"))))
 
 
-# the fields computed with the same arithmetic on both paths (copies, libm's hypot): equal to
-# the bit; the others come from NumPy's (BLAS) matrix products on the reference path
+# the fields computed with the same arithmetic on both paths (copies): equal to the bit; the
+# others come from NumPy's (BLAS) matrix products on the reference path, or from hypot, whose
+# numba and NumPy versions need not be the same libm call on every platform
 _BIT_EQUAL = set(wipm.WIPMParams._fields) - {
     "inertia_body",
     "wheel_inertia",
     "wheel_inertia_transverse",
+    "com_distance",
 }
 
 
@@ -501,10 +504,16 @@ def test_params_from_robot_after_pickling_and_copying() -> None:
     qpos, qvel = robot.full_state(*random_minimal_state(robot, rng))
     robot.update(qpos, qvel)
     original = wipm.params_from_robot(robot)
+    compiled = (robot_update, wipm_values)
+    signatures = [len(function.signatures) for function in compiled]
     for twin in (pickle.loads(pickle.dumps(robot)), copy.deepcopy(robot)):
         assert twin.model is not robot.model
+        # read-only again (NumPy's copies are writable): no second compiled signature
+        assert not twin.J_tf_pattern.flags.writeable
+        assert not twin.heading_rotation.flags.writeable
         _assert_same_params(wipm.params_from_robot(twin), original)
         twin.update(qpos, qvel)
+        assert [len(function.signatures) for function in compiled] == signatures
         _change_model(twin.model, twin, rng)
         twin.update(qpos, qvel)
         _assert_same_params(

@@ -102,6 +102,12 @@ def idealised_state(
     qvel[dr] = xd / r + half * psid - q1d
 
 
+FREE_JOINT_TF_ENTRIES = ((0, 0), (1, 0), (3, 1), (5, 1))
+"""The entries of ``J_tf`` that :func:`minimal_state` writes at each state in 3-D, as (row after
+the free joint's first dof, column): its linear x, y rows in column ``x`` (``cos psi``, ``sin
+psi``), its angular x, z rows in column ``psi`` (``-sin q1``, ``cos q1``)."""
+
+
 @njit(cache=True)
 def minimal_state(
     qpos: np.ndarray,
@@ -149,7 +155,7 @@ def minimal_state(
         nu[0], nu[1], nu[2] = xd, psid, q1d
         first = 3
         # J_tf's free-joint rows: the axle's linear velocity in world, the base's angular
-        # velocity in its own frame; and their time derivative along nu
+        # velocity in its own frame (FREE_JOINT_TF_ENTRIES); and their time derivative along nu
         c1, s1 = math.cos(q1), math.sin(q1)
         J[v + 0, 0] = c
         J[v + 1, 0] = s

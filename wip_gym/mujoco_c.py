@@ -98,3 +98,20 @@ def _float64_pointer(typingctx: Any, address: Any) -> Any:
 
 
 float64_pointer: Any = _float64_pointer  # typed Any: called from compiled code with one address
+
+
+def float64_addresses(arrays: tuple[Any, ...]) -> list[int]:
+    """The addresses (``array.ctypes.data``) of C-contiguous float64 arrays, for a table that
+    compiled code reads through :data:`float64_pointer` (valid while the arrays' owners, the
+    MjModel and MjData, live). Raises ``ValueError`` for any other array: compiled code would
+    read it as float64 at the wrong strides."""
+    addresses = []
+    for i, array in enumerate(arrays):
+        if array.dtype != "float64" or not array.flags.c_contiguous:
+            raise ValueError(
+                f"array {i} of the address table is {array.dtype}, "
+                f"{'C-contiguous' if array.flags.c_contiguous else 'strided'}: "
+                "a table needs C-contiguous float64 arrays"
+            )
+        addresses.append(int(array.ctypes.data))
+    return addresses

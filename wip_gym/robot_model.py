@@ -34,6 +34,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from wip_gym import minimal_kernels as kernels
+from wip_gym import mujoco_c
 from wip_gym.minimal_kernels import (
     all_finite,
     idealised_state,
@@ -275,8 +276,8 @@ class RobotModel:
     """
 
     def __init__(self, model: mujoco.MjModel) -> None:
-        self.model = model
-        self.data = mujoco.MjData(model)
+        self._model = model
+        self._data = mujoco.MjData(model)
         self.layout = RobotLayout.from_model(model)
         lay = self.layout
         nv, n = model.nv, lay.n_min
@@ -323,6 +324,18 @@ class RobotModel:
         # cleared by every update
         self.cache: dict[object, object] = {}
 
+    @property
+    def model(self) -> mujoco.MjModel:
+        """The MuJoCo model, fixed for this object's life (its compiled calls hold views and
+        addresses of its buffers): change its values in place (a mass, a gain); for another
+        model make another ``RobotModel``."""
+        return self._model
+
+    @property
+    def data(self) -> mujoco.MjData:
+        """This object's own MuJoCo data (fixed, as :attr:`model`)."""
+        return self._data
+
     def _bind_views(self) -> None:
         """Views on MuJoCo's buffers (an attribute read makes a new view: ~1 us each) and the
         address table of :meth:`wipm_values`, made again after a copy or an unpickling (whose
@@ -344,9 +357,7 @@ class RobotModel:
             model.opt.gravity,
         )
         table = np.zeros(kernels.W_BODIES + len(lay.body_bodies), dtype=np.int64)
-        for i, array in enumerate(arrays):
-            assert array.dtype == np.float64 and array.flags.c_contiguous
-            table[i] = array.ctypes.data
+        table[: len(arrays)] = mujoco_c.float64_addresses(arrays)
         table[kernels.W_NBODY], table[kernels.W_NV] = model.nbody, model.nv
         table[kernels.W_BASE], table[kernels.W_WHEEL] = lay.base_body, lay.wheel_bodies[0]
         table[kernels.W_WHEEL_DOF] = lay.wheel_dof[0]
@@ -357,6 +368,10 @@ class RobotModel:
     def __setstate__(self, state: dict[str, object]) -> None:
         self.__dict__.update(state)
         self._bind_views()
+        # NumPy's pickling and deepcopy do not keep the read-only flag (and a writable array is
+        # another signature for numba: the compiled update would compile again)
+        _read_only(self._J_pattern)
+        _read_only(self._heading)
 
     # ------------------------------------------------------------------ state
     def update(self, qpos: ArrayLike, qvel: ArrayLike, *, dynamics: bool = True) -> None:
@@ -667,9 +682,8 @@ def transform_pattern(J_constant: Array, layout: RobotLayout) -> NDArray[np.int6
     ``x``; its angular x, z rows in column ``psi``)."""
     mask = J_constant != 0.0
     if not layout.planar:
-        v = layout.root_dof
-        for row, column in ((v + 0, 0), (v + 1, 0), (v + 3, 1), (v + 5, 1)):
-            mask[row, column] = True
+        for row, column in kernels.FREE_JOINT_TF_ENTRIES:
+            mask[layout.root_dof + row, column] = True
     rows, columns = np.nonzero(mask.T)[::-1]
     return np.array([rows, columns], dtype=np.int64)
 

@@ -3,13 +3,13 @@
 numba's ``@`` calls BLAS and wants contiguous operands; these wrappers make transposes and
 slices contiguous so that call sites read as the maths. Plain compiled loops were tried first
 and measured slower at these sizes: ``T^T T`` (31 x 18), ``M_act calA`` (20 x 18 by 18 x 18)
-and ``jac J_tf`` (6 x 30 by 30 x 18) took 20.7 us as loops against 4.2 us through BLAS, and the
+and ``jac J_tf`` (6 x 30 by 30 x 19) took 20.7 us as loops against 4.2 us through BLAS, and the
 QP kernel's arithmetic 29.5 us against 7.2 us (this 2-core machine, 2026-11-26).
 
 Two exceptions. Operands of a few hundred entries (a 6 x 24 Jacobian times a velocity, 3 x 3
 rotations) cost less as loops: a BLAS call's overhead is about 0.35 us here, the loops' 0.15 to
 0.25 us (``small_matvec``, ``small_matmul``). And the products with ``J_tf``: it is mostly
-zeros in a pattern fixed by the robot's layout (27 of 24 x 19 entries for KrangTray's model),
+zeros in a pattern fixed by the robot's layout (27 of 30 x 19 entries on KrangTray-v0's model),
 and the ``*_pattern`` loops below visit only those entries. ``A = J_tf^T M J_tf`` took 6.2 to
 10.4 us through BLAS and 2.8 us over the pattern (``minimal_dynamics``, same machine).
 """
@@ -53,7 +53,8 @@ def matmul_transposed(A: np.ndarray, B: np.ndarray) -> np.ndarray:
 @njit(cache=True)
 def matmul_pattern(A: np.ndarray, S: np.ndarray, pattern: np.ndarray) -> np.ndarray:
     """``A @ S`` for an ``S`` whose nonzero entries all lie in ``pattern`` (``(2, nnz)``: row
-    and column indices): ``rows(A) x nnz`` multiply-adds instead of ``rows(A) x size(S)``."""
+    and column indices, each entry once: a repeated one would count twice): ``rows(A) x nnz``
+    multiply-adds instead of ``rows(A) x size(S)``."""
     out = np.zeros((A.shape[0], S.shape[1]))
     for e in range(pattern.shape[1]):
         r, c = pattern[0, e], pattern[1, e]

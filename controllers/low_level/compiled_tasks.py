@@ -246,8 +246,10 @@ def task_rows(
 ) -> None:
     """Fill ``J``, ``target`` (``xdd*``) and ``jdot_nu`` of the stacked tasks.
 
-    ``scalars``: ``theta, thetad, cos psi, sin psi, psid, index_psi`` (-1 planar).
-    ``bodies``: ``(base, wheel_left, wheel_right)``; ``site_ids[i]``: the MuJoCo id of site
+    ``q``, ``nu``, ``J_tf``, ``J_theta``: the robot's (``RobotModel``), ``J_pattern`` where
+    ``J_tf`` may be nonzero (``RobotModel.J_tf_pattern``: the products with ``J_tf`` visit only
+    those entries). ``scalars``: ``theta, thetad, cos psi, sin psi, psid, index_psi`` (-1
+    planar). ``bodies``: ``(base, wheel_left, wheel_right)``; ``site_ids[i]``: the MuJoCo id of site
     slot ``i``. At the robot's state: ``xpos``, ``site_xpos``, ``site_xmat`` (MuJoCo's arrays),
     ``site_jac[i]`` (``mj_jacSite``), ``origin_jac`` (the base origin's ``jacp``). At the probe's
     idealised state: ``qvel``, ``qacc_0``, ``xpos``, ``site_xpos``, ``probe_jac[0]`` and its

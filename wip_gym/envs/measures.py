@@ -299,9 +299,7 @@ def address_table(model: Any, data: Any) -> np.ndarray:
     )
     table = np.zeros(N_TABLE, np.int64)
     table[T_MODEL], table[T_DATA] = model._address, data._address
-    for i, array in enumerate(arrays):
-        assert array.dtype == np.float64 and array.flags.c_contiguous
-        table[T_ARRAYS + i] = array.ctypes.data
+    table[T_ARRAYS : T_ARRAYS + len(arrays)] = mjc.float64_addresses(arrays)
     table[T_NQ], table[T_NV], table[T_NBODY], table[T_NSITE] = (
         model.nq,
         model.nv,
