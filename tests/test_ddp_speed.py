@@ -5,6 +5,7 @@ persistent compilation cache works from an empty directory."""
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import subprocess
 import sys
@@ -14,8 +15,10 @@ import jax
 import numpy as np
 import pytest
 
+from controllers.high_level import mpc as mpc_module
 from controllers.high_level.mpc import ModelPredictiveController, MPCConfig, mpc_problem
 from controllers.high_level.planning import PlanConfig, plan_to_goal, planning_problem
+from controllers.optimizer import ddp
 from tests import ddp_recorded
 
 REPO = Path(__file__).resolve().parents[1]
@@ -170,3 +173,40 @@ def test_compilation_cache_starts_from_an_empty_directory(tmp_path: Path) -> Non
         costs.append(float(done.stdout.strip().splitlines()[-1]))
         assert cache.is_dir() and any(cache.iterdir())
     assert np.isfinite(costs[0]) and costs[0] == costs[1]
+
+
+def test_line_search_takes_the_same_step_however_many_alphas_it_tries_alone(
+    reference: dict[str, np.ndarray], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The line search tries the largest alphas one at a time (``ddp._ALPHAS_ALONE``) before
+    the rest in parallel: the accepted step is the largest acceptable alpha whatever that
+    count, so 60 warm-started planar MPC steps along a plan are the same with 1, 2 (the
+    default) and all 11 tried alone. The steps do reach the searches: with ``alpha = 1`` alone,
+    or 1 and 1/2, the results differ."""
+    params = ddp_recorded.params_from_arrays(reference)
+    plan = plan_to_goal(
+        ddp_recorded.initial_state("planar", float(reference["theta0"])),
+        params,
+        np.array(ddp_recorded.GOALS["planar"]),
+        planar=True,
+        config=PlanConfig(),
+    )
+
+    def predictions(alone: int, alphas: tuple[float, ...] | None = None) -> np.ndarray:
+        monkeypatch.setattr(ddp, "_ALPHAS_ALONE", alone)
+        mpc_module.compiled_step.cache_clear()  # trace again with this count
+        config = MPCConfig()
+        if alphas is not None:
+            config = dataclasses.replace(config, ddp=dataclasses.replace(config.ddp, alphas=alphas))
+        controller = ModelPredictiveController(plan, config)
+        steps = [controller.step(i, state, params) for i, state in enumerate(plan.states[:60])]
+        return np.array([step.predicted_states for step in steps])
+
+    try:
+        default = predictions(2)
+        for alone in (1, len(MPCConfig().ddp.alphas)):
+            np.testing.assert_allclose(predictions(alone), default, rtol=0, atol=1e-12)
+        for alphas in ((1.0,), (1.0, 0.5)):
+            assert np.abs(predictions(2, alphas) - default).max() > 1e-6
+    finally:
+        mpc_module.compiled_step.cache_clear()  # no step traced under a patched count is kept

@@ -107,12 +107,12 @@ derivatives of each step computed inside it, the stage costs, the line search) i
 that XLA:CPU compiles it into one kernel: the small products as broadcast sums (``_mv``,
 ``_mm``, ...) and ``Q_uu``'s Cholesky factor entry by entry (``_cholesky_solve``), since a
 ``dot`` or a LAPACK call inside a loop makes XLA dispatch every operation of every step
-separately. The line search tries ``alpha = 1`` alone first and the parallel search only if it
-fails (the same accepted step). Each rollout (the warm start's, every line search's) computes
-its stage costs in the same loop, which shares the dynamics' arithmetic with the penalty's
-(measured: the MPC step 6-8 % faster, ``X`` and ``U`` bit for bit the same as with a separate
-cost loop). Results equal those of the plain ``@``/``cho_solve`` version to round-off
-(tests/test_ddp_speed.py).
+separately. The line search tries ``alpha = 1`` and then ``1/2`` alone first and the parallel
+search over the rest only if both fail (the same accepted step). Each rollout (the warm
+start's, every line search's) computes its stage costs in the same loop, which shares the
+dynamics' arithmetic with the penalty's (measured: the MPC step 6-8 % faster, ``X`` and ``U``
+bit for bit the same as with a separate cost loop). Results equal those of the plain
+``@``/``cho_solve`` version to round-off (tests/test_ddp_speed.py).
 """
 
 from __future__ import annotations
@@ -146,6 +146,12 @@ RunningCost = Callable[[Array, Array, PyTree], Array]
 TerminalCost = Callable[[Array, PyTree], Array]
 # (x, u, ref) -> (l_x, l_u, l_xx, l_ux, l_uu) of the running cost at one step
 RunningDerivatives = Callable[[Array, Array, PyTree], tuple[Array, Array, Array, Array, Array]]
+
+
+_ALPHAS_ALONE = 2
+"""How many of the largest alphas the line search tries one at a time before the others in
+parallel: the first is accepted in about three quarters of the MPC's line searches, and a
+parallel search over all eleven cost about ten single rollouts (docs/performance.md §8, §10)."""
 
 
 def _default_alphas() -> tuple[float, ...]:
@@ -637,25 +643,38 @@ class DDPSolver:
             expected = -(alpha * s.bp.dv1 + alpha**2 * s.bp.dv2)
             return jnp.isfinite(cost) & (actual > 0) & (actual >= cfg.line_search_c * expected)
 
-        def search_all(s: _LoopState) -> tuple[Array, Array, Array, Array]:
-            """Every alpha in parallel; the largest acceptable one (X, U, cost, accepted)."""
-            Xs, Us, costs = jax.vmap(lambda a: forward(s.X, s.U, s.bp, a))(alphas)
-            good = acceptable(s, costs, alphas)
+        alone = min(_ALPHAS_ALONE, len(cfg.alphas))
+
+        def search_rest(s: _LoopState) -> tuple[Array, Array, Array, Array]:
+            """The alphas after the first ``alone`` in parallel; the largest acceptable one
+            (X, U, cost, accepted)."""
+            rest = alphas[alone:]
+            Xs, Us, costs = jax.vmap(lambda a: forward(s.X, s.U, s.bp, a))(rest)
+            good = acceptable(s, costs, rest)
             best = jnp.argmax(good)
             return Xs[best], Us[best], costs[best], jnp.any(good)
+
+        def try_alone(s: _LoopState, i: int) -> tuple[Array, Array, Array, Array]:
+            """alphas[i] alone; if it is not acceptable, the next (alone, then in parallel)."""
+            if i == alone:
+                if alone == len(cfg.alphas):
+                    return s.X, s.U, s.cost, jnp.array(False)
+                return search_rest(s)
+            X1, U1, cost1 = forward(s.X, s.U, s.bp, alphas[i])
+            return jax.lax.cond(
+                acceptable(s, cost1, alphas[i]),
+                lambda: (X1, U1, cost1, jnp.array(True)),
+                lambda: try_alone(s, i + 1),
+            )
 
         def line_search(s: _LoopState) -> tuple[Array, Array, Array, Array, Array, Array]:
             """(6)-(7); returns X, U, cost, mu, dmu for the next backward pass and `stuck`.
 
-            The largest alpha is tried alone first: it is usually accepted, and then it is the
-            answer of the parallel search too (the largest acceptable alpha), at 1/len(alphas)
-            of the cost. Otherwise all of them are tried in parallel."""
-            X1, U1, cost1 = forward(s.X, s.U, s.bp, alphas[0])
-            X_new, U_new, cost_new, accepted = jax.lax.cond(
-                acceptable(s, cost1, alphas[0]),
-                lambda: (X1, U1, cost1, jnp.array(True)),
-                lambda: search_all(s),
-            )
+            The largest alphas are tried one at a time first (``_ALPHAS_ALONE`` of them): the
+            first is usually accepted, and the first acceptable one is the answer of a parallel
+            search too (the largest acceptable alpha), at a fraction of its cost. Only then are
+            the others tried in parallel."""
+            X_new, U_new, cost_new, accepted = try_alone(s, 0)
             mu_dn, dmu_dn = self._decrease(s.mu, s.dmu)
             mu_up, dmu_up = self._increase(s.mu, s.dmu)
             # A failed line search that cannot raise mu any further ends the solve.
