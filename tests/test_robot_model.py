@@ -7,6 +7,7 @@ rolling on the floor through MuJoCo's soft contacts: the contact's softness.
 
 from __future__ import annotations
 
+import gymnasium as gym
 import mujoco
 import numpy as np
 import pytest
@@ -16,9 +17,17 @@ from dynamics_reference import (
     sample_contact_states,
 )
 
+import wip_gym  # noqa: F401  (registers the envs)
 from wip_gym.assets import mjcf_path
 from wip_gym.minimal_kernels import quaternion_matrix
 from wip_gym.robot_model import RobotModel
+from wip_gym.small_linalg import (
+    matmul_pattern,
+    matmul_transposed_pattern,
+    matvec_transposed_pattern,
+    small_matmul,
+    small_matvec,
+)
 from wip_gym.wheel_torques import generalized_to_wheel, wheel_to_generalized
 
 ROBOTS = ["wip", "planar7", "krang"]
@@ -287,10 +296,6 @@ def test_transform_jacobian_is_nonzero_only_in_its_pattern(source: str) -> None:
     if source in ROBOTS:
         robot = RobotModel(mujoco.MjModel.from_xml_path(str(mjcf_path(f"scene_{source}.xml"))))
     else:
-        import gymnasium as gym  # noqa: PLC0415 (only these cases need an env)
-
-        import wip_gym  # noqa: F401, PLC0415 (registers the envs)
-
         env = gym.make(source)
         robot = RobotModel(env.unwrapped.model)
         env.close()
@@ -336,14 +341,6 @@ def test_pattern_products_equal_dense_products() -> None:
     """``wip_gym.small_linalg``'s products over a sparsity pattern against NumPy's dense
     products, on a random matrix with zeros outside its pattern (and the pattern's columns in
     any order, repeated columns included); its loops for small operands likewise."""
-    from wip_gym.small_linalg import (  # noqa: PLC0415
-        matmul_pattern,
-        matmul_transposed_pattern,
-        matvec_transposed_pattern,
-        small_matmul,
-        small_matvec,
-    )
-
     rng = np.random.default_rng(5)
     S = np.zeros((24, 19))
     rows, columns = rng.integers(0, 24, 40), rng.integers(0, 19, 40)

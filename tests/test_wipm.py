@@ -10,6 +10,9 @@ products of inertia and the rotation of ``lambda(q)``'s inertia into the CoM fra
 
 from __future__ import annotations
 
+import copy
+import pickle
+
 import jax
 import jax.numpy as jnp
 import mujoco
@@ -24,7 +27,7 @@ from dynamics_reference import (
 from controllers.simplified import wipm
 from wip_gym.assets import mjcf_path
 from wip_gym.minimal_kernels import robot_update, wipm_values
-from wip_gym.robot_model import RobotModel
+from wip_gym.robot_model import WIPM_SCALARS, RobotModel
 from wip_gym.wheel_torques import generalized_to_wheel, wheel_to_generalized
 
 spatial_torque_dynamics = jax.jit(wipm.spatial_torque_dynamics)
@@ -427,8 +430,6 @@ def _assert_same_params(fast: wipm.WIPMParams, reference: wipm.WIPMParams) -> No
 
 
 def test_wipm_scalars_are_the_params_fields() -> None:
-    from wip_gym.robot_model import WIPM_SCALARS
-
     fields = list(wipm.WIPMParams._fields)
     fields.remove("inertia_body")
     assert tuple(fields) == WIPM_SCALARS
@@ -496,9 +497,6 @@ def test_params_from_robot_reads_the_model_at_each_call(name: str) -> None:
 def test_params_from_robot_after_pickling_and_copying() -> None:
     """An unpickled (or deep-copied) robot model reads its own MuJoCo model, not the original's:
     its address table is made again with its views (``RobotModel.__setstate__``)."""
-    import copy
-    import pickle
-
     robot = _robot("krang")
     rng = np.random.default_rng(33)
     qpos, qvel = robot.full_state(*random_minimal_state(robot, rng))
