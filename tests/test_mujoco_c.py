@@ -8,7 +8,7 @@ import mujoco
 import numpy as np
 import pytest
 from dynamics_reference import random_minimal_state
-from numba import carray, njit
+from numba import njit
 
 from wip_gym import mujoco_c as mjc
 from wip_gym.assets import mjcf_path
@@ -97,14 +97,14 @@ def test_an_untested_mujoco_release_is_refused(monkeypatch: pytest.MonkeyPatch) 
 
 @njit
 def _through_pointer(address, rows, cols, out) -> None:
-    view = carray(mjc.float64_pointer(np.uint64(address)), (rows, cols))
+    view = mjc.float64_view(address, (rows, cols))
     for i in range(rows):
         for j in range(cols):
             out[i, j] = view[i, j]
             view[i, j] = -view[i, j]
 
 
-def test_float64_pointer_views_the_array_at_an_address() -> None:
+def test_float64_view_is_the_array_at_an_address() -> None:
     model = mujoco.MjModel.from_xml_path(str(mjcf_path("scene_krang.xml")))
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)

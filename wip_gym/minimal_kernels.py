@@ -29,7 +29,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import carray, njit
+from numba import njit
 
 from wip_gym import mujoco_c as mjc
 from wip_gym.small_linalg import (
@@ -359,7 +359,7 @@ def wipm_values(
     nbody, nv = table[W_NBODY], table[W_NV]
 
     def view(i: int, shape: tuple[int, ...]) -> np.ndarray:
-        return carray(mjc.float64_pointer(np.uint64(table[i])), shape)
+        return mjc.float64_view(table[i], shape)
 
     ximat, xipos, xpos = (
         view(W_XIMAT, (nbody, 9)),

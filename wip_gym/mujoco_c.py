@@ -23,7 +23,8 @@ from typing import Any
 
 import llvmlite.binding as llvm
 import mujoco
-from numba import types
+import numpy as np
+from numba import carray, njit, types
 from numba.extending import intrinsic
 
 _PATTERNS = ("libmujoco.so*", "libmujoco*.dylib", "mujoco.dll")
@@ -83,7 +84,7 @@ mj_jacSubtreeCom = _declare("mj_jacSubtreeCom", _ptr, _ptr, _ptr, _int)  # (m, d
 
 @intrinsic
 def _float64_pointer(typingctx: Any, address: Any) -> Any:
-    """``(double *) address`` in compiled code, for ``numba.carray(float64_pointer(a), shape)``:
+    """``(double *) address`` in compiled code, for ``numba.carray`` (:func:`float64_view`):
     a view of a MuJoCo buffer whose address (``array.ctypes.data``) was taken once, so that a
     compiled call gets one table of addresses instead of one argument per array (numba unboxes
     every array argument on each call, about 0.1 us apiece)."""
@@ -98,6 +99,13 @@ def _float64_pointer(typingctx: Any, address: Any) -> Any:
 
 
 float64_pointer: Any = _float64_pointer  # typed Any: called from compiled code with one address
+
+
+@njit(cache=True)
+def float64_view(address: int, shape: tuple[int, ...]) -> np.ndarray:
+    """In compiled code, the C-contiguous float64 array of ``shape`` at ``address`` (an entry of
+    a table of :func:`float64_addresses`): a view, read and written in place."""
+    return carray(float64_pointer(np.uint64(address)), shape)
 
 
 def float64_addresses(arrays: tuple[Any, ...]) -> list[int]:

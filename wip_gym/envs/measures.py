@@ -21,7 +21,7 @@ import math
 from typing import Any
 
 import numpy as np
-from numba import carray, njit, types
+from numba import njit, types
 
 from wip_gym import mujoco_c as mjc
 from wip_gym.scene import CUP_HALF_HEIGHT, CUP_RADIUS, TRAY_HALF_SIZE
@@ -332,7 +332,7 @@ def env_measures(
     a = T_ARRAYS
 
     def view(i: int, shape: tuple[int, ...]) -> np.ndarray:
-        return carray(mjc.float64_pointer(np.uint64(table[a + i])), shape)
+        return mjc.float64_view(table[a + i], shape)
 
     step_measures(
         view(0, (table[T_NQ],)),
