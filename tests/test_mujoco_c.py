@@ -113,3 +113,23 @@ def test_float64_view_is_the_array_at_an_address() -> None:
     _through_pointer(data.xpos.ctypes.data, model.nbody, 3, seen)
     np.testing.assert_array_equal(seen, xpos)  # read where the data's array is
     np.testing.assert_array_equal(data.xpos, -xpos)  # and written there
+
+
+@njit
+def _quat2mat(quat, out) -> None:
+    mjc.mju_quat2Mat(out.ctypes.data, quat.ctypes.data)
+
+
+def test_compiled_quat2mat_equals_the_binding() -> None:
+    """``mju_quat2Mat`` from compiled code (the wheel's inertial frame in
+    ``minimal_kernels.wipm_values``) is the binding's, on random unit quaternions and on its
+    identity shortcut."""
+    rng = np.random.default_rng(29)
+    quats = [np.array([1.0, 0.0, 0.0, 0.0]), np.array([-1.0, 0.0, 0.0, 0.0])]
+    quats += [q / np.linalg.norm(q) for q in rng.normal(size=(200, 4))]
+    for quat in quats:
+        expected = np.zeros(9)
+        mujoco.mju_quat2Mat(expected, quat)
+        got = np.full(9, np.nan)
+        _quat2mat(quat, got)
+        np.testing.assert_array_equal(got, expected)

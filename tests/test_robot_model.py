@@ -19,7 +19,6 @@ from dynamics_reference import (
 
 import wip_gym  # noqa: F401  (registers the envs)
 from wip_gym.assets import mjcf_path
-from wip_gym.minimal_kernels import quaternion_matrix
 from wip_gym.robot_model import RobotModel
 from wip_gym.small_linalg import (
     matmul_pattern,
@@ -380,17 +379,3 @@ def test_body_inertia_about_the_axle_equals_the_sum_over_bodies(robot: RobotMode
         np.testing.assert_allclose(robot.body_inertia_about_axle(), inertia, rtol=0, atol=1e-12)
         pitch = robot.body_inertia_about_axle()[1, 1]
         assert pitch == pytest.approx(robot.A[lay.index_q1, lay.index_q1], rel=1e-10)
-
-
-def test_quaternion_matrix_is_mujocos() -> None:
-    """``minimal_kernels.quaternion_matrix`` (the wheel's inertial frame in ``wipm_values``) is
-    ``mju_quat2Mat`` to the bit, on random unit quaternions and on its identity shortcut."""
-    rng = np.random.default_rng(29)
-    quats = [np.array([1.0, 0.0, 0.0, 0.0]), np.array([-1.0, 0.0, 0.0, 0.0])]
-    quats += [q / np.linalg.norm(q) for q in rng.normal(size=(200, 4))]
-    for quat in quats:
-        expected = np.zeros(9)
-        mujoco.mju_quat2Mat(expected, quat)
-        got = np.full((3, 3), np.nan)
-        quaternion_matrix(quat, got)
-        np.testing.assert_array_equal(got, expected.reshape(3, 3))

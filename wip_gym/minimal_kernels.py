@@ -16,7 +16,7 @@ calls (``wip_gym.mujoco_c``) and runs them in one compiled call:
 and, outside the update, :func:`wipm_values`: the WIPM's parameters ``lambda(q)`` (paper section
 "Simplified Model") at the updated state, in one compiled call
 (``RobotModel.wipm_values``, once per MPC step), with :func:`inertia_about_point` and
-:func:`quaternion_matrix`.
+MuJoCo's ``mju_quat2Mat``.
 
 The NumPy expressions they replace are kept in ``tests/test_robot_model.py`` and compared on
 random states of every robot (the minimal coordinates also against ``RobotModel.full_state``,
@@ -309,30 +309,6 @@ W_NBODY, W_NV, W_BASE, W_WHEEL, W_WHEEL_DOF, W_BODIES = range(8, 14)
 
 
 @njit(cache=True)
-def quaternion_matrix(quat: np.ndarray, out: np.ndarray) -> None:
-    """The rotation matrix of the unit quaternion ``quat = (w, x, y, z)`` into ``out`` (3x3),
-    with the arithmetic of MuJoCo's ``mju_quat2Mat`` (its shortcut for ``(1, 0, 0, 0)``
-    included)."""
-    if quat[0] == 1 and quat[1] == 0 and quat[2] == 0 and quat[3] == 0:
-        for a in range(3):
-            for b in range(3):
-                out[a, b] = 1.0 if a == b else 0.0
-        return
-    q00, q01, q02, q03 = quat[0] * quat[0], quat[0] * quat[1], quat[0] * quat[2], quat[0] * quat[3]
-    q11, q12, q13 = quat[1] * quat[1], quat[1] * quat[2], quat[1] * quat[3]
-    q22, q23, q33 = quat[2] * quat[2], quat[2] * quat[3], quat[3] * quat[3]
-    out[0, 0] = q00 + q11 - q22 - q33
-    out[1, 1] = q00 - q11 + q22 - q33
-    out[2, 2] = q00 - q11 - q22 + q33
-    out[0, 1] = 2 * (q12 - q03)
-    out[0, 2] = 2 * (q13 + q02)
-    out[1, 0] = 2 * (q12 + q03)
-    out[1, 2] = 2 * (q23 - q01)
-    out[2, 0] = 2 * (q13 - q02)
-    out[2, 1] = 2 * (q23 + q01)
-
-
-@njit(cache=True)
 def wipm_values(
     table: np.ndarray,
     heading: np.ndarray,
@@ -352,7 +328,7 @@ def wipm_values(
     g)`` (``wip_gym.robot_model.WIPM_SCALARS``; a tuple of floats: boxing it costs less than
     an array and the scalars taken out of it), with ``L = hypot(X_com, Z_com)``, one wheel's
     mass, axial and transverse inertia ``(Rw diag(I_w) Rw^T)[1, 1]`` and ``[0, 0]`` (``Rw`` the
-    wheel's inertial frame, :func:`quaternion_matrix` of ``body_iquat``), its joint's damping
+    wheel's inertial frame, MuJoCo's ``mju_quat2Mat`` of ``body_iquat``), its joint's damping
     and ``g = -gravity_z``; ``inertia_body`` = ``I_B = Ry(theta)^T I_axle Ry(theta)``,
     symmetrised, with ``I_axle`` the body's inertia about the axle midpoint in the axle frame
     (:func:`inertia_about_point`)."""
@@ -382,12 +358,12 @@ def wipm_values(
             inertia_body[a, b] = 0.5 * (rotated[a, b] + rotated[b, a])
     # one wheel: its principal inertia turned into its body frame (hinge about y)
     wheel = table[W_WHEEL]
-    frame = np.empty((3, 3))
-    quaternion_matrix(iquat[wheel], frame)
+    frame = np.empty(9)  # row-major 3x3
+    mjc.mju_quat2Mat(frame.ctypes.data, iquat[wheel].ctypes.data)
     axial, transverse = 0.0, 0.0
     for k in range(3):
-        axial += frame[1, k] * inertia[wheel, k] * frame[1, k]
-        transverse += frame[0, k] * inertia[wheel, k] * frame[0, k]
+        axial += frame[3 + k] * inertia[wheel, k] * frame[3 + k]
+        transverse += frame[k] * inertia[wheel, k] * frame[k]
     values = (
         body_mass,
         math.hypot(com[0], com[2]),

@@ -78,6 +78,7 @@ mj_fullM = _declare("mj_fullM", _ptr, _ptr, _ptr)  # (m, d, dst)
 mj_rne = _declare("mj_rne", _ptr, _ptr, _int, _ptr)  # (m, d, flg_acc, result)
 mj_jac = _declare("mj_jac", _ptr, _ptr, _ptr, _ptr, _ptr, _int)  # (m, d, jacp, jacr, point, body)
 mj_jacDot = _declare("mj_jacDot", _ptr, _ptr, _ptr, _ptr, _ptr, _int)  # as mj_jac
+mju_quat2Mat = _declare("mju_quat2Mat", _ptr, _ptr)  # (res[9], quat[4])
 mj_jacSite = _declare("mj_jacSite", _ptr, _ptr, _ptr, _ptr, _int)  # (m, d, jacp, jacr, site)
 mj_jacSubtreeCom = _declare("mj_jacSubtreeCom", _ptr, _ptr, _ptr, _int)  # (m, d, jacp, body)
 
