@@ -102,6 +102,23 @@ def _float64_pointer(typingctx: Any, address: Any) -> Any:
 float64_pointer: Any = _float64_pointer  # typed Any: called from compiled code with one address
 
 
+@intrinsic
+def _int64_pointer(typingctx: Any, address: Any) -> Any:
+    """``(int64_t *) address`` in compiled code: :data:`float64_pointer` for int64 arrays
+    (``wip_gym.array_table``)."""
+    if not isinstance(address, types.Integer):
+        return None
+    signature = types.CPointer(types.int64)(address)
+
+    def codegen(context: Any, builder: Any, sig: Any, args: Any) -> Any:
+        return builder.inttoptr(args[0], context.get_value_type(sig.return_type))
+
+    return signature, codegen
+
+
+int64_pointer: Any = _int64_pointer
+
+
 @njit(cache=True)
 def float64_view(address: int, shape: tuple[int, ...]) -> np.ndarray:
     """In compiled code, the C-contiguous float64 array of ``shape`` at ``address`` (an entry of

@@ -99,6 +99,32 @@ class LowLevelKernel:
         self._limit_indices = np.asarray(layout.limit_indices, dtype=np.int64)
         self._constants = np.array([layout.limit_horizon, layout.regularization])
 
+    def table_entries(self) -> dict[str, Array]:
+        """The arrays of :func:`kernel_step` by name, for the one-call step of
+        ``controllers.low_level.compiled_step`` (all but the inputs ``A``, ``h``, the rows and
+        the state)."""
+        lay = self.layout
+        return {
+            "calA": self.calA,
+            "Ph": self.Ph,
+            "E": self.E,
+            "e": self.e,
+            "actuator_map": lay.actuator_map,
+            "torque_low": lay.torque_low,
+            "torque_high": lay.torque_high,
+            "limits": self._limits,
+            "limit_indices": self._limit_indices,
+            "constants": self._constants,
+            "T": self.T,
+            "b": self.b,
+            "H": self.H,
+            "g": self.g,
+            "C": self.C,
+            "lower": self.lower,
+            "upper": self.upper,
+            "x": self.x,
+        }
+
     def run(
         self,
         A: Array,

@@ -36,11 +36,13 @@ import proxsuite
 from numpy.typing import NDArray
 from scipy.linalg.lapack import dposv
 
+from controllers.low_level.compiled_step import rows_and_kernel, step_table
 from controllers.low_level.isolated_dynamics import IsolatedDynamics
 from controllers.low_level.kernel import KernelLayout, LowLevelKernel, solution_terms
 from controllers.low_level.motion_probe import MotionProbe
 from controllers.low_level.task_stack import CompiledTaskStack, supports
 from controllers.low_level.tasks import Task
+from wip_gym.array_table import ArrayTable
 from wip_gym.robot_model import RobotModel
 from wip_gym.wheel_torques import generalized_to_wheel_matrix
 
@@ -61,6 +63,10 @@ class QPSettings:
     compiled_tasks: fill the task rows by one compiled call
         (``controllers.low_level.task_stack``) when every task is of a kind it knows; False:
         always from the task objects (the reference it is tested against).
+    one_call: with compiled rows and eq. ``iso3`` from the robot, the rows and the kernel as
+        one compiled call whose arrays come from one table
+        (``controllers.low_level.compiled_step``; the same arithmetic, tested equal to the
+        bit); False: the rows' call then the kernel's.
     """
 
     regularization: float = 1e-6
@@ -69,6 +75,7 @@ class QPSettings:
     max_iterations: int = 1000
     unconstrained_first: bool = True
     compiled_tasks: bool = True
+    one_call: bool = True
 
 
 @dataclass(frozen=True)
@@ -169,6 +176,9 @@ class TaskQP:
         self._rows = -1
         self._feasible = False
         self._stack: CompiledTaskStack | None = None
+        # the one-call step's table and the (stack, kernel) it was built for
+        self._table: ArrayTable | None = None
+        self._table_for: tuple[object, object] = (None, None)
         self.compiled = False  # whether the last step's rows came from the compiled call
 
     def _buffers(self, rows: int, n_min: int) -> None:
@@ -224,6 +234,7 @@ class TaskQP:
     def __getstate__(self) -> dict[str, object]:
         state = self.__dict__.copy()
         state["_stack"] = None  # holds views on MuJoCo's arrays: made again on the next step
+        state["_table"], state["_table_for"] = None, (None, None)  # addresses: likewise
         return state
 
     def _snapshot(self, robot: RobotModel, tasks: Sequence[Task]) -> None:
@@ -248,9 +259,37 @@ class TaskQP:
             start = stop
         self._jdot_nu(robot, tasks, out=self._bias)
 
+    def _one_call_table(self, stack: CompiledTaskStack, robot: RobotModel) -> ArrayTable:
+        """The table of the one-call step, built again when the stack or the kernel (with its
+        row buffers and torque-limit arrays) was made anew since."""
+        stack_for, kernel_for = self._table_for
+        table = self._table
+        if table is None or stack_for is not stack or kernel_for is not self.kernel:
+            table = step_table(
+                stack,
+                self.kernel,
+                robot,
+                self._J,
+                self._target,
+                self._bias,
+                self._w,  # type: ignore[arg-type]
+            )
+            self._table, self._table_for = table, (stack, self.kernel)
+        return table
+
     def _run_kernel(
         self, robot: RobotModel, iso: IsolatedDynamics | None, tasks: Sequence[Task]
     ) -> bool:
+        if iso is None and self.settings.one_call:
+            stack = self._compiled_stack(robot, tasks)
+            if stack is not None:
+                self.compiled = True
+                self._ensure_buffers(stack.rows, robot.layout.n_min)
+                table = self._one_call_table(stack, robot)
+                stack.prepare(robot, self._w)
+                feasible = rows_and_kernel(table.rows, robot.J_theta, robot.A, robot.h)
+                stack.memoise_observers(robot, self._target)
+                return bool(feasible)
         self._snapshot(robot, tasks)
         A, h = (robot.A, robot.h) if iso is None else (None, None)
         return self.kernel.run(

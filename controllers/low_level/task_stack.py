@@ -448,11 +448,9 @@ class CompiledTaskStack:
                     else task.weight  # type: ignore[attr-defined]
                 )
 
-    def fill(self, robot: RobotModel, J: Array, target: Array, jdot_nu: Array, w: Array) -> None:
-        """The stacked rows ``J``, ``xdd*``, ``Jdot nu`` and weights ``w`` of this state (the
-        same as the task objects' ``jacobian``, ``reference_acceleration``, ``jdot_nu`` and
-        ``weights``, tested), advancing the observers once per state (a second call at the
-        same state takes their memoised commands, as their Python path does)."""
+    def prepare(self, robot: RobotModel, w: Array) -> None:
+        """What :meth:`fill` does before its compiled call: whether each observer advances at
+        this state, step 2 (the weights into ``w``), the robot's scalars."""
         if robot is not self._robot:
             raise ValueError("a compiled task stack serves the robot model it was built for")
         cache = robot.cache
@@ -467,6 +465,86 @@ class CompiledTaskStack:
         scalars[2] = heading[0, 0]
         scalars[3] = heading[1, 0]
         scalars[4] = 0.0 if self._planar else robot.nu[int(scalars[5])]
+
+    def memoise_observers(self, robot: RobotModel, target: Array) -> None:
+        """What :meth:`fill` does after its compiled call: an observer advances once per state,
+        its command memoised as its Python path does (views on one private copy of the
+        rows)."""
+        if self._observer_rows:
+            cache = robot.cache
+            commands = target.copy()
+            for key, start, stop in self._observer_rows:
+                cache[key] = commands[start:stop]
+
+    def table_entries(self, robot: RobotModel) -> dict[str, np.ndarray]:
+        """The arrays of :func:`stack_rows` by name, for the one-call step of
+        ``controllers.low_level.compiled_step`` (all but ``J_theta``, which the robot makes
+        anew at each update, and the rows ``J``, ``target``, ``jdot_nu``); its scalars as
+        ``stack_ints`` (the model's, data's and probe's addresses, the theta flag) and
+        ``stack_floats`` (the probe's wheel radius and separation)."""
+        if robot is not self._robot:
+            raise ValueError("a compiled task stack serves the robot model it was built for")
+        model, data, probe_data, layout, body_qpos, body_dof, radius, separation = (
+            self._probe_constants
+        )
+        probe_qpos, probe_qacc, site_bodies = self._probe_state
+        xpos, site_xpos, site_xmat = self._robot_arrays
+        probe_qvel, probe_qacc0, probe_xpos, probe_site_xpos = self._probe_arrays
+        subtree_com, xipos, subtree_linvel, cfrc_int = self._probe_subtree
+        subtree_mass, gravity = self._model_arrays
+        return {
+            "stack_ints": np.array([model, data, probe_data, int(self._theta)], dtype=np.int64),
+            "stack_floats": np.array([radius, separation], dtype=float),
+            "layout": layout,
+            "body_qpos": body_qpos,
+            "body_dof": body_dof,
+            "Jdot_tf_nu": robot.Jdot_tf_nu,
+            "probe_qpos": probe_qpos,
+            "probe_qacc": probe_qacc,
+            "site_bodies": site_bodies,
+            "kinds": self.kinds,
+            "sites": self.sites,
+            "observers": self.observers,
+            "row_start": self.row_start,
+            "params": self.params,
+            "targets": self.targets,
+            "row_column": self.row_column,
+            "row_target": self.row_target,
+            "q": robot.q,
+            "nu": robot.nu,
+            "J_tf": robot.J_tf,
+            "J_pattern": robot.J_tf_pattern,
+            "scalars": self.scalars,
+            "bodies": self.bodies,
+            "site_ids": self.site_ids,
+            "xpos": xpos,
+            "site_xpos": site_xpos,
+            "site_xmat": site_xmat,
+            "site_jac": self.site_jac,
+            "origin_jac": robot.cache["origin_jacobian"],  # type: ignore[dict-item]
+            "probe_qvel": probe_qvel,
+            "probe_qacc0": probe_qacc0,
+            "probe_xpos": probe_xpos,
+            "probe_site_xpos": probe_site_xpos,
+            "probe_jac": self.probe_jac,
+            "probe_jac_dot": self.probe_jac_dot,
+            "probe_subtree_com": subtree_com,
+            "probe_xipos": xipos,
+            "probe_subtree_linvel": subtree_linvel,
+            "probe_cfrc_int": cfrc_int,
+            "subtree_mass": subtree_mass,
+            "gravity": gravity,
+            "observer_memory": self.observer_memory,
+            "observer_settings": self.observer_settings,
+            "observer_advance": self.observer_advance,
+        }
+
+    def fill(self, robot: RobotModel, J: Array, target: Array, jdot_nu: Array, w: Array) -> None:
+        """The stacked rows ``J``, ``xdd*``, ``Jdot nu`` and weights ``w`` of this state (the
+        same as the task objects' ``jacobian``, ``reference_acceleration``, ``jdot_nu`` and
+        ``weights``, tested), advancing the observers once per state (a second call at the
+        same state takes their memoised commands, as their Python path does)."""
+        self.prepare(robot, w)
         stack_rows(
             *self._probe_constants,
             robot.Jdot_tf_nu,
@@ -485,7 +563,7 @@ class CompiledTaskStack:
             robot.J_tf,
             robot.J_tf_pattern,
             robot.J_theta,
-            scalars,
+            self.scalars,
             self.bodies,
             self.site_ids,
             *self._robot_arrays,
@@ -503,9 +581,4 @@ class CompiledTaskStack:
             target,
             jdot_nu,
         )
-        # an observer advances once per state: its command memoised as its Python path does
-        # (views on one private copy of the rows)
-        if self._observer_rows:
-            commands = target.copy()
-            for key, start, stop in self._observer_rows:
-                cache[key] = commands[start:stop]
+        self.memoise_observers(robot, target)

@@ -1,0 +1,195 @@
+"""The low level's one-call step (``controllers.low_level.compiled_step``) and the table of
+arrays it reads (``wip_gym.array_table``).
+
+The one call runs the rows' and the kernel's own arithmetic, so it must equal the two calls to
+the bit: on random states of both robots (observers advancing over consecutive steps), every
+kernel buffer and the feasibility agree exactly. The table is built again whenever what it
+points at is made anew, and the robot model's arrays in it are written in place."""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import pickle
+
+import numpy as np
+import pytest
+from dynamics_reference import random_minimal_state
+from test_compiled_tasks import _task_set
+from test_wbc import _load, _realistic_tasks
+
+from controllers.low_level.task_qp import QPSettings, TaskQP
+from wip_gym.array_table import (
+    ArrayTable,
+    float_cube,
+    float_matrix,
+    float_vector,
+    int_matrix,
+    int_vector,
+)
+from wip_gym.robot_model import RobotModel
+
+_BUFFERS = ("T", "b", "H", "g", "C", "lower", "upper", "x", "calA", "Ph", "E", "e")
+
+
+def _pair(robot: RobotModel) -> tuple[TaskQP, TaskQP]:
+    low, high = robot.model.actuator_ctrlrange.T.copy()
+    one = TaskQP(robot, low, high, QPSettings())
+    two = TaskQP(robot, low.copy(), high.copy(), QPSettings(one_call=False))
+    return one, two
+
+
+def _assert_same_step(one: TaskQP, two: TaskQP) -> None:
+    for name in _BUFFERS:
+        np.testing.assert_array_equal(getattr(one.kernel, name), getattr(two.kernel, name), name)
+    np.testing.assert_array_equal(one._J, two._J)
+    np.testing.assert_array_equal(one._target, two._target)
+    np.testing.assert_array_equal(one._bias, two._bias)
+    np.testing.assert_array_equal(one._w, two._w)
+    assert one._feasible == two._feasible
+
+
+@pytest.mark.parametrize("name", ["krang", "planar7"])
+@pytest.mark.parametrize("observed", [False, True])
+def test_one_call_equals_the_two_calls_to_the_bit(name: str, observed: bool) -> None:
+    robot = RobotModel(_load(name))
+    one, two = _pair(robot)
+    rng = np.random.default_rng(21)
+    q, nu = random_minimal_state(robot, rng)
+    robot.update(*robot.full_state(q, nu))
+    tasks_one, tasks_two = _task_set(robot, observed), _task_set(robot, observed)
+    for step in range(6):
+        # consecutive nearby states (the observers' memory evolves), then a far one
+        if step == 5:
+            q, nu = random_minimal_state(robot, rng)
+        robot.update(*robot.full_state(q + 1e-3 * step * nu, nu + 0.05 * step))
+        one.assemble(robot, None, tasks_one)
+        two.assemble(robot, None, tasks_two)
+        assert one.compiled and two.compiled and one._table is not None and two._table is None
+        _assert_same_step(one, two)
+        if observed:
+            np.testing.assert_array_equal(
+                one._stack.observer_memory,  # type: ignore[union-attr]
+                two._stack.observer_memory,  # type: ignore[union-attr]
+            )
+
+
+def test_the_table_follows_new_torque_limits_row_buffers_and_tasks() -> None:
+    robot = RobotModel(_load("krang"))
+    one, two = _pair(robot)
+    robot.update(*robot.full_state(*random_minimal_state(robot, np.random.default_rng(22))))
+    tasks = _realistic_tasks(robot)
+    one.assemble(robot, None, tasks)
+    first = one._table
+    # limits changed in place: read through the same table
+    one.torque_low[:] *= 0.5
+    two.torque_low[:] *= 0.5
+    one.assemble(robot, None, tasks)
+    two.assemble(robot, None, tasks)
+    assert one._table is first
+    _assert_same_step(one, two)
+    # limits replaced by new arrays: a new kernel, so a new table
+    one.torque_high = one.torque_high * 0.25
+    two.torque_high = two.torque_high * 0.25
+    one.assemble(robot, None, tasks)
+    two.assemble(robot, None, tasks)
+    assert one._table is not first
+    _assert_same_step(one, two)
+    # another task list of other rows: a new stack, new row buffers, a new table
+    second = one._table
+    fewer = tasks[:-1]
+    one.assemble(robot, None, fewer)
+    two.assemble(robot, None, fewer)
+    assert one._table is not second
+    assert one._table.arrays[list(one._table.names).index("J")] is one._J  # type: ignore[union-attr]
+    _assert_same_step(one, two)
+
+
+def test_the_robot_arrays_in_the_table_are_written_in_place() -> None:
+    """The table holds ``q``, ``nu``, ``J_tf``, ``Jdot_tf nu`` and the origin's Jacobian of
+    one ``RobotModel``: an update must write them, not replace them."""
+    robot = RobotModel(_load("krang"))
+    rng = np.random.default_rng(23)
+    robot.update(*robot.full_state(*random_minimal_state(robot, rng)))
+    held = (robot.q, robot.nu, robot.J_tf, robot.Jdot_tf_nu, robot.cache["origin_jacobian"])
+    before = [a.copy() for a in held]
+    robot.update(*robot.full_state(*random_minimal_state(robot, rng)))
+    after = (robot.q, robot.nu, robot.J_tf, robot.Jdot_tf_nu, robot.cache["origin_jacobian"])
+    assert all(a is b for a, b in zip(held, after, strict=True))
+    assert any(not np.array_equal(a, b) for a, b in zip(before, after, strict=True))
+
+
+@pytest.mark.parametrize("copier", [copy.deepcopy, lambda qp: pickle.loads(pickle.dumps(qp))])
+def test_a_copied_task_qp_builds_its_own_table(copier: object) -> None:
+    robot = RobotModel(_load("planar7"))
+    one, _ = _pair(robot)
+    robot.update(*robot.full_state(*random_minimal_state(robot, np.random.default_rng(24))))
+    one.assemble(robot, None, _realistic_tasks(robot))
+    clone = copier(one)  # type: ignore[operator]
+    assert clone._table is None and clone._stack is None
+
+
+def test_the_table_reads_and_writes_the_arrays_it_was_built_from() -> None:
+    rng = np.random.default_rng(25)
+    arrays = [
+        rng.normal(size=4),
+        rng.normal(size=(3, 5)),
+        rng.normal(size=(2, 3, 4)),
+        np.arange(7, dtype=np.int64),
+        np.arange(12, dtype=np.int64).reshape(3, 4),
+        np.zeros(0),
+    ]
+    table = ArrayTable(arrays, ["v", "m", "c", "iv", "im", "empty"])
+    assert table.holds(arrays) and not table.holds([a.copy() for a in arrays])
+    rows = table.rows
+    np.testing.assert_array_equal(float_vector(rows, 0), arrays[0])
+    np.testing.assert_array_equal(float_matrix(rows, 1), arrays[1])
+    np.testing.assert_array_equal(float_cube(rows, 2), arrays[2])
+    np.testing.assert_array_equal(int_vector(rows, 3), arrays[3])
+    np.testing.assert_array_equal(int_matrix(rows, 4), arrays[4])
+    assert float_vector(rows, 5).shape == (0,)
+    view = float_matrix(rows, 1)
+    view[2, 4] = 123.0  # a view: written through
+    assert arrays[1][2, 4] == 123.0
+    with pytest.raises(ValueError, match="another kind"):
+        float_matrix(rows, 0)
+    with pytest.raises(ValueError, match="another kind"):
+        int_vector(rows, 0)
+
+
+@pytest.mark.parametrize(
+    ("array", "message"),
+    [
+        (np.zeros(3, dtype=np.float32), "float32 of 1 dimensions"),
+        (np.zeros((2, 2, 2, 2)), "float64 of 4 dimensions"),
+        (np.zeros((2, 2, 2), dtype=np.int64), "int64 of 3 dimensions"),
+        (np.zeros((4, 4))[:, 1], "not C-contiguous"),
+        ([1.0, 2.0], "is a list"),
+    ],
+)
+def test_the_table_refuses_what_compiled_code_cannot_view(array: object, message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        ArrayTable([np.zeros(2), array], ["fine", "bad"])  # type: ignore[list-item]
+
+
+def test_the_step_table_refuses_a_kernel_of_other_rows() -> None:
+    from controllers.low_level.compiled_step import step_table
+
+    robot = RobotModel(_load("krang"))
+    one, _ = _pair(robot)
+    robot.update(*robot.full_state(*random_minimal_state(robot, np.random.default_rng(26))))
+    tasks = _realistic_tasks(robot)
+    one.assemble(robot, None, tasks)
+    other = dataclasses.replace(one.kernel.layout, rows=one.kernel.layout.rows + 1)
+    from controllers.low_level.kernel import LowLevelKernel
+
+    with pytest.raises(ValueError, match="rows"):
+        step_table(
+            one._stack,  # type: ignore[arg-type]
+            LowLevelKernel(other),
+            robot,
+            one._J,  # type: ignore[arg-type]
+            one._target,
+            one._bias,
+            one._w,
+        )
