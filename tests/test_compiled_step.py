@@ -193,3 +193,64 @@ def test_the_step_table_refuses_a_kernel_of_other_rows() -> None:
             one._bias,
             one._w,
         )
+
+
+@pytest.mark.parametrize("name", ["krang", "planar7"])
+def test_the_robot_update_through_its_table_equals_the_call_with_arguments(name: str) -> None:
+    """``RobotModel.update`` calls ``robot_update_at`` (its arrays in one table): the same
+    results, to the bit, as ``robot_update`` with each array passed, on a second model."""
+    from wip_gym.minimal_kernels import robot_update
+
+    robot, reference = RobotModel(_load(name)), RobotModel(_load(name))
+    r = reference
+    rng = np.random.default_rng(27)
+    for dynamics in (True, False, True):
+        qpos, qvel = robot.full_state(*random_minimal_state(robot, rng))
+        robot.update(qpos, qvel, dynamics=dynamics)
+        r._qpos_in[:], r._qvel_in[:] = qpos, qvel
+        expected = robot_update(
+            r.model._address,
+            r.data._address,
+            r._qpos_in,
+            r._qvel_in,
+            r._mj_qpos,
+            r._mj_qvel,
+            r._mj_xmat,
+            r._mj_xpos,
+            r._mj_xipos,
+            r._mj_qfrc_passive,
+            r._mj_body_mass,
+            r._mj_subtree_mass,
+            r._bodies,
+            r._body_ids,
+            r._layout_ints,
+            r._body_qpos,
+            r._body_dof,
+            r.layout.wheel_radius,
+            r._q,
+            r._nu,
+            r._J,
+            r._J_pattern,
+            r._Jdot_nu,
+            r._jacp,
+            r._jac_wheels,
+            r._jac_origin,
+            r._M,
+            r._bias,
+            r._S,
+            dynamics,
+        )
+        psi, psid, _, _, mass, com, J_com, theta, thetad, J_theta, A, h, B = expected
+        assert (robot.theta, robot.thetad, robot.body_mass) == (theta, thetad, mass)
+        np.testing.assert_array_equal(robot.com, com)
+        np.testing.assert_array_equal(robot.J_com, J_com)
+        np.testing.assert_array_equal(robot.J_theta, J_theta)
+        np.testing.assert_array_equal(robot.q, r._q)
+        np.testing.assert_array_equal(robot.nu, r._nu)
+        np.testing.assert_array_equal(robot.J_tf, r._J)
+        if dynamics:
+            np.testing.assert_array_equal(robot.A, A)
+            np.testing.assert_array_equal(robot.h, h)
+            np.testing.assert_array_equal(robot.B, B)
+        if not robot.layout.planar:
+            assert (robot.psi, robot._psid) == (psi, psid)

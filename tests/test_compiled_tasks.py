@@ -230,17 +230,17 @@ def test_compiled_rows_on_an_oracle_model_with_the_cup() -> None:
 
 
 def test_read_only_or_strided_states_do_not_compile_the_update_again() -> None:
-    from wip_gym.minimal_kernels import robot_update
+    from wip_gym.minimal_kernels import robot_update_at
 
     robot = RobotModel(_load("krang"))
     qpos, qvel = robot.full_state(*random_minimal_state(robot, np.random.default_rng(12)))
     robot.update(qpos, qvel)
-    signatures = len(robot_update.signatures)
+    signatures = len(robot_update_at.signatures)
     frozen = qpos.copy()
     frozen.flags.writeable = False
     strided = np.repeat(qvel, 2)[::2]
     robot.update(frozen, strided)
-    assert len(robot_update.signatures) == signatures
+    assert len(robot_update_at.signatures) == signatures
     reference = RobotModel(robot.model)
     reference.update(qpos, qvel)
     np.testing.assert_array_equal(robot.q, reference.q)

@@ -26,7 +26,7 @@ from dynamics_reference import (
 
 from controllers.simplified import wipm
 from wip_gym.assets import mjcf_path
-from wip_gym.minimal_kernels import robot_update, wipm_values
+from wip_gym.minimal_kernels import robot_update_at, wipm_values
 from wip_gym.robot_model import WIPM_SCALARS, RobotModel
 from wip_gym.wheel_torques import generalized_to_wheel, wheel_to_generalized
 
@@ -502,7 +502,7 @@ def test_params_from_robot_after_pickling_and_copying() -> None:
     qpos, qvel = robot.full_state(*random_minimal_state(robot, rng))
     robot.update(qpos, qvel)
     original = wipm.params_from_robot(robot)
-    compiled = (robot_update, wipm_values)
+    compiled = (robot_update_at, wipm_values)
     signatures = [len(function.signatures) for function in compiled]
     for twin in (pickle.loads(pickle.dumps(robot)), copy.deepcopy(robot)):
         assert twin.model is not robot.model

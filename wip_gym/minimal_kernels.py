@@ -2,7 +2,8 @@
 
 Four functions of arrays, :func:`all_finite` (the update's input check), and
 :func:`robot_update`, which makes ``RobotModel.update``'s MuJoCo
-calls (``wip_gym.mujoco_c``) and runs them in one compiled call:
+calls (``wip_gym.mujoco_c``) and runs them in one compiled call (called from Python as
+:func:`robot_update_at`, its arrays in one ``wip_gym.array_table.ArrayTable``):
 
 * :func:`idealised_state`: the inverse, MuJoCo's ``qpos``, ``qvel`` of a minimal state with the
   wheels on the floor (``RobotModel.full_state``);
@@ -32,6 +33,7 @@ import numpy as np
 from numba import njit
 
 from wip_gym import mujoco_c as mjc
+from wip_gym.array_table import float_cube, float_matrix, float_vector, int_matrix, int_vector
 from wip_gym.small_linalg import (
     matmul_pattern,
     matmul_transposed_pattern,
@@ -485,3 +487,92 @@ def robot_update(
     else:
         A, h, B = np.zeros((0, 0)), np.zeros(0), np.zeros((0, 0))
     return psi, psid, c, s, mass, com, J_com, theta, thetad, J_theta, A, h, B
+
+
+UPDATE_ENTRIES = (
+    "ints",  # the model's and data's addresses
+    "floats",  # the wheel radius
+    "qpos",
+    "qvel",
+    "data_qpos",
+    "data_qvel",
+    "xmat",
+    "xpos",
+    "xipos",
+    "qfrc_passive",
+    "body_mass",
+    "subtree_mass",
+    "bodies",
+    "body_ids",
+    "layout",
+    "body_qpos",
+    "body_dof",
+    "q",
+    "nu",
+    "J",
+    "J_pattern",
+    "Jdot_nu",
+    "jac_subtree",
+    "jac_wheels",
+    "jac_origin",
+    "M",
+    "bias",
+    "S",
+)
+"""The rows of :func:`robot_update_at`'s table, by name: :func:`robot_update`'s arguments in
+their order, its scalars in the first two (``RobotModel`` builds it once per MuJoCo data)."""
+
+
+@njit(cache=True)
+def robot_update_at(
+    table: np.ndarray, dynamics: bool
+) -> tuple[
+    float,
+    float,
+    float,
+    float,
+    float,
+    np.ndarray,
+    np.ndarray,
+    float,
+    float,
+    np.ndarray,
+    np.ndarray,
+    np.ndarray,
+    np.ndarray,
+]:
+    """:func:`robot_update` on the arrays of ``table`` (:data:`UPDATE_ENTRIES`): one array to
+    unbox instead of twenty-six (``wip_gym.array_table``)."""
+    ints = int_vector(table, 0)
+    return robot_update(
+        ints[0],
+        ints[1],
+        float_vector(table, 2),
+        float_vector(table, 3),
+        float_vector(table, 4),
+        float_vector(table, 5),
+        float_matrix(table, 6),
+        float_matrix(table, 7),
+        float_matrix(table, 8),
+        float_vector(table, 9),
+        float_vector(table, 10),
+        float_vector(table, 11),
+        int_vector(table, 12),
+        int_vector(table, 13),
+        int_vector(table, 14),
+        int_vector(table, 15),
+        int_vector(table, 16),
+        float_vector(table, 1)[0],
+        float_vector(table, 17),
+        float_vector(table, 18),
+        float_matrix(table, 19),
+        int_matrix(table, 20),
+        float_vector(table, 21),
+        float_matrix(table, 22),
+        float_cube(table, 23),
+        float_matrix(table, 24),
+        float_matrix(table, 25),
+        float_vector(table, 26),
+        float_matrix(table, 27),
+        dynamics,
+    )

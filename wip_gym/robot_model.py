@@ -35,11 +35,12 @@ from numpy.typing import ArrayLike, NDArray
 
 from wip_gym import minimal_kernels as kernels
 from wip_gym import mujoco_c
+from wip_gym.array_table import ArrayTable
 from wip_gym.minimal_kernels import (
     all_finite,
     idealised_state,
     inertia_about_point,
-    robot_update,
+    robot_update_at,
 )
 
 Array = NDArray[np.float64]
@@ -318,6 +319,7 @@ class RobotModel:
             self._J[lay.wheel_dof[1], 1] = sep / (2.0 * r)
             self._J[lay.root_dof + 4, 2] = 1.0
         self._J_pattern = _read_only(transform_pattern(self._J, lay))
+        self._bind_update_table()
         self._updated = False
         self._has_dynamics = False
         # per-state memo for quantities computed by users of this model (task Jacobians, ...);
@@ -365,9 +367,54 @@ class RobotModel:
         # addresses into MuJoCo's buffers, valid while self.model and self.data live
         self._wipm_table = table
 
+    def _bind_update_table(self) -> None:
+        """The table of the compiled update (``minimal_kernels.robot_update_at``): its
+        buffers and MuJoCo's, made once, so that an update unboxes one array. Made again with
+        the views after a copy or an unpickling."""
+        m, d = self.model, self.data
+        arrays = {
+            "ints": np.array([m._address, d._address], dtype=np.int64),
+            "floats": np.array([self.layout.wheel_radius]),
+            "qpos": self._qpos_in,
+            "qvel": self._qvel_in,
+            "data_qpos": self._mj_qpos,
+            "data_qvel": self._mj_qvel,
+            "xmat": self._mj_xmat,
+            "xpos": self._mj_xpos,
+            "xipos": self._mj_xipos,
+            "qfrc_passive": self._mj_qfrc_passive,
+            "body_mass": self._mj_body_mass,
+            "subtree_mass": self._mj_subtree_mass,
+            "bodies": self._bodies,
+            "body_ids": self._body_ids,
+            "layout": self._layout_ints,
+            "body_qpos": self._body_qpos,
+            "body_dof": self._body_dof,
+            "q": self._q,
+            "nu": self._nu,
+            "J": self._J,
+            "J_pattern": self._J_pattern,
+            "Jdot_nu": self._Jdot_nu,
+            "jac_subtree": self._jacp,
+            "jac_wheels": self._jac_wheels,
+            "jac_origin": self._jac_origin,
+            "M": self._M,
+            "bias": self._bias,
+            "S": self._S,
+        }
+        self._update_table = ArrayTable(
+            [arrays[name] for name in kernels.UPDATE_ENTRIES], kernels.UPDATE_ENTRIES
+        )
+
+    def __getstate__(self) -> dict[str, object]:
+        state = self.__dict__.copy()
+        del state["_update_table"]  # addresses: made again by __setstate__
+        return state
+
     def __setstate__(self, state: dict[str, object]) -> None:
         self.__dict__.update(state)
         self._bind_views()
+        self._bind_update_table()
         # NumPy's pickling and deepcopy do not keep the read-only flag (and a writable array is
         # another signature for numba: the compiled update would compile again)
         _read_only(self._J_pattern)
@@ -380,7 +427,7 @@ class RobotModel:
         With ``dynamics=False`` only the kinematic quantities (minimal coordinates, ``J_tf``,
         CoM, ``theta``, ``thetad``) are computed; ``A``, ``h``, ``B`` are then unavailable.
         """
-        m, d, lay = self.model, self.data, self.layout
+        lay = self.layout
         qpos = np.asarray(qpos, dtype=float)
         qvel = np.asarray(qvel, dtype=float)
         if qpos.shape != (lay.nq,) or qvel.shape != (lay.nv,):
@@ -409,38 +456,7 @@ class RobotModel:
             A,
             h,
             B,
-        ) = robot_update(
-            m._address,
-            d._address,
-            self._qpos_in,
-            self._qvel_in,
-            self._mj_qpos,
-            self._mj_qvel,
-            self._mj_xmat,
-            self._mj_xpos,
-            self._mj_xipos,
-            self._mj_qfrc_passive,
-            self._mj_body_mass,
-            self._mj_subtree_mass,
-            self._bodies,
-            self._body_ids,
-            self._layout_ints,
-            self._body_qpos,
-            self._body_dof,
-            lay.wheel_radius,
-            self._q,
-            self._nu,
-            self._J,
-            self._J_pattern,
-            self._Jdot_nu,
-            self._jacp,
-            self._jac_wheels,
-            self._jac_origin,
-            self._M,
-            self._bias,
-            self._S,
-            dynamics,
-        )
+        ) = robot_update_at(self._update_table.rows, dynamics)
         if not lay.planar:
             heading = np.array((c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0)).reshape(3, 3)
             self._heading = _read_only(heading)
