@@ -72,6 +72,20 @@ def test_one_call_equals_the_two_calls_to_the_bit(name: str, observed: bool) -> 
                 one._stack.observer_memory,  # type: ignore[union-attr]
                 two._stack.observer_memory,  # type: ignore[union-attr]
             )
+        # the solutions: on a shortcut step the one call's torques (computed in it) equal the
+        # two calls' (solution_terms after them) to the bit; ProxQP (the first step, and any
+        # with an active constraint) agrees to its tolerance (its SIMD sums may depend on the
+        # buffers' alignment)
+        a, b = one.solve(robot, None, tasks_one), two.solve(robot, None, tasks_two)
+        assert (a.solved, a.iterations == 0) == (b.solved, b.iterations == 0)
+        for field in ("qdd", "nu_dot", "generalized", "actuators"):
+            if a.iterations == 0:
+                np.testing.assert_array_equal(getattr(a, field), getattr(b, field), field)
+            else:
+                scale = max(1.0, float(np.abs(getattr(b, field)).max()))
+                np.testing.assert_allclose(
+                    getattr(a, field), getattr(b, field), rtol=0, atol=1e-9 * scale
+                )
 
 
 def test_the_table_follows_new_torque_limits_row_buffers_and_tasks() -> None:
@@ -198,17 +212,26 @@ def test_the_step_table_refuses_a_kernel_of_other_rows() -> None:
 @pytest.mark.parametrize("name", ["krang", "planar7"])
 def test_the_robot_update_through_its_table_equals_the_call_with_arguments(name: str) -> None:
     """``RobotModel.update`` calls ``robot_update_at`` (its arrays in one table): the same
-    results, to the bit, as ``robot_update`` with each array passed, on a second model."""
+    results, to the bit, as ``robot_update`` with each array passed, on a second model; the
+    properties are copies that stay as they were after the next update."""
     from wip_gym.minimal_kernels import robot_update
 
     robot, reference = RobotModel(_load(name)), RobotModel(_load(name))
     r = reference
     rng = np.random.default_rng(27)
+    kept = None
     for dynamics in (True, False, True):
         qpos, qvel = robot.full_state(*random_minimal_state(robot, rng))
         robot.update(qpos, qvel, dynamics=dynamics)
         r._qpos_in[:], r._qvel_in[:] = qpos, qvel
-        expected = robot_update(
+        scalars, com, J_com, J_theta = (
+            np.zeros(7),
+            np.zeros(3),
+            np.zeros((3, r.layout.n_min)),
+            np.zeros(r.layout.n_min),
+        )
+        A, h, B = np.zeros_like(r._A_buffer), np.zeros_like(r._h_buffer), np.zeros_like(r._B_buffer)
+        robot_update(
             r.model._address,
             r.data._address,
             r._qpos_in,
@@ -238,19 +261,88 @@ def test_the_robot_update_through_its_table_equals_the_call_with_arguments(name:
             r._M,
             r._bias,
             r._S,
+            scalars,
+            com,
+            J_com,
+            J_theta,
+            A,
+            h,
+            B,
             dynamics,
         )
-        psi, psid, _, _, mass, com, J_com, theta, thetad, J_theta, A, h, B = expected
-        assert (robot.theta, robot.thetad, robot.body_mass) == (theta, thetad, mass)
+        psi, psid, c, s, mass, theta, thetad = scalars.tolist()
+        assert (robot.theta, robot.thetad, robot.body_mass, robot.psi) == (theta, thetad, mass, psi)
         np.testing.assert_array_equal(robot.com, com)
         np.testing.assert_array_equal(robot.J_com, J_com)
         np.testing.assert_array_equal(robot.J_theta, J_theta)
         np.testing.assert_array_equal(robot.q, r._q)
         np.testing.assert_array_equal(robot.nu, r._nu)
         np.testing.assert_array_equal(robot.J_tf, r._J)
+        np.testing.assert_array_equal(
+            robot.heading_rotation, [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
+        )
+        assert robot.has_dynamics == dynamics
         if dynamics:
             np.testing.assert_array_equal(robot.A, A)
             np.testing.assert_array_equal(robot.h, h)
             np.testing.assert_array_equal(robot.B, B)
-        if not robot.layout.planar:
-            assert (robot.psi, robot._psid) == (psi, psid)
+            assert robot.A is robot.A  # one copy per update
+            if kept is not None:
+                # what a caller kept from an earlier update is as it was
+                for array, value in zip(kept[0], kept[1], strict=True):
+                    np.testing.assert_array_equal(array, value)
+            kept_arrays = (
+                robot.A,
+                robot.h,
+                robot.B,
+                robot.com,
+                robot.J_theta,
+                robot.heading_rotation,
+            )
+            kept = (kept_arrays, [a.copy() for a in kept_arrays])
+        else:
+            with pytest.raises(RuntimeError, match="dynamics=False"):
+                robot.A  # noqa: B018
+
+
+def test_the_one_call_step_needs_the_dynamics() -> None:
+    robot = RobotModel(_load("krang"))
+    one, _ = _pair(robot)
+    qpos, qvel = robot.full_state(*random_minimal_state(robot, np.random.default_rng(28)))
+    robot.update(qpos, qvel)
+    tasks = _realistic_tasks(robot)
+    one.assemble(robot, None, tasks)
+    robot.update(qpos, qvel, dynamics=False)
+    with pytest.raises(RuntimeError, match="dynamics=False"):
+        one.assemble(robot, None, tasks)
+
+
+@pytest.mark.parametrize("env_id", ["wip_gym/PlanarTray-v0", "wip_gym/KrangTray-v0"])
+def test_a_closed_loop_with_one_call_equals_it_with_two_to_the_bit(env_id: str) -> None:
+    """The default controller (hand observers on, the MPC every tenth step) in closed loop on
+    two copies of the env, one with each path: the same actions, bit for bit, over 150 steps
+    that take the QP's shortcut (where the one call also computes the torques)."""
+    import gymnasium as gym
+
+    import wip_gym  # noqa: F401
+    from controllers.hierarchical import HierarchicalConfig, HierarchicalController
+
+    runs = []
+    for one_call in (True, False):
+        env = gym.make(env_id)
+        obs, info = env.reset(seed=4)
+        config = HierarchicalConfig(qp=QPSettings(one_call=one_call))
+        policy = HierarchicalController.for_env(env, config)
+        policy.reset(obs, info)
+        runs.append((env, policy, obs))
+    (env_a, policy_a, obs_a), (env_b, policy_b, obs_b) = runs
+    calls = policy_a.qp.proxqp_calls
+    for _ in range(150):
+        action_a, action_b = policy_a(obs_a), policy_b(obs_b)
+        np.testing.assert_array_equal(action_a, action_b)
+        obs_a, *_ = env_a.step(action_a)
+        obs_b, *_ = env_b.step(action_b)
+    assert policy_a.qp.proxqp_calls == calls  # every step by the shortcut
+    assert policy_a.qp._table is not None and policy_b.qp._table is None
+    env_a.close()
+    env_b.close()

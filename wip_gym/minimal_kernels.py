@@ -412,31 +412,25 @@ def robot_update(
     M: np.ndarray,
     bias: np.ndarray,
     S: np.ndarray,
+    scalars: np.ndarray,
+    com_out: np.ndarray,
+    J_com_out: np.ndarray,
+    J_theta_out: np.ndarray,
+    A_out: np.ndarray,
+    h_out: np.ndarray,
+    B_out: np.ndarray,
     dynamics: bool,
-) -> tuple[
-    float,
-    float,
-    float,
-    float,
-    float,
-    np.ndarray,
-    np.ndarray,
-    float,
-    float,
-    np.ndarray,
-    np.ndarray,
-    np.ndarray,
-    np.ndarray,
-]:
+) -> None:
     """``RobotModel.update`` for the state ``(qpos, qvel)`` (the robot's own entries) on the
     MuJoCo ``model``, ``data`` (addresses; ``data_*``, ``xmat``, ... are views on its arrays):
     kinematics and ``mj_comPos``, :func:`minimal_state`, the Jacobians of the base subtree's
     CoM, of the wheels' CoMs and of the base origin, :func:`body_com`; with ``dynamics`` also
     ``mj_crb``, the full mass matrix, ``mj_comVel``, ``mj_passive``, ``mj_rne`` and
-    :func:`minimal_dynamics` (else ``A``, ``h``, ``B`` are empty). ``bodies``: ``(base,
-    wheel_left, wheel_right)``; ``J_pattern``: where ``J`` (``J_tf``) may be nonzero. Returns
-    ``(psi, psid, cos psi, sin psi, mass, com, J_com,
-    theta, thetad, J_theta, A, h, B)``."""
+    :func:`minimal_dynamics` (else ``A_out``, ``h_out``, ``B_out`` are left as they are).
+    ``bodies``: ``(base, wheel_left, wheel_right)``; ``J_pattern``: where ``J`` (``J_tf``) may
+    be nonzero. Written into the ``*_out`` buffers, and ``(psi, psid, cos psi, sin psi, mass,
+    theta, thetad)`` into ``scalars`` (:data:`UPDATE_SCALARS`): returning new arrays would
+    cost their boxing at every call."""
     data_qpos[: len(qpos)] = qpos
     data_qvel[: len(qvel)] = qvel
     mjc.mj_kinematics(model, data)
@@ -477,6 +471,11 @@ def robot_update(
         s,
         layout[0] != 0,
     )
+    scalars[0], scalars[1], scalars[2], scalars[3] = psi, psid, c, s
+    scalars[4], scalars[5], scalars[6] = mass, theta, thetad
+    com_out[:] = com
+    J_com_out[:] = J_com
+    J_theta_out[:] = J_theta
     if dynamics:
         mjc.mj_crb(model, data)
         mjc.mj_fullM(model, data, M.ctypes.data)
@@ -484,9 +483,9 @@ def robot_update(
         mjc.mj_passive(model, data)
         mjc.mj_rne(model, data, 0, bias.ctypes.data)
         A, h, B = minimal_dynamics(M, J, J_pattern, Jdot_nu, bias, qfrc_passive, S)
-    else:
-        A, h, B = np.zeros((0, 0)), np.zeros(0), np.zeros((0, 0))
-    return psi, psid, c, s, mass, com, J_com, theta, thetad, J_theta, A, h, B
+        A_out[:] = A
+        h_out[:] = h
+        B_out[:] = B
 
 
 UPDATE_ENTRIES = (
@@ -518,33 +517,27 @@ UPDATE_ENTRIES = (
     "M",
     "bias",
     "S",
+    "scalars",
+    "com",
+    "J_com",
+    "J_theta",
+    "A",
+    "h",
+    "B",
 )
 """The rows of :func:`robot_update_at`'s table, by name: :func:`robot_update`'s arguments in
 their order, its scalars in the first two (``RobotModel`` builds it once per MuJoCo data)."""
 
+UPDATE_SCALARS = ("psi", "psid", "cos_psi", "sin_psi", "body_mass", "theta", "thetad")
+"""The entries of :func:`robot_update`'s ``scalars``, in order."""
+
 
 @njit(cache=True)
-def robot_update_at(
-    table: np.ndarray, dynamics: bool
-) -> tuple[
-    float,
-    float,
-    float,
-    float,
-    float,
-    np.ndarray,
-    np.ndarray,
-    float,
-    float,
-    np.ndarray,
-    np.ndarray,
-    np.ndarray,
-    np.ndarray,
-]:
+def robot_update_at(table: np.ndarray, dynamics: bool) -> None:
     """:func:`robot_update` on the arrays of ``table`` (:data:`UPDATE_ENTRIES`): one array to
-    unbox instead of twenty-six (``wip_gym.array_table``)."""
+    unbox instead of thirty-three (``wip_gym.array_table``)."""
     ints = int_vector(table, 0)
-    return robot_update(
+    robot_update(
         ints[0],
         ints[1],
         float_vector(table, 2),
@@ -574,5 +567,12 @@ def robot_update_at(
         float_matrix(table, 25),
         float_vector(table, 26),
         float_matrix(table, 27),
+        float_vector(table, 28),
+        float_vector(table, 29),
+        float_matrix(table, 30),
+        float_vector(table, 31),
+        float_matrix(table, 32),
+        float_vector(table, 33),
+        float_matrix(table, 34),
         dynamics,
     )

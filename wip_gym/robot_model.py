@@ -300,7 +300,8 @@ class RobotModel:
         self._body_ids = np.array(lay.body_bodies)
         self._layout_ints, self._body_qpos, self._body_dof = lay.kernel_arrays()
         self._bodies = np.array([lay.base_body, *lay.wheel_bodies], dtype=np.int64)
-        self._heading = _read_only(np.eye(3))
+        self._heading: Array | None = _read_only(np.eye(3))
+        self._cos_psi, self._sin_psi = 1.0, 0.0
         self._q = np.zeros(n)
         self._nu = np.zeros(n)
         first_body = 3 if not lay.planar else 2
@@ -319,6 +320,16 @@ class RobotModel:
             self._J[lay.wheel_dof[1], 1] = sep / (2.0 * r)
             self._J[lay.root_dof + 4, 2] = 1.0
         self._J_pattern = _read_only(transform_pattern(self._J, lay))
+        # the compiled update's outputs, written in place; the properties hand out copies made
+        # at their first read after an update (so that what a caller keeps stays as it was)
+        self._scalars = np.zeros(len(kernels.UPDATE_SCALARS))
+        self._com_buffer = np.zeros(3)
+        self._J_com_buffer = np.zeros((3, n))
+        self._J_theta_buffer = np.zeros(n)
+        self._A_buffer = np.zeros((n, n))
+        self._h_buffer = np.zeros(n)
+        self._B_buffer = np.zeros((n, model.nu))
+        self._forget_copies()
         self._bind_update_table()
         self._updated = False
         self._has_dynamics = False
@@ -401,6 +412,13 @@ class RobotModel:
             "M": self._M,
             "bias": self._bias,
             "S": self._S,
+            "scalars": self._scalars,
+            "com": self._com_buffer,
+            "J_com": self._J_com_buffer,
+            "J_theta": self._J_theta_buffer,
+            "A": self._A_buffer,
+            "h": self._h_buffer,
+            "B": self._B_buffer,
         }
         self._update_table = ArrayTable(
             [arrays[name] for name in kernels.UPDATE_ENTRIES], kernels.UPDATE_ENTRIES
@@ -418,7 +436,8 @@ class RobotModel:
         # NumPy's pickling and deepcopy do not keep the read-only flag (and a writable array is
         # another signature for numba: the compiled update would compile again)
         _read_only(self._J_pattern)
-        _read_only(self._heading)
+        if self._heading is not None:
+            _read_only(self._heading)
 
     # ------------------------------------------------------------------ state
     def update(self, qpos: ArrayLike, qvel: ArrayLike, *, dynamics: bool = True) -> None:
@@ -442,30 +461,49 @@ class RobotModel:
         if not all_finite(self._qpos_in, self._qvel_in):
             raise ValueError("qpos/qvel contain NaN or inf")
         self.cache.clear()
+        robot_update_at(self._update_table.rows, dynamics)
         (
             self._psi,
             self._psid,
-            c,
-            s,
+            self._cos_psi,
+            self._sin_psi,
             self._body_mass,
-            self._com,
-            self._J_com,
             self._theta,
             self._thetad,
-            self._J_theta,
-            A,
-            h,
-            B,
-        ) = robot_update_at(self._update_table.rows, dynamics)
-        if not lay.planar:
-            heading = np.array((c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0)).reshape(3, 3)
-            self._heading = _read_only(heading)
+        ) = self._scalars.tolist()
+        self._forget_copies()
         # the base origin's linear Jacobian, kept for the tasks (site_in_axle_frame)
         self.cache["origin_jacobian"] = self._jac_origin
         self._updated = True
         self._has_dynamics = dynamics
-        if dynamics:
-            self._A, self._h, self._B = A, h, B
+
+    def _forget_copies(self) -> None:
+        """The properties' copies of the update's outputs, made again at their next read."""
+        self._com: Array | None = None
+        self._J_com: Array | None = None
+        self._J_theta: Array | None = None
+        self._A: Array | None = None
+        self._h: Array | None = None
+        self._B: Array | None = None
+        if not self.layout.planar:
+            self._heading = None  # Rz(psi), made at its first read
+
+    def update_buffers(self) -> dict[str, Array]:
+        """The compiled update's outputs that compiled callers read (the task QP's one-call
+        step, ``controllers.low_level.compiled_step``): ``J_theta``, ``A``, ``h`` and
+        ``scalars`` (``minimal_kernels.UPDATE_SCALARS``), written in place by every update of
+        this object. Python callers: use the properties (copies that stay as they were)."""
+        return {
+            "J_theta": self._J_theta_buffer,
+            "A": self._A_buffer,
+            "h": self._h_buffer,
+            "robot_scalars": self._scalars,
+        }
+
+    @property
+    def has_dynamics(self) -> bool:
+        """Whether the last update computed ``A``, ``h``, ``B`` (``dynamics=True``)."""
+        return self._updated and self._has_dynamics
 
     def _require(self) -> None:
         if not self._updated:
@@ -509,20 +547,27 @@ class RobotModel:
 
     @property
     def A(self) -> Array:
-        """Minimal-coordinate inertia ``J_tf^T M J_tf`` (paper eq. ``dyn``)."""
+        """Minimal-coordinate inertia ``J_tf^T M J_tf`` (paper eq. ``dyn``). Like every
+        array property of an update's result, a new array per update (the same one within)."""
         self._require_dynamics()
+        if self._A is None:
+            self._A = self._A_buffer.copy()
         return self._A
 
     @property
     def h(self) -> Array:
         """Bias ``J_tf^T (M Jdot_tf nu + c - f_passive)``: Coriolis, gravity, friction."""
         self._require_dynamics()
+        if self._h is None:
+            self._h = self._h_buffer.copy()
         return self._h
 
     @property
     def B(self) -> Array:
         """Actuation ``J_tf^T S`` (``n_min x nu``): ``A nu_dot + h = B ctrl``."""
         self._require_dynamics()
+        if self._B is None:
+            self._B = self._B_buffer.copy()
         return self._B
 
     @property
@@ -533,7 +578,11 @@ class RobotModel:
     @property
     def heading_rotation(self) -> Array:
         """Rotation of the axle frame in world: ``Rz(psi)`` (identity for planar robots).
-        Read-only, made once per update."""
+        Read-only, made once per update (at its first read)."""
+        if self._heading is None:
+            c, s = self._cos_psi, self._sin_psi
+            heading = np.array((c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0)).reshape(3, 3)
+            self._heading = _read_only(heading)
         return self._heading
 
     @property
@@ -551,12 +600,16 @@ class RobotModel:
     def com(self) -> Array:
         """Body CoM (wheels excluded) in the axle frame."""
         self._require()
+        if self._com is None:
+            self._com = self._com_buffer.copy()
         return self._com
 
     @property
     def J_com(self) -> Array:
         """Jacobian of :attr:`com` with respect to ``nu`` (``3 x n_min``)."""
         self._require()
+        if self._J_com is None:
+            self._J_com = self._J_com_buffer.copy()
         return self._J_com
 
     @property
@@ -575,13 +628,16 @@ class RobotModel:
     def J_theta(self) -> Array:
         """Row Jacobian of ``theta`` with respect to ``nu``."""
         self._require()
+        if self._J_theta is None:
+            self._J_theta = self._J_theta_buffer.copy()
         return self._J_theta
 
     # ---------------------------------------------------------- derived
     def accelerations(self, ctrl: ArrayLike) -> Array:
         """Minimal accelerations ``nu_dot`` solving ``A nu_dot + h = B ctrl``."""
         self._require_dynamics()
-        return np.linalg.solve(self._A, self._B @ np.asarray(ctrl, dtype=float) - self._h)
+        A, B, h = self._A_buffer, self._B_buffer, self._h_buffer
+        return np.linalg.solve(A, B @ np.asarray(ctrl, dtype=float) - h)
 
     def full_accelerations(self, nu_dot: ArrayLike) -> Array:
         """MuJoCo's ``qacc`` for minimal accelerations: ``J_tf nu_dot + Jdot_tf nu``."""
@@ -614,14 +670,14 @@ class RobotModel:
         mujoco.mju_quat2Mat(flat, m.body_iquat[w])
         R = flat.reshape(3, 3)
         tensor = R @ np.diag(wheel_inertia) @ R.T
-        com = self._com.copy()
+        com = self._com_buffer.copy()
         return WIPMParameters(
             body_mass=self._body_mass,
             com=com,
             com_distance=float(np.hypot(com[0], com[2])),
             theta=self._theta,
             thetad=self._thetad,
-            pitch_inertia=float(self._A[lay.index_q1, lay.index_q1]),
+            pitch_inertia=float(self._A_buffer[lay.index_q1, lay.index_q1]),
             inertia_axle=self.body_inertia_about_axle(),
             wheel_mass=float(m.body_mass[w]),
             wheel_inertia=float(tensor[1, 1]),
@@ -649,8 +705,8 @@ class RobotModel:
         lay = self.layout
         return kernels.wipm_values(
             self._wipm_table,
-            self._heading,
-            self._com,
+            self.heading_rotation,
+            self._com_buffer,
             self._body_mass,
             self._theta,
             lay.wheel_radius,

@@ -5,18 +5,19 @@ With every task of a kind the compiled rows know (``controllers.low_level.task_s
 ``iso3`` computed from the robot (the controller's default), a control step's task rows
 (:func:`controllers.low_level.task_stack.stack_rows`) and QP kernel
 (:func:`controllers.low_level.kernel.kernel_step`) are one call of :func:`rows_and_kernel`. Its
-arrays (MuJoCo's, the motion probe's, the task stack's, the kernel's: buffers made once and
-written in place) reach it as one :class:`wip_gym.array_table.ArrayTable` (:data:`ENTRIES`, in
-this order), and the three the robot model makes anew at each update (``J_theta``, ``A``,
-``h``) as arguments: four arguments to unbox instead of seventy-four. The arithmetic is the two
-functions' own, so the result is the same to the bit as :meth:`CompiledTaskStack.fill` then
-:meth:`LowLevelKernel.run` (``tests/test_compiled_step.py``).
+arrays (MuJoCo's, the robot model's, the motion probe's, the task stack's, the kernel's: buffers
+made once and written in place) reach it as one :class:`wip_gym.array_table.ArrayTable`
+(:data:`ENTRIES`, in this order): one argument to unbox instead of seventy-four. When the
+unconstrained minimiser is feasible, the same call computes what it implies (the torques,
+``kernel.solution_terms_into``). The arithmetic is those functions' own, so the result is the
+same to the bit as :meth:`CompiledTaskStack.fill`, :meth:`LowLevelKernel.run` and
+``solution_terms`` (``tests/test_compiled_step.py``).
 
 The table is built by :func:`step_table` for one task stack and one kernel: ``TaskQP`` builds it
 again whenever either is made anew (a new task list, new row buffers, new torque-limit arrays),
 and never pickles it. The robot model's arrays in it (``q``, ``nu``, ``J_tf``, ``Jdot_tf nu``,
-the origin's Jacobian) are written in place by every update of the same ``RobotModel``
-(tested).
+the origin's Jacobian and :meth:`RobotModel.update_buffers`) are written in place by every
+update of the same ``RobotModel`` (tested).
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from controllers.low_level.kernel import LowLevelKernel, kernel_step
+from controllers.low_level.kernel import LowLevelKernel, kernel_step, solution_terms_into
 from controllers.low_level.task_stack import CompiledTaskStack, stack_rows
 from wip_gym.array_table import (
     ArrayTable,
@@ -111,6 +112,14 @@ ENTRIES = (
     "lower",
     "upper",
     "x",
+    # what a feasible x implies (kernel.solution_terms_into), then the robot model's buffers
+    "generalized",
+    "actuators",
+    "nu_dot",
+    "J_theta",
+    "A",
+    "h",
+    "robot_scalars",
 )
 """The table's rows, by name (:func:`rows_and_kernel` reads them by these indices)."""
 
@@ -181,6 +190,13 @@ ENTRIES = (
     _LOWER,
     _UPPER,
     _X,
+    _GENERALIZED,
+    _ACTUATORS,
+    _NU_DOT,
+    _J_THETA,
+    _A,
+    _H_ROBOT,
+    _ROBOT_SCALARS,
 ) = range(len(ENTRIES))
 
 
@@ -203,6 +219,7 @@ def step_table(
     entries = {
         **stack.table_entries(robot),
         **kernel.table_entries(),
+        **robot.update_buffers(),
         "J": J,
         "target": target,
         "jdot_nu": jdot_nu,
@@ -218,15 +235,23 @@ def step_table(
 
 
 @njit(cache=True)
-def rows_and_kernel(table: NDArray[np.int64], J_theta: Array, A: Array, h: Array) -> bool:
-    """:func:`stack_rows` then :func:`kernel_step` (with eq. ``iso3`` from ``A``, ``h``) on the
-    arrays of ``table`` (:func:`step_table`); returns the kernel's answer: whether the
-    unconstrained minimiser meets every constraint."""
+def rows_and_kernel(table: NDArray[np.int64]) -> bool:
+    """The robot's scalars into the stack's (what ``CompiledTaskStack.prepare`` does in
+    Python), :func:`stack_rows`, :func:`kernel_step` (with eq. ``iso3`` from the robot's ``A``,
+    ``h``) and, when the unconstrained minimiser ``x`` meets every constraint,
+    :func:`solution_terms_into`, on the arrays of ``table`` (:func:`step_table`). Returns the
+    kernel's answer: whether ``x`` meets every constraint."""
     ints, floats = int_vector(table, _INTS), float_vector(table, _FLOATS)
     J = float_matrix(table, _J)
     target = float_vector(table, _TARGET)
     jdot_nu = float_vector(table, _JDOT_NU)
     q, nu = float_vector(table, _Q), float_vector(table, _NU)
+    # theta, thetad, cos psi, sin psi, psid (0 planar) as task_rows reads them
+    robot_scalars, scalars = float_vector(table, _ROBOT_SCALARS), float_vector(table, _SCALARS)
+    index_psi = int(scalars[5])
+    scalars[0], scalars[1] = robot_scalars[5], robot_scalars[6]
+    scalars[2], scalars[3] = robot_scalars[2], robot_scalars[3]
+    scalars[4] = 0.0 if index_psi < 0 else nu[index_psi]
     stack_rows(
         ints[0],
         ints[1],
@@ -253,8 +278,8 @@ def rows_and_kernel(table: NDArray[np.int64], J_theta: Array, A: Array, h: Array
         nu,
         float_matrix(table, _J_TF),
         int_matrix(table, _J_PATTERN),
-        J_theta,
-        float_vector(table, _SCALARS),
+        float_vector(table, _J_THETA),
+        scalars,
         int_vector(table, _BODIES),
         int_vector(table, _SITE_IDS),
         float_matrix(table, _XPOS),
@@ -281,10 +306,13 @@ def rows_and_kernel(table: NDArray[np.int64], J_theta: Array, A: Array, h: Array
         target,
         jdot_nu,
     )
-    return kernel_step(
+    calA, Ph = float_matrix(table, _CAL_A), float_vector(table, _PH)
+    E, e = float_matrix(table, _E), float_vector(table, _SMALL_E)
+    actuator_map, x = float_matrix(table, _ACTUATOR_MAP), float_vector(table, _X)
+    feasible = kernel_step(
         True,
-        A,
-        h,
+        float_matrix(table, _A),
+        float_vector(table, _H_ROBOT),
         ints[4],
         floats[2],
         J,
@@ -293,11 +321,11 @@ def rows_and_kernel(table: NDArray[np.int64], J_theta: Array, A: Array, h: Array
         float_vector(table, _W),
         q,
         nu,
-        float_matrix(table, _CAL_A),
-        float_vector(table, _PH),
-        float_matrix(table, _E),
-        float_vector(table, _SMALL_E),
-        float_matrix(table, _ACTUATOR_MAP),
+        calA,
+        Ph,
+        E,
+        e,
+        actuator_map,
         float_vector(table, _TORQUE_LOW),
         float_vector(table, _TORQUE_HIGH),
         float_matrix(table, _LIMITS),
@@ -310,5 +338,18 @@ def rows_and_kernel(table: NDArray[np.int64], J_theta: Array, A: Array, h: Array
         float_matrix(table, _C),
         float_vector(table, _LOWER),
         float_vector(table, _UPPER),
-        float_vector(table, _X),
+        x,
     )
+    if feasible:
+        solution_terms_into(
+            calA,
+            Ph,
+            actuator_map,
+            E,
+            e,
+            x,
+            float_vector(table, _GENERALIZED),
+            float_vector(table, _ACTUATORS),
+            float_vector(table, _NU_DOT),
+        )
+    return feasible

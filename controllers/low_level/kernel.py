@@ -90,6 +90,10 @@ class LowLevelKernel:
         self.lower = np.zeros(m + n_limit)
         self.upper = np.zeros(m + n_limit)
         self.x = np.zeros(n)
+        # what x implies (solution_terms_into), filled by the one-call step when x is feasible
+        self.generalized = np.zeros(n)
+        self.actuators = np.zeros(m)
+        self.nu_dot = np.zeros(n_min)
         self._m = m
         # the joints' ranges, fixed when the kernel is made (the model's jnt_range); the torque
         # limits are read at every call
@@ -123,6 +127,9 @@ class LowLevelKernel:
             "lower": self.lower,
             "upper": self.upper,
             "x": self.x,
+            "generalized": self.generalized,
+            "actuators": self.actuators,
+            "nu_dot": self.nu_dot,
         }
 
     def run(
@@ -320,10 +327,31 @@ def _cholesky_solve(H: Array, rhs: Array, x: Array) -> bool:
 
 
 @njit(cache=True)
+def solution_terms_into(
+    calA: Array,
+    Ph: Array,
+    actuator_map: Array,
+    E: Array,
+    e: Array,
+    qdd: Array,
+    generalized: Array,
+    actuators: Array,
+    nu_dot: Array,
+) -> None:
+    """What a solution ``qdd`` implies, into ``generalized``, ``actuators`` and ``nu_dot``: the
+    generalised forces ``Gamma = calA qdd + Ph`` (eq. ``iso3``), the actuator torques
+    ``M_act Gamma`` and ``nu_dot = E qdd + e``."""
+    generalized[:] = matvec(calA, qdd) + Ph
+    actuators[:] = matvec(actuator_map, generalized)
+    nu_dot[:] = matvec(E, qdd) + e
+
+
+@njit(cache=True)
 def solution_terms(
     calA: Array, Ph: Array, actuator_map: Array, E: Array, e: Array, qdd: Array
 ) -> tuple[Array, Array, Array]:
-    """What a solution ``qdd`` implies (new arrays): the generalised forces ``Gamma = calA qdd
-    + Ph`` (eq. ``iso3``), the actuator torques ``M_act Gamma`` and ``nu_dot = E qdd + e``."""
-    generalized = matvec(calA, qdd) + Ph
-    return generalized, matvec(actuator_map, generalized), matvec(E, qdd) + e
+    """:func:`solution_terms_into`, into new arrays ``(generalized, actuators, nu_dot)``."""
+    generalized, nu_dot = np.empty(len(Ph)), np.empty(len(e))
+    actuators = np.empty(actuator_map.shape[0])
+    solution_terms_into(calA, Ph, actuator_map, E, e, qdd, generalized, actuators, nu_dot)
+    return generalized, actuators, nu_dot

@@ -175,6 +175,7 @@ class TaskQP:
         self._J: Array | None = None  # task-row buffers and kernel, made by _buffers
         self._rows = -1
         self._feasible = False
+        self._terms_ready = False  # the kernel's solution terms are of this step's x
         self._stack: CompiledTaskStack | None = None
         # the one-call step's table and the (stack, kernel) it was built for
         self._table: ArrayTable | None = None
@@ -283,13 +284,17 @@ class TaskQP:
         if iso is None and self.settings.one_call:
             stack = self._compiled_stack(robot, tasks)
             if stack is not None:
+                if not robot.has_dynamics:
+                    raise RuntimeError("the last robot update had dynamics=False: no A, h")
                 self.compiled = True
                 self._ensure_buffers(stack.rows, robot.layout.n_min)
                 table = self._one_call_table(stack, robot)
-                stack.prepare(robot, self._w)
-                feasible = rows_and_kernel(table.rows, robot.J_theta, robot.A, robot.h)
+                stack.prepare_parameters(robot, self._w)
+                feasible = rows_and_kernel(table.rows)
                 stack.memoise_observers(robot, self._target)
-                return bool(feasible)
+                self._terms_ready = feasible
+                return feasible
+        self._terms_ready = False
         self._snapshot(robot, tasks)
         A, h = (robot.A, robot.h) if iso is None else (None, None)
         return self.kernel.run(
@@ -338,6 +343,18 @@ class TaskQP:
         ``robot``). ``proxqp_calls`` counts the steps ProxQP solved."""
         H, g, C, lower, upper = self.assemble(robot, iso, tasks)
         if self._qp is not None and self.settings.unconstrained_first and self._feasible:
+            if self._terms_ready:  # the one-call step computed what x implies
+                k = self.kernel
+                actuators = k.actuators.copy()
+                self._last_actuators = actuators
+                return QPSolution(
+                    qdd=k.x.copy(),
+                    nu_dot=k.nu_dot.copy(),
+                    generalized=k.generalized.copy(),
+                    actuators=actuators,
+                    solved=True,
+                    iterations=0,
+                )
             return self._solution(self.kernel.x.copy(), iterations=0)
         self.proxqp_calls += 1
         if self._qp is None:

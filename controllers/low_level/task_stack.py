@@ -448,9 +448,10 @@ class CompiledTaskStack:
                     else task.weight  # type: ignore[attr-defined]
                 )
 
-    def prepare(self, robot: RobotModel, w: Array) -> None:
-        """What :meth:`fill` does before its compiled call: whether each observer advances at
-        this state, step 2 (the weights into ``w``), the robot's scalars."""
+    def prepare_parameters(self, robot: RobotModel, w: Array) -> None:
+        """Whether each observer advances at this state, and step 2 (the weights into
+        ``w``): what the one-call step (``controllers.low_level.compiled_step``) needs done in
+        Python before its call."""
         if robot is not self._robot:
             raise ValueError("a compiled task stack serves the robot model it was built for")
         cache = robot.cache
@@ -458,6 +459,11 @@ class CompiledTaskStack:
         for slot, key in enumerate(self._observer_keys):
             advance[slot] = key not in cache
         self._pack_parameters(w)
+
+    def prepare(self, robot: RobotModel, w: Array) -> None:
+        """What :meth:`fill` does before its compiled call: :meth:`prepare_parameters`, then
+        the robot's scalars (``theta, thetad, cos psi, sin psi, psid``)."""
+        self.prepare_parameters(robot, w)
         scalars = self.scalars
         heading = robot.heading_rotation
         scalars[0] = robot.theta
