@@ -227,6 +227,16 @@ def test_bad_state_raises(robot: RobotModel) -> None:
         robot.update(np.zeros(lay.nq + 1), np.zeros(lay.nv))
     with pytest.raises(ValueError, match="NaN"):
         robot.update(np.full(lay.nq, np.nan), np.zeros(lay.nv))
+    # a refused state leaves the last one as it was
+    qpos, qvel = robot.full_state(*random_minimal_state(robot, np.random.default_rng(9)))
+    robot.update(qpos, qvel)
+    q, A, theta = robot.q.copy(), robot.A, robot.theta
+    bad = qvel.copy()
+    bad[-1] = np.inf
+    with pytest.raises(ValueError, match="NaN or inf"):
+        robot.update(qpos, bad)
+    np.testing.assert_array_equal(robot.q, q)
+    assert robot.A is A and robot.theta == theta
 
 
 def test_compiled_arithmetic_equals_numpy(robot: RobotModel) -> None:

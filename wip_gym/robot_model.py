@@ -37,7 +37,6 @@ from wip_gym import minimal_kernels as kernels
 from wip_gym import mujoco_c
 from wip_gym.array_table import ArrayTable
 from wip_gym.minimal_kernels import (
-    all_finite,
     idealised_state,
     inertia_about_point,
     robot_update_at,
@@ -454,14 +453,13 @@ class RobotModel:
                 f"expected qpos of shape ({lay.nq},) and qvel ({lay.nv},), "
                 f"got {qpos.shape}, {qvel.shape}"
             )
-        # copied first: the compiled check sees one array type (the copies are scratch, read
-        # only by the compiled update below)
+        # copied first: the compiled update sees one array type (the copies are scratch, read
+        # only by it), and checks them before it computes anything
         self._qpos_in[:] = qpos
         self._qvel_in[:] = qvel
-        if not all_finite(self._qpos_in, self._qvel_in):
+        if not robot_update_at(self._update_table.rows, dynamics):
             raise ValueError("qpos/qvel contain NaN or inf")
         self.cache.clear()
-        robot_update_at(self._update_table.rows, dynamics)
         (
             self._psi,
             self._psid,
