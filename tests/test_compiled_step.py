@@ -18,6 +18,7 @@ from dynamics_reference import random_minimal_state
 from test_compiled_tasks import _task_set
 from test_wbc import _load, _realistic_tasks
 
+from controllers.low_level.compiled_step import ENTRIES
 from controllers.low_level.task_qp import QPSettings, TaskQP
 from wip_gym.array_table import (
     ArrayTable,
@@ -109,6 +110,14 @@ def test_the_table_follows_new_torque_limits_row_buffers_and_tasks() -> None:
     two.assemble(robot, None, tasks)
     assert one._table is not first
     _assert_same_step(one, two)
+    # another task list of the same rows (new task objects): a new stack, so a new table
+    second = one._table
+    again = _realistic_tasks(robot)
+    one.assemble(robot, None, again)
+    two.assemble(robot, None, again)
+    assert one._table is not second
+    assert one._table.arrays[ENTRIES.index("kinds")] is one._stack.kinds  # type: ignore[union-attr]
+    _assert_same_step(one, two)
     # another task list of other rows: a new stack, new row buffers, a new table
     second = one._table
     fewer = tasks[:-1]
@@ -125,12 +134,19 @@ def test_the_robot_arrays_in_the_table_are_written_in_place() -> None:
     robot = RobotModel(_load("krang"))
     rng = np.random.default_rng(23)
     robot.update(*robot.full_state(*random_minimal_state(robot, rng)))
-    held = (robot.q, robot.nu, robot.J_tf, robot.Jdot_tf_nu, robot.cache["origin_jacobian"])
+
+    def arrays() -> list[np.ndarray]:
+        return [robot.q, robot.nu, robot.J_tf, robot.Jdot_tf_nu, *robot.update_buffers().values()]
+
+    held = arrays()
     before = [a.copy() for a in held]
     robot.update(*robot.full_state(*random_minimal_state(robot, rng)))
-    after = (robot.q, robot.nu, robot.J_tf, robot.Jdot_tf_nu, robot.cache["origin_jacobian"])
+    after = arrays()
     assert all(a is b for a, b in zip(held, after, strict=True))
-    assert any(not np.array_equal(a, b) for a, b in zip(before, after, strict=True))
+    # each changed with the state, but the origin's Jacobian (the free joint's translation: I)
+    changed = [not np.array_equal(a, b) for a, b in zip(before, after, strict=True)]
+    assert changed[:-1] == [True] * (len(changed) - 1)
+    assert list(robot.update_buffers())[-1] == "origin_jac"
 
 
 @pytest.mark.parametrize("copier", [copy.deepcopy, lambda qp: pickle.loads(pickle.dumps(qp))])
@@ -141,6 +157,12 @@ def test_a_copied_task_qp_builds_its_own_table(copier: object) -> None:
     one.assemble(robot, None, _realistic_tasks(robot))
     clone = copier(one)  # type: ignore[operator]
     assert clone._table is None and clone._stack is None
+    # (stepping a copied controller on its own data: test_compiled_tasks.py's
+    # test_a_copied_controller_steps_on_its_own_data)
+    with pytest.raises(TypeError, match="addresses"):
+        copy.deepcopy(one._table)
+    with pytest.raises(TypeError, match="addresses"):
+        pickle.dumps(one._table)
 
 
 def test_the_table_reads_and_writes_the_arrays_it_was_built_from() -> None:
@@ -346,3 +368,9 @@ def test_a_closed_loop_with_one_call_equals_it_with_two_to_the_bit(env_id: str) 
     assert policy_a.qp._table is not None and policy_b.qp._table is None
     env_a.close()
     env_b.close()
+
+
+def test_the_heading_before_any_update_is_the_identity() -> None:
+    robot = RobotModel(_load("krang"))
+    np.testing.assert_array_equal(robot.heading_rotation, np.eye(3))
+    assert not robot.heading_rotation.flags.writeable

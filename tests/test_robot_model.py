@@ -230,13 +230,15 @@ def test_bad_state_raises(robot: RobotModel) -> None:
     # a refused state leaves the last one as it was
     qpos, qvel = robot.full_state(*random_minimal_state(robot, np.random.default_rng(9)))
     robot.update(qpos, qvel)
-    q, A, theta = robot.q.copy(), robot.A, robot.theta
+    held = [robot.q, robot.nu, robot.data.qpos, robot.data.qvel, robot.data.xpos]
+    held += list(robot.update_buffers().values())
+    before = [a.copy() for a in held]
     bad = qvel.copy()
     bad[-1] = np.inf
     with pytest.raises(ValueError, match="NaN or inf"):
         robot.update(qpos, bad)
-    np.testing.assert_array_equal(robot.q, q)
-    assert robot.A is A and robot.theta == theta
+    for array, value in zip(held, before, strict=True):
+        np.testing.assert_array_equal(array, value)
 
 
 def test_compiled_arithmetic_equals_numpy(robot: RobotModel) -> None:

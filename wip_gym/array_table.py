@@ -67,6 +67,12 @@ class ArrayTable:
         self.names = tuple(labels)
         self.rows = rows
 
+    def __reduce__(self) -> tuple[object, ...]:
+        raise TypeError(
+            "an array table holds addresses, which a copy or an unpickling would keep pointing "
+            "at the original arrays: build a new table from the copied arrays instead"
+        )
+
     def holds(self, arrays: Sequence[NDArray[np.generic]]) -> bool:
         """Whether the table was built from these very array objects (not copies)."""
         return len(arrays) == len(self.arrays) and all(
@@ -78,6 +84,10 @@ class ArrayTable:
 def _check(table: NDArray[np.int64], i: int, kind: int) -> None:
     if table[i, 1] != kind:
         raise ValueError("array table: an entry read as another kind than it holds")
+
+
+# The readers below are for compiled code, where the table's owner keeps the memory alive for
+# the call. Called from Python (tests), the view they return does not keep it alive.
 
 
 @njit(cache=True)

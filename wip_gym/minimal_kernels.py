@@ -535,8 +535,9 @@ UPDATE_SCALARS = ("psi", "psid", "cos_psi", "sin_psi", "body_mass", "theta", "th
 @njit(cache=True)
 def robot_update_at(table: np.ndarray, dynamics: bool) -> bool:
     """:func:`robot_update` on the arrays of ``table`` (:data:`UPDATE_ENTRIES`): one array to
-    unbox instead of thirty-three (``wip_gym.array_table``). First :func:`all_finite` on the
-    state (``qpos``, ``qvel``): False, with nothing computed or written, if it is not."""
+    unbox instead of :func:`robot_update`'s 33 array arguments (``wip_gym.array_table``).
+    First :func:`all_finite` on the state (``qpos``, ``qvel``): False, with nothing computed or
+    written, if it is not."""
     ints = int_vector(table, 0)
     if not all_finite(float_vector(table, 2), float_vector(table, 3)):
         return False

@@ -296,7 +296,7 @@ class RobotModel:
         # the caller passes (read-only or strided arrays would each compile it again)
         self._qpos_in = np.zeros(lay.nq)
         self._qvel_in = np.zeros(lay.nv)
-        self._body_ids = np.array(lay.body_bodies)
+        self._body_ids = np.array(lay.body_bodies, dtype=np.int64)
         self._layout_ints, self._body_qpos, self._body_dof = lay.kernel_arrays()
         self._bodies = np.array([lay.base_body, *lay.wheel_bodies], dtype=np.int64)
         self._heading: Array | None = _read_only(np.eye(3))
@@ -425,7 +425,7 @@ class RobotModel:
 
     def __getstate__(self) -> dict[str, object]:
         state = self.__dict__.copy()
-        del state["_update_table"]  # addresses: made again by __setstate__
+        state.pop("_update_table", None)  # addresses: made again by __setstate__
         return state
 
     def __setstate__(self, state: dict[str, object]) -> None:
@@ -433,7 +433,8 @@ class RobotModel:
         self._bind_views()
         self._bind_update_table()
         # NumPy's pickling and deepcopy do not keep the read-only flag (and a writable array is
-        # another signature for numba: the compiled update would compile again)
+        # another signature for numba: the two-call task rows and wipm_values would compile
+        # again)
         _read_only(self._J_pattern)
         if self._heading is not None:
             _read_only(self._heading)
@@ -496,6 +497,7 @@ class RobotModel:
             "A": self._A_buffer,
             "h": self._h_buffer,
             "robot_scalars": self._scalars,
+            "origin_jac": self._jac_origin,
         }
 
     @property
@@ -545,8 +547,10 @@ class RobotModel:
 
     @property
     def A(self) -> Array:
-        """Minimal-coordinate inertia ``J_tf^T M J_tf`` (paper eq. ``dyn``). Like every
-        array property of an update's result, a new array per update (the same one within)."""
+        """Minimal-coordinate inertia ``J_tf^T M J_tf`` (paper eq. ``dyn``). A new array per
+        update (the same one within it), as are ``h``, ``B``, ``com``, ``J_com``, ``J_theta``
+        and ``heading_rotation``; ``q``, ``nu``, ``J_tf`` and ``Jdot_tf_nu`` are buffers that
+        every update writes in place (copy them to keep a state's values)."""
         self._require_dynamics()
         if self._A is None:
             self._A = self._A_buffer.copy()
@@ -659,7 +663,7 @@ class RobotModel:
     def wipm_parameters(self) -> WIPMParameters:
         """``lambda(q)`` at the current state (see :class:`WIPMParameters`); the reference
         for :meth:`wipm_values`, the controllers' path once per MPC step."""
-        self._require()
+        self._require_dynamics()  # the pitch inertia is an entry of A
         m, lay = self.model, self.layout
         w = lay.wheel_bodies[0]
         wheel_inertia = np.asarray(m.body_inertia[w])

@@ -7,7 +7,8 @@ With every task of a kind the compiled rows know (``controllers.low_level.task_s
 (:func:`controllers.low_level.kernel.kernel_step`) are one call of :func:`rows_and_kernel`. Its
 arrays (MuJoCo's, the robot model's, the motion probe's, the task stack's, the kernel's: buffers
 made once and written in place) reach it as one :class:`wip_gym.array_table.ArrayTable`
-(:data:`ENTRIES`, in this order): one argument to unbox instead of seventy-four. When the
+(:data:`ENTRIES`, in this order): one array to unbox instead of the 72 array arguments of the
+two calls it replaces (46 of ``stack_rows``, 26 of ``kernel_step``). When the
 unconstrained minimiser is feasible, the same call computes what it implies (the torques,
 ``kernel.solution_terms_into``). The arithmetic is those functions' own, so the result is the
 same to the bit as :meth:`CompiledTaskStack.fill`, :meth:`LowLevelKernel.run` and
@@ -216,15 +217,18 @@ def step_table(
             f"the kernel and row buffers are for {kernel.layout.rows} rows of "
             f"{J.shape[1]} columns; the stack has {stack.rows} of {robot.layout.n_min}"
         )
-    entries = {
-        **stack.table_entries(robot),
-        **kernel.table_entries(),
-        **robot.update_buffers(),
-        "J": J,
-        "target": target,
-        "jdot_nu": jdot_nu,
-        "w": w,
-    }
+    parts = (
+        stack.table_entries(robot),
+        kernel.table_entries(),
+        robot.update_buffers(),
+        {"J": J, "target": target, "jdot_nu": jdot_nu, "w": w},
+    )
+    entries: dict[str, np.ndarray] = {}
+    for part in parts:
+        twice = entries.keys() & part.keys()
+        if twice:
+            raise ValueError(f"step table: entries {sorted(twice)} given twice")
+        entries.update(part)
     ints = np.array([*entries.pop("stack_ints"), kernel.layout.index_q1], dtype=np.int64)
     floats = np.array([*entries.pop("stack_floats"), kernel.layout.wheel_radius])
     entries["ints"], entries["floats"] = ints, floats

@@ -20,9 +20,12 @@ QP is convex and its constraints are then inactive), and ProxQP is not called. I
 that is most steps (no torque or joint limit active); ProxQP, warm-started, takes the others
 (``proxqp_calls`` counts them).
 
-Per step: the tasks fill the stacked rows (``J``, ``xdd*``, ``Jdot nu``, ``w``); then one call of
-``controllers.low_level.kernel`` computes eq. ``iso3`` (unless the caller passes it), ``T``,
+Per step: the tasks fill the stacked rows (``J``, ``xdd*``, ``Jdot nu``, ``w``); then the kernel
+(``controllers.low_level.kernel``) computes eq. ``iso3`` (unless the caller passes it), ``T``,
 ``b``, ``H``, ``g``, the constraint rows and the unconstrained minimiser with its feasibility.
+With the compiled rows and eq. ``iso3`` from the robot (the controller's case), both and the
+torques of a feasible minimiser are one compiled call (``controllers.low_level.compiled_step``,
+``QPSettings.one_call``); otherwise the rows (compiled or task by task) and the kernel are two.
 Weights are per row, so a task may weight each of its rows differently (per axis, per joint).
 """
 

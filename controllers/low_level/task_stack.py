@@ -484,8 +484,9 @@ class CompiledTaskStack:
 
     def table_entries(self, robot: RobotModel) -> dict[str, np.ndarray]:
         """The arrays of :func:`stack_rows` by name, for the one-call step of
-        ``controllers.low_level.compiled_step`` (all but ``J_theta``, which the robot makes
-        anew at each update, and the rows ``J``, ``target``, ``jdot_nu``); its scalars as
+        ``controllers.low_level.compiled_step`` (all but the robot's ``J_theta`` and origin
+        Jacobian, which ``RobotModel.update_buffers`` gives, and the rows ``J``, ``target``,
+        ``jdot_nu``); its scalars as
         ``stack_ints`` (the model's, data's and probe's addresses, the theta flag) and
         ``stack_floats`` (the probe's wheel radius and separation)."""
         if robot is not self._robot:
@@ -527,7 +528,6 @@ class CompiledTaskStack:
             "site_xpos": site_xpos,
             "site_xmat": site_xmat,
             "site_jac": self.site_jac,
-            "origin_jac": robot.cache["origin_jacobian"],  # type: ignore[dict-item]
             "probe_qvel": probe_qvel,
             "probe_qacc0": probe_qacc0,
             "probe_xpos": probe_xpos,
