@@ -3,7 +3,7 @@
     python -m benchmarks.warm_caches [--env ENV ...] [--steps 20]
 
 The compiled parts of the closed loop are cached on disk after their first use: numba's (the
-robot model, the env step, the low level: about 40 s to compile on 2 cores, milliseconds to
+robot model, the env step, the low level: about a minute to compile on 2 cores, milliseconds to
 load) and JAX's (the DDP plan and MPC, ``controllers.optimizer.jax_setup``). This runs a few
 control steps of ``unified`` on each env (default: PlanarTray-v0 and KrangTray-v0, the planar and
 3-D problems) and prints the time each took. ``make install`` runs it.

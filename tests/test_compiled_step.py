@@ -178,19 +178,19 @@ def test_the_table_reads_and_writes_the_arrays_it_was_built_from() -> None:
     table = ArrayTable(arrays, ["v", "m", "c", "iv", "im", "empty"])
     assert table.holds(arrays) and not table.holds([a.copy() for a in arrays])
     rows = table.rows
-    np.testing.assert_array_equal(float_vector(rows, 0), arrays[0])
-    np.testing.assert_array_equal(float_matrix(rows, 1), arrays[1])
-    np.testing.assert_array_equal(float_cube(rows, 2), arrays[2])
-    np.testing.assert_array_equal(int_vector(rows, 3), arrays[3])
-    np.testing.assert_array_equal(int_matrix(rows, 4), arrays[4])
-    assert float_vector(rows, 5).shape == (0,)
-    view = float_matrix(rows, 1)
+    np.testing.assert_array_equal(float_vector(rows[0]), arrays[0])
+    np.testing.assert_array_equal(float_matrix(rows[1]), arrays[1])
+    np.testing.assert_array_equal(float_cube(rows[2]), arrays[2])
+    np.testing.assert_array_equal(int_vector(rows[3]), arrays[3])
+    np.testing.assert_array_equal(int_matrix(rows[4]), arrays[4])
+    assert float_vector(rows[5]).shape == (0,)
+    view = float_matrix(rows[1])
     view[2, 4] = 123.0  # a view: written through
     assert arrays[1][2, 4] == 123.0
     with pytest.raises(ValueError, match="another kind"):
-        float_matrix(rows, 0)
+        float_matrix(rows[0])
     with pytest.raises(ValueError, match="another kind"):
-        int_vector(rows, 0)
+        int_vector(rows[0])
 
 
 @pytest.mark.parametrize(

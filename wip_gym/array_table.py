@@ -6,8 +6,8 @@ made from compiled code (docs/performance.md §11). A control step's arrays are 
 once (MuJoCo's, the task stack's, the QP kernel's), so their addresses can be taken once too:
 :class:`ArrayTable` holds one int64 row per array, ``(address, kind, d0, d1, d2)``, and compiled
 code views row ``i`` with the reader of its kind (:func:`float_vector`, :func:`float_matrix`,
-:func:`float_cube`, :func:`int_vector`, :func:`int_matrix`), which raises when the row is of
-another kind. A call then unboxes one array instead of fifty.
+:func:`float_cube`, :func:`int_vector`, :func:`int_matrix`, given ``table[i]``), which raises
+when the row is of another kind. A call then unboxes one array instead of fifty.
 
 The table is valid while its arrays are the ones computed with: it keeps a reference to each
 (so none is freed), and whoever builds it must build it again when one is replaced by a new
@@ -81,46 +81,46 @@ class ArrayTable:
 
 
 @njit(cache=True)
-def _check(table: NDArray[np.int64], i: int, kind: int) -> None:
-    if table[i, 1] != kind:
+def _check(row: NDArray[np.int64], kind: int) -> None:
+    if row[1] != kind:
         raise ValueError("array table: an entry read as another kind than it holds")
 
 
-# The readers below are for compiled code, where the table's owner keeps the memory alive for
-# the call. Called from Python (tests), the view they return does not keep it alive.
+# The readers take a row (``table[i]``), not ``(table, i)``: numba compiles a function called from
+# compiled code once per literal argument, and every entry's index is one (94 compilations of
+# the check, half a minute on the first run, before this).
 
 
 @njit(cache=True)
-def float_vector(table: NDArray[np.int64], i: int) -> NDArray[np.float64]:
-    """Row ``i`` of ``table`` as the float64 vector it holds (a view)."""
-    _check(table, i, FLOAT_VECTOR)
-    return carray(mjc.float64_pointer(np.uint64(table[i, 0])), (table[i, 2],))
+def float_vector(row: NDArray[np.int64]) -> NDArray[np.float64]:
+    """The float64 vector a table's ``row`` holds (a view)."""
+    _check(row, FLOAT_VECTOR)
+    return carray(mjc.float64_pointer(np.uint64(row[0])), (row[2],))
 
 
 @njit(cache=True)
-def float_matrix(table: NDArray[np.int64], i: int) -> NDArray[np.float64]:
-    """Row ``i`` of ``table`` as the float64 matrix it holds (a view)."""
-    _check(table, i, FLOAT_MATRIX)
-    return carray(mjc.float64_pointer(np.uint64(table[i, 0])), (table[i, 2], table[i, 3]))
+def float_matrix(row: NDArray[np.int64]) -> NDArray[np.float64]:
+    """The float64 matrix a table's ``row`` holds (a view)."""
+    _check(row, FLOAT_MATRIX)
+    return carray(mjc.float64_pointer(np.uint64(row[0])), (row[2], row[3]))
 
 
 @njit(cache=True)
-def float_cube(table: NDArray[np.int64], i: int) -> NDArray[np.float64]:
-    """Row ``i`` of ``table`` as the float64 array of three dimensions it holds (a view)."""
-    _check(table, i, FLOAT_CUBE)
-    shape = (table[i, 2], table[i, 3], table[i, 4])
-    return carray(mjc.float64_pointer(np.uint64(table[i, 0])), shape)
+def float_cube(row: NDArray[np.int64]) -> NDArray[np.float64]:
+    """The float64 array of three dimensions a table's ``row`` holds (a view)."""
+    _check(row, FLOAT_CUBE)
+    return carray(mjc.float64_pointer(np.uint64(row[0])), (row[2], row[3], row[4]))
 
 
 @njit(cache=True)
-def int_vector(table: NDArray[np.int64], i: int) -> NDArray[np.int64]:
-    """Row ``i`` of ``table`` as the int64 vector it holds (a view)."""
-    _check(table, i, INT_VECTOR)
-    return carray(mjc.int64_pointer(np.uint64(table[i, 0])), (table[i, 2],))
+def int_vector(row: NDArray[np.int64]) -> NDArray[np.int64]:
+    """The int64 vector a table's ``row`` holds (a view)."""
+    _check(row, INT_VECTOR)
+    return carray(mjc.int64_pointer(np.uint64(row[0])), (row[2],))
 
 
 @njit(cache=True)
-def int_matrix(table: NDArray[np.int64], i: int) -> NDArray[np.int64]:
-    """Row ``i`` of ``table`` as the int64 matrix it holds (a view)."""
-    _check(table, i, INT_MATRIX)
-    return carray(mjc.int64_pointer(np.uint64(table[i, 0])), (table[i, 2], table[i, 3]))
+def int_matrix(row: NDArray[np.int64]) -> NDArray[np.int64]:
+    """The int64 matrix a table's ``row`` holds (a view)."""
+    _check(row, INT_MATRIX)
+    return carray(mjc.int64_pointer(np.uint64(row[0])), (row[2], row[3]))
