@@ -73,12 +73,6 @@ class ArrayTable:
             "at the original arrays: build a new table from the copied arrays instead"
         )
 
-    def holds(self, arrays: Sequence[NDArray[np.generic]]) -> bool:
-        """Whether the table was built from these very array objects (not copies)."""
-        return len(arrays) == len(self.arrays) and all(
-            a is b for a, b in zip(arrays, self.arrays, strict=True)
-        )
-
 
 @njit(cache=True)
 def _check(row: NDArray[np.int64], kind: int) -> None:

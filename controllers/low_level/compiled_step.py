@@ -28,7 +28,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from controllers.low_level.kernel import LowLevelKernel, kernel_step, solution_terms_into
-from controllers.low_level.task_stack import CompiledTaskStack, stack_rows
+from controllers.low_level.task_stack import CompiledTaskStack, robot_scalars_into, stack_rows
 from wip_gym.array_table import (
     ArrayTable,
     float_cube,
@@ -240,22 +240,18 @@ def step_table(
 
 @njit(cache=True)
 def rows_and_kernel(table: NDArray[np.int64]) -> bool:
-    """The robot's scalars into the stack's (what ``CompiledTaskStack.prepare`` does in
-    Python), :func:`stack_rows`, :func:`kernel_step` (with eq. ``iso3`` from the robot's ``A``,
-    ``h``) and, when the unconstrained minimiser ``x`` meets every constraint,
-    :func:`solution_terms_into`, on the arrays of ``table`` (:func:`step_table`). Returns the
-    kernel's answer: whether ``x`` meets every constraint."""
+    """The robot's scalars into the stack's (:func:`robot_scalars_into`), :func:`stack_rows`,
+    :func:`kernel_step` (with eq. ``iso3`` from the robot's ``A``, ``h``) and, when the
+    unconstrained minimiser ``x`` meets every constraint, :func:`solution_terms_into`, on the
+    arrays of ``table`` (:func:`step_table`). Returns the kernel's answer: whether ``x`` meets
+    every constraint."""
     ints, floats = int_vector(table[_INTS]), float_vector(table[_FLOATS])
     J = float_matrix(table[_J])
     target = float_vector(table[_TARGET])
     jdot_nu = float_vector(table[_JDOT_NU])
     q, nu = float_vector(table[_Q]), float_vector(table[_NU])
-    # theta, thetad, cos psi, sin psi, psid (0 planar) as task_rows reads them
-    robot_scalars, scalars = float_vector(table[_ROBOT_SCALARS]), float_vector(table[_SCALARS])
-    index_psi = int(scalars[5])
-    scalars[0], scalars[1] = robot_scalars[5], robot_scalars[6]
-    scalars[2], scalars[3] = robot_scalars[2], robot_scalars[3]
-    scalars[4] = 0.0 if index_psi < 0 else nu[index_psi]
+    scalars = float_vector(table[_SCALARS])
+    robot_scalars_into(float_vector(table[_ROBOT_SCALARS]), nu, scalars)
     stack_rows(
         ints[0],
         ints[1],

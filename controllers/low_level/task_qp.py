@@ -346,19 +346,11 @@ class TaskQP:
         ``robot``). ``proxqp_calls`` counts the steps ProxQP solved."""
         H, g, C, lower, upper = self.assemble(robot, iso, tasks)
         if self._qp is not None and self.settings.unconstrained_first and self._feasible:
+            k = self.kernel
             if self._terms_ready:  # the one-call step computed what x implies
-                k = self.kernel
-                actuators = k.actuators.copy()
-                self._last_actuators = actuators
-                return QPSolution(
-                    qdd=k.x.copy(),
-                    nu_dot=k.nu_dot.copy(),
-                    generalized=k.generalized.copy(),
-                    actuators=actuators,
-                    solved=True,
-                    iterations=0,
-                )
-            return self._solution(self.kernel.x.copy(), iterations=0)
+                terms = (k.generalized.copy(), k.actuators.copy(), k.nu_dot.copy())
+                return self._solution(k.x.copy(), iterations=0, terms=terms)
+            return self._solution(k.x.copy(), iterations=0)
         self.proxqp_calls += 1
         if self._qp is None:
             self._qp = start_proxqp(H, g, C, lower, upper, self.settings)
@@ -384,9 +376,15 @@ class TaskQP:
             iterations=iterations,
         )
 
-    def _solution(self, qdd: Array, iterations: int) -> QPSolution:
-        k = self.kernel
-        generalized, actuators, nu_dot = solution_terms(k.calA, k.Ph, self.M_act, k.E, k.e, qdd)
+    def _solution(
+        self, qdd: Array, iterations: int, terms: tuple[Array, Array, Array] | None = None
+    ) -> QPSolution:
+        """The solved QP's answer for ``qdd``, with its ``(generalized, actuators, nu_dot)``
+        (``kernel.solution_terms``, computed here unless given)."""
+        if terms is None:
+            k = self.kernel
+            terms = solution_terms(k.calA, k.Ph, self.M_act, k.E, k.e, qdd)
+        generalized, actuators, nu_dot = terms
         self._last_actuators = actuators
         return QPSolution(
             qdd=qdd,

@@ -99,6 +99,18 @@ def snapshot(
 
 
 @njit(cache=True)
+def robot_scalars_into(robot_scalars: np.ndarray, nu: np.ndarray, scalars: np.ndarray) -> None:
+    """The robot's ``theta, thetad, cos psi, sin psi, psid`` into ``scalars[:5]`` (as
+    :func:`controllers.low_level.compiled_tasks.task_rows` reads them) from the update's
+    ``robot_scalars`` (``wip_gym.minimal_kernels.UPDATE_SCALARS``) and ``nu``; ``psid`` 0 when
+    ``scalars[5]``, the index of ``psi``, is -1 (planar)."""
+    index_psi = int(scalars[5])
+    scalars[0], scalars[1] = robot_scalars[5], robot_scalars[6]
+    scalars[2], scalars[3] = robot_scalars[2], robot_scalars[3]
+    scalars[4] = 0.0 if index_psi < 0 else nu[index_psi]
+
+
+@njit(cache=True)
 def stack_rows(
     model: int,
     data: int,
@@ -368,7 +380,6 @@ class CompiledTaskStack:
         n_sites, nv = len(sites), m.nv
         self.scalars = np.zeros(6)
         self.scalars[5] = -1 if lay.index_psi is None else lay.index_psi
-        self._planar = lay.planar
         self.site_jac = np.zeros((n_sites, 6, nv))
         self.probe_jac = np.zeros((n_sites + 1, 6, nv))
         self.probe_jac_dot = np.zeros((n_sites + 1, 6, nv))
@@ -462,15 +473,9 @@ class CompiledTaskStack:
 
     def prepare(self, robot: RobotModel, w: Array) -> None:
         """What :meth:`fill` does before its compiled call: :meth:`prepare_parameters`, then
-        the robot's scalars (``theta, thetad, cos psi, sin psi, psid``)."""
+        the robot's scalars (:func:`robot_scalars_into`)."""
         self.prepare_parameters(robot, w)
-        scalars = self.scalars
-        heading = robot.heading_rotation
-        scalars[0] = robot.theta
-        scalars[1] = robot.thetad
-        scalars[2] = heading[0, 0]
-        scalars[3] = heading[1, 0]
-        scalars[4] = 0.0 if self._planar else robot.nu[int(scalars[5])]
+        robot_scalars_into(robot.update_buffers()["robot_scalars"], robot.nu, self.scalars)
 
     def memoise_observers(self, robot: RobotModel, target: Array) -> None:
         """What :meth:`fill` does after its compiled call: an observer advances once per state,
