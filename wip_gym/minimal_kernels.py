@@ -301,13 +301,20 @@ def inertia_about_point(
     return out
 
 
-#: the address table of :func:`wipm_values` (``RobotModel`` makes it once per MjModel/MjData):
-#: the addresses of MuJoCo's ``ximat``, ``xipos``, ``xpos``, ``body_inertia``, ``body_iquat``,
-#: ``body_mass``, ``dof_damping`` and ``opt.gravity``, then ``nbody``, ``nv``, the base body, the
-#: left wheel body, its dof, and from ``W_BODIES`` on the ids of the body's bodies (the robot's
-#: bodies but the wheels)
-W_XIMAT, W_XIPOS, W_XPOS, W_INERTIA, W_IQUAT, W_MASS, W_DAMPING, W_GRAVITY = range(8)
-W_NBODY, W_NV, W_BASE, W_WHEEL, W_WHEEL_DOF, W_BODIES = range(8, 14)
+WIPM_ENTRIES = (
+    "ints",  # the base body, the left wheel body, its dof
+    "ximat",
+    "xipos",
+    "xpos",
+    "body_inertia",
+    "body_iquat",
+    "body_mass",
+    "dof_damping",
+    "gravity",
+    "body_ids",  # the body's bodies: the robot's but the wheels
+)
+"""The rows of :func:`wipm_values`' table (``wip_gym.array_table``; ``RobotModel`` makes it
+once per MjModel/MjData): MuJoCo's arrays and the ids it reads."""
 
 
 @njit(cache=True)
@@ -322,9 +329,10 @@ def wipm_values(
 ) -> tuple[tuple[float, ...], np.ndarray]:
     """``lambda(q)`` as the WIPM takes it (paper section "Simplified Model";
     ``controllers.simplified.wipm.params_from_lambda`` of ``RobotModel.wipm_parameters``) in one
-    compiled call, from MuJoCo's arrays at ``table`` (``W_*``; read at this call: a mass or
-    inertia changed in the model since the last update is seen, as by ``wipm_parameters``) and
-    the body's ``com`` (axle frame), ``body_mass`` and ``theta`` of the last update.
+    compiled call, from MuJoCo's arrays in ``table`` (:data:`WIPM_ENTRIES`; read at this call: a
+    mass or inertia changed in the model since the last update is seen, as by
+    ``wipm_parameters``) and the body's ``com`` (axle frame), ``body_mass`` and ``theta`` of the
+    last update.
 
     Returns ``(values, inertia_body)``: ``values`` = ``(M, L, com_y, m_w, I_a, I_t, d, R, sep,
     g)`` (``wip_gym.robot_model.WIPM_SCALARS``; a tuple of floats: boxing it costs less than
@@ -334,21 +342,13 @@ def wipm_values(
     and ``g = -gravity_z``; ``inertia_body`` = ``I_B = Ry(theta)^T I_axle Ry(theta)``,
     symmetrised, with ``I_axle`` the body's inertia about the axle midpoint in the axle frame
     (:func:`inertia_about_point`)."""
-    nbody, nv = table[W_NBODY], table[W_NV]
-
-    def view(i: int, shape: tuple[int, ...]) -> np.ndarray:
-        return mjc.float64_view(table[i], shape)
-
-    ximat, xipos, xpos = (
-        view(W_XIMAT, (nbody, 9)),
-        view(W_XIPOS, (nbody, 3)),
-        view(W_XPOS, (nbody, 3)),
-    )
-    inertia, iquat = view(W_INERTIA, (nbody, 3)), view(W_IQUAT, (nbody, 4))
-    mass, damping, gravity = view(W_MASS, (nbody,)), view(W_DAMPING, (nv,)), view(W_GRAVITY, (3,))
-    axle = inertia_about_point(
-        ximat, xipos, inertia, mass, table[W_BODIES:], xpos[table[W_BASE]], heading
-    )
+    ints = int_vector(table[0])
+    base, wheel, wheel_dof = ints[0], ints[1], ints[2]
+    ximat, xipos, xpos = float_matrix(table[1]), float_matrix(table[2]), float_matrix(table[3])
+    inertia, iquat = float_matrix(table[4]), float_matrix(table[5])
+    mass, damping, gravity = float_vector(table[6]), float_vector(table[7]), float_vector(table[8])
+    bodies = int_vector(table[9])
+    axle = inertia_about_point(ximat, xipos, inertia, mass, bodies, xpos[base], heading)
     # Ry(theta)^T I_axle Ry(theta) (small_matmul: every product, zeros too)
     c, s = math.cos(theta), math.sin(theta)
     rot = np.zeros((3, 3))
@@ -359,7 +359,6 @@ def wipm_values(
         for b in range(3):
             inertia_body[a, b] = 0.5 * (rotated[a, b] + rotated[b, a])
     # one wheel: its principal inertia turned into its body frame (hinge about y)
-    wheel = table[W_WHEEL]
     frame = np.empty(9)  # row-major 3x3
     mjc.mju_quat2Mat(frame.ctypes.data, iquat[wheel].ctypes.data)
     axial, transverse = 0.0, 0.0
@@ -373,7 +372,7 @@ def wipm_values(
         mass[wheel],
         axial,
         transverse,
-        damping[table[W_WHEEL_DOF]],
+        damping[wheel_dof],
         wheel_radius,
         wheel_separation,
         -gravity[2],

@@ -34,7 +34,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from wip_gym import minimal_kernels as kernels
-from wip_gym import mujoco_c
 from wip_gym.array_table import ArrayTable
 from wip_gym.minimal_kernels import (
     idealised_state,
@@ -329,7 +328,7 @@ class RobotModel:
         self._h_buffer = np.zeros(n)
         self._B_buffer = np.zeros((n, model.nu))
         self._forget_copies()
-        self._bind_update_table()
+        self._bind_tables()
         self._updated = False
         self._has_dynamics = False
         # per-state memo for quantities computed by users of this model (task Jacobians, ...);
@@ -349,39 +348,36 @@ class RobotModel:
         return self._data
 
     def _bind_views(self) -> None:
-        """Views on MuJoCo's buffers (an attribute read makes a new view: ~1 us each) and the
-        address table of :meth:`wipm_values`, made again after a copy or an unpickling (whose
-        views would point at the old arrays, its addresses at the old model). Masses are read at
-        every update (an env may change them: payload, randomisation)."""
-        d, model, lay = self.data, self.model, self.layout
+        """Views on MuJoCo's buffers (an attribute read makes a new view: ~1 us each), made
+        again after a copy or an unpickling (whose views would point at the old arrays). Masses
+        are read at every update (an env may change them: payload, randomisation)."""
+        d, model = self.data, self.model
         self._mj_qpos, self._mj_qvel = d.qpos, d.qvel
         self._mj_xpos, self._mj_xipos, self._mj_xmat = d.xpos, d.xipos, d.xmat
         self._mj_body_mass, self._mj_subtree_mass = model.body_mass, model.body_subtreemass
         self._mj_qfrc_passive = d.qfrc_passive
-        arrays = (
-            d.ximat,
-            d.xipos,
-            d.xpos,
-            model.body_inertia,
-            model.body_iquat,
-            model.body_mass,
-            model.dof_damping,
-            model.opt.gravity,
-        )
-        table = np.zeros(kernels.W_BODIES + len(lay.body_bodies), dtype=np.int64)
-        table[: len(arrays)] = mujoco_c.float64_addresses(arrays)
-        table[kernels.W_NBODY], table[kernels.W_NV] = model.nbody, model.nv
-        table[kernels.W_BASE], table[kernels.W_WHEEL] = lay.base_body, lay.wheel_bodies[0]
-        table[kernels.W_WHEEL_DOF] = lay.wheel_dof[0]
-        table[kernels.W_BODIES :] = lay.body_bodies
-        # addresses into MuJoCo's buffers, valid while self.model and self.data live
-        self._wipm_table = table
 
-    def _bind_update_table(self) -> None:
-        """The table of the compiled update (``minimal_kernels.robot_update_at``): its
-        buffers and MuJoCo's, made once, so that an update unboxes one array. Made again with
-        the views after a copy or an unpickling."""
-        m, d = self.model, self.data
+    def _bind_tables(self) -> None:
+        """The tables of addresses (``wip_gym.array_table``) of the compiled update
+        (``minimal_kernels.robot_update_at``) and of :meth:`wipm_values`: their buffers and
+        MuJoCo's, made once, so that a call unboxes one array. Made again with the views after
+        a copy or an unpickling (their addresses would be the old model's)."""
+        m, d, lay = self.model, self.data, self.layout
+        wipm = {
+            "ints": np.array([lay.base_body, lay.wheel_bodies[0], lay.wheel_dof[0]], np.int64),
+            "ximat": d.ximat,
+            "xipos": self._mj_xipos,
+            "xpos": self._mj_xpos,
+            "body_inertia": m.body_inertia,
+            "body_iquat": m.body_iquat,
+            "body_mass": self._mj_body_mass,
+            "dof_damping": m.dof_damping,
+            "gravity": m.opt.gravity,
+            "body_ids": self._body_ids,
+        }
+        self._wipm_table = ArrayTable(
+            [wipm[name] for name in kernels.WIPM_ENTRIES], kernels.WIPM_ENTRIES
+        )
         arrays = {
             "ints": np.array([m._address, d._address], dtype=np.int64),
             "floats": np.array([self.layout.wheel_radius]),
@@ -426,12 +422,13 @@ class RobotModel:
     def __getstate__(self) -> dict[str, object]:
         state = self.__dict__.copy()
         state.pop("_update_table", None)  # addresses: made again by __setstate__
+        state.pop("_wipm_table", None)
         return state
 
     def __setstate__(self, state: dict[str, object]) -> None:
         self.__dict__.update(state)
         self._bind_views()
-        self._bind_update_table()
+        self._bind_tables()
         # NumPy's pickling and deepcopy do not keep the read-only flag (and a writable array is
         # another signature for numba: the two-call task rows and wipm_values would compile
         # again)
@@ -706,7 +703,7 @@ class RobotModel:
         self._require()
         lay = self.layout
         return kernels.wipm_values(
-            self._wipm_table,
+            self._wipm_table.rows,
             self.heading_rotation,
             self._com_buffer,
             self._body_mass,
