@@ -83,40 +83,30 @@ mj_jacSite = _declare("mj_jacSite", _ptr, _ptr, _ptr, _ptr, _int)  # (m, d, jacp
 mj_jacSubtreeCom = _declare("mj_jacSubtreeCom", _ptr, _ptr, _ptr, _int)  # (m, d, jacp, body)
 
 
-@intrinsic
-def _float64_pointer(typingctx: Any, address: Any) -> Any:
-    """``(double *) address`` in compiled code, for ``numba.carray`` (:func:`float64_view`):
-    a view of a MuJoCo buffer whose address (``array.ctypes.data``) was taken once, so that a
-    compiled call gets one table of addresses instead of one argument per array (numba unboxes
-    every array argument on each call, about 0.1 us apiece)."""
-    if not isinstance(address, types.Integer):
-        return None
-    signature = types.CPointer(types.float64)(address)
+def _pointer_intrinsic(element: types.Type) -> Any:
+    """An intrinsic ``(element *) address`` for compiled code, for ``numba.carray``: a view of a
+    buffer whose address (``array.ctypes.data``) was taken once, so that a compiled call gets
+    one table of addresses instead of one argument per array (numba unboxes every array
+    argument on each call)."""
 
-    def codegen(context: Any, builder: Any, sig: Any, args: Any) -> Any:
-        return builder.inttoptr(args[0], context.get_value_type(sig.return_type))
+    def pointer(typingctx: Any, address: Any) -> Any:
+        if not isinstance(address, types.Integer):
+            return None
+        signature = types.CPointer(element)(address)
 
-    return signature, codegen
+        def codegen(context: Any, builder: Any, sig: Any, args: Any) -> Any:
+            return builder.inttoptr(args[0], context.get_value_type(sig.return_type))
 
+        return signature, codegen
 
-float64_pointer: Any = _float64_pointer  # typed Any: called from compiled code with one address
-
-
-@intrinsic
-def _int64_pointer(typingctx: Any, address: Any) -> Any:
-    """``(int64_t *) address`` in compiled code: :data:`float64_pointer` for int64 arrays
-    (``wip_gym.array_table``)."""
-    if not isinstance(address, types.Integer):
-        return None
-    signature = types.CPointer(types.int64)(address)
-
-    def codegen(context: Any, builder: Any, sig: Any, args: Any) -> Any:
-        return builder.inttoptr(args[0], context.get_value_type(sig.return_type))
-
-    return signature, codegen
+    pointer.__name__ = f"{element}_pointer"
+    return intrinsic(pointer)
 
 
-int64_pointer: Any = _int64_pointer
+float64_pointer: Any = _pointer_intrinsic(types.float64)
+"""``(double *) address`` in compiled code (:func:`float64_view`, ``wip_gym.array_table``)."""
+int64_pointer: Any = _pointer_intrinsic(types.int64)
+"""``(int64_t *) address`` in compiled code (``wip_gym.array_table``)."""
 
 
 @njit(cache=True)
