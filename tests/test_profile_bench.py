@@ -24,8 +24,8 @@ from benchmarks.speed.closed_loop_table import figure as closed_loop_figure
 from benchmarks.speed.closed_loop_table import main as closed_loop_main
 from benchmarks.speed.closed_loop_table import table as closed_loop_table
 from benchmarks.speed.env_own_work import own_work_us
-from benchmarks.speed.profile import ROWS, profile_episode
-from benchmarks.speed.yardstick import REFERENCE_ENV, reference_step_us
+from benchmarks.speed.profile import ROWS, floor_times, profile_episode, replay_step
+from benchmarks.speed.yardstick import REFERENCE_ENV, ReferenceStep, reference_step_us
 
 TOP_KEYS = {
     "env",
@@ -133,7 +133,8 @@ def test_a_known_delay_lands_in_its_own_part(monkeypatch: pytest.MonkeyPatch) ->
         assert median[part] >= DELAY_S, part
     assert median["loop"] >= 2 * DELAY_S
     # not attributed to the parts timed beside the delayed ones
-    for part in ("qp_assembly", "qp_solve", "python_overhead", "mujoco_step"):
+    parts = ("qp_assembly", "qp_solve", "python_overhead", "mujoco_step", "env_physics")
+    for part in parts:
         assert median[part] - before[part] < 0.5 * DELAY_S, part
 
 
@@ -151,6 +152,53 @@ def _own_reference_us(repeats: int = 400) -> float:
         times.append(time.perf_counter() - start)
     env.close()
     return float(np.median(times[50:]) * 1e6)
+
+
+def test_the_floor_replays_the_episodes_steps() -> None:
+    """``floor_times``' steps are the env's: restoring a state recorded before ``env.step``
+    and stepping it with the same action bare gives the env's next state to the bit (a
+    controlled episode, cup contacts included), and bad rows are refused."""
+    env = gym.make("wip_gym/KrangTray-v0")
+    observation, info = env.reset(seed=0)
+    base = env.unwrapped
+    model, data = base.model, base.data
+    policy = profile_module.make_policy("decoupled", env)
+    policy.reset(observation, info)
+    scratch = mujoco.MjData(model)
+    size = mujoco.mj_stateSize(model, profile_module.STATE)
+    states, actions = np.zeros((30, size)), np.zeros((30, model.nu))
+    for n in range(30):
+        action = policy(observation)
+        mujoco.mj_getState(model, data, states[n], profile_module.STATE)
+        actions[n] = action
+        observation, *_ = env.step(action)
+        seconds = replay_step(model, scratch, states[n], action, base.frame_skip)
+        assert seconds > 0
+        np.testing.assert_array_equal(scratch.qpos, data.qpos)
+        np.testing.assert_array_equal(scratch.qvel, data.qvel)
+    assert data.ncon > 0  # the cup stands on the tray: contacts were stepped
+    times = floor_times(model, states, actions, base.frame_skip)
+    assert times.shape == (30,) and np.all(times > 0)
+    with pytest.raises(ValueError, match="integration state"):
+        floor_times(model, states[:, :-1], actions, base.frame_skip)
+    with pytest.raises(ValueError, match="actions must be"):
+        floor_times(model, states, actions[:-1], base.frame_skip)
+    env.close()
+
+
+def test_a_burst_of_the_unit_is_warm_samples() -> None:
+    """``ReferenceStep.burst``: ``count`` timed samples, each a bare Krang-v0 step from its
+    reset state (the data after a sample is that state stepped once), bad counts refused."""
+    reference = ReferenceStep()
+    samples = reference.burst(5)
+    assert len(samples) == 5 and all(0 < s < 1 for s in samples)
+    stepped = mujoco.MjData(reference.model)
+    mujoco.mj_copyData(stepped, reference.model, reference.reset_data)
+    mujoco.mj_step(reference.model, stepped)
+    np.testing.assert_array_equal(reference.data.qpos, stepped.qpos)
+    np.testing.assert_array_equal(reference.data.qvel, stepped.qvel)
+    with pytest.raises(ValueError, match=">= 1"):
+        reference.burst(0)
 
 
 def test_the_unit_is_a_bare_krang_step() -> None:
@@ -209,10 +257,12 @@ def test_env_own_work_is_the_step_beyond_its_physics() -> None:
 
 
 def test_closed_loop_comparison_shows_each_columns_rounds_before_and_after() -> None:
-    def profile(control: float, unit: float) -> dict[str, Any]:
+    def profile(control: float, unit: float, physics: bool = True) -> dict[str, Any]:
         part = {"mean": 1.0, "median": 1.0}
         parts = dict.fromkeys(("robot_model", "qp_assembly", "qp_solve", "high_level"), part)
-        parts |= dict.fromkeys(("env_step", "env_overhead", "loop"), part)
+        parts |= dict.fromkeys(("env_step", "env_overhead", "loop", "mujoco_step"), part)
+        if physics:  # False: a --base revision's profile from before env_physics existed
+            parts["env_physics"] = part
         return {
             "control_time_units": {"mean": control, "p99": 3 * control},
             "per_step_units": parts,
@@ -227,6 +277,12 @@ def test_closed_loop_comparison_shows_each_columns_rounds_before_and_after() -> 
     assert lines[2] == "| control, mean | 19.0 [18.0, 20.0] | 15.0 | 5 |"
     assert lines[3] == "| control, p99 | 57.0 [54.0, 60.0] | 45.0 | 12 |"
     assert "| of which the task rows and QP (mean) | 2.0 [2.0, 2.0] | 2.0 |  |" in lines
+    assert "| of which its physics (mean) | 1.0 [1.0, 1.0] | 1.0 |  |" in lines
+    lacking = {"KrangTray": [profile(20.0, 15.0, physics=False)]}  # no env_physics: "-"
+    assert (
+        "| of which its physics (mean) | - | 1.0 |  |"
+        in closed_loop_comparison(lacking, after).splitlines()
+    )
     assert lines[-1] == "unit (bare mj_step of Krang-v0): 14.0 to 16.0 us"
 
 

@@ -54,6 +54,8 @@ ROWS: tuple[tuple[str, tuple[str, ...], float | None], ...] = (
     ("of which the task rows and QP (mean)", ("per_step_units", "qp_assembly", "mean"), None),
     ("of which the high level (mean)", ("per_step_units", "high_level", "mean"), None),
     ("env step, mean (physics included)", ("per_step_units", "env_step", "mean"), 2.5),
+    ("of which its physics (mean)", ("per_step_units", "env_physics", "mean"), None),
+    ("the same steps' bare mj_step, warm (mean)", ("per_step_units", "mujoco_step", "mean"), None),
     ("env's own work, median", ("per_step_units", "env_overhead", "median"), 1.0),
     ("closed loop, mean", ("per_step_units", "loop", "mean"), 8.0),
     ("real-time factor", ("real_time_factor",), None),
@@ -71,6 +73,8 @@ def figure(result: dict[str, Any], path: Sequence[str]) -> float:
         return float(sum(part["mean"] for part in parts))
     value: Any = result
     for key in path:
+        if key not in value:  # a profile older than the figure (a --base revision's)
+            raise ValueError(f"the profile has no figure at {'.'.join(path)}")
         value = value[key]
     if value is None:
         raise ValueError(f"the profile has no figure at {'.'.join(path)}")
@@ -133,8 +137,21 @@ def _profile(
     return dict(json.loads(path.read_text()))
 
 
+def _figures(runs: Sequence[dict[str, Any]], path: Sequence[str]) -> list[float]:
+    """The figure at ``path`` of each run, none if the runs lack it (a ``--base`` revision's
+    profile from before the figure existed)."""
+    try:
+        return [figure(r, path) for r in runs]
+    except ValueError:
+        if path[0] == "per_step_units" and path[1] in ("qp_assembly", "qp_solve"):
+            raise  # a profile without a task QP: not a revision's difference
+        return []
+
+
 def spread(values: Sequence[float]) -> str:
-    """``median [min, max]`` (one value: itself)."""
+    """``median [min, max]`` (one value: itself; none: ``-``)."""
+    if not values:
+        return "-"
     if len(values) == 1:
         return f"{values[0]:.1f}"
     return f"{statistics.median(values):.1f} [{min(values):.1f}, {max(values):.1f}]"
@@ -149,9 +166,7 @@ def comparison(
     header = " | ".join(f"{t} before | {t} after" for t in titles)
     lines = [f"| per 1 ms step, units | {header} | target |", "|---" * (2 * len(titles) + 2) + "|"]
     for title, path, target in ROWS:
-        cells = [
-            spread([figure(r, path) for r in runs[t]]) for t in titles for runs in (before, after)
-        ]
+        cells = [spread(_figures(runs[t], path)) for t in titles for runs in (before, after)]
         lines.append(
             f"| {title} | " + " | ".join(cells) + f" | {'' if target is None else f'{target:g}'} |"
         )

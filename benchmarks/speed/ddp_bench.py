@@ -203,20 +203,23 @@ class _PeerMPC:
 
 
 REFERENCE_SAMPLES: list[float] = []  # the unit's samples taken between the timed MPC steps
+REFERENCE_EVERY = 50  # MPC steps between two bursts of the unit's reference step
 
 
 def _mpc_times(
     step: Callable[[int], Any], warmup: Callable[[], Any], steps: int, label: str
 ) -> tuple[float, list[float]]:
     """``mpc_compile_s`` (a throwaway first step minus the median) and the step times (s).
-    After every step one reference step (``benchmarks.speed.yardstick``) is timed too, into
-    ``REFERENCE_SAMPLES``, so that the unit sees the same machine load as the steps."""
+    Every ``REFERENCE_EVERY`` steps a burst of reference steps (``ReferenceStep.burst``: warm,
+    as the unit is defined) is timed too, into ``REFERENCE_SAMPLES``, so that the unit sees
+    the same machine load as the steps."""
     first, _ = _timed(warmup)
     reference = ReferenceStep()
     times = []
     for i in tqdm(range(steps), desc=label, leave=False, disable=None):
         times.append(_timed(lambda i=i: step(i))[0])
-        REFERENCE_SAMPLES.append(reference.sample())
+        if (i + 1) % REFERENCE_EVERY == 0 or i + 1 == steps:
+            REFERENCE_SAMPLES.extend(reference.burst())
     return max(first - statistics.median(times), 0.0), times
 
 

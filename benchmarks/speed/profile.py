@@ -18,16 +18,29 @@ wrapped on the instance for this run only (the controller's code is not changed;
 costs well under a microsecond): ``robot.update`` (the robot model), ``qp.assemble`` and
 ``qp.solve`` (the task QP; ``qp_solve`` is ``solve`` minus ``assemble``) and
 ``high_level.reference`` (the MPC and the reference it hands the low level, amortised: it runs
-every 10 ms). A part the controller lacks is ``null``. The floor, ``mujoco_step``, is a bare
-``mujoco.mj_step(model, data, nstep=frame_skip)`` (one control period) on a scratch copy of the
-env's data taken just before every ``env.step``, with the same control: the same states, in the
-same run, outside the timed loop.
+every 10 ms), and the env's ``do_simulation`` (``env_physics``: its ``mj_step`` in the loop). A
+part the controller lacks is ``null``. The floor, ``mujoco_step``, is a bare
+``mujoco.mj_step(model, data, nstep=frame_skip)`` (one control period) from every state the
+episode stepped, with the control the policy gave there: the state (``mj_getState``, the
+integration state) is recorded before every ``env.step`` and the floor is timed after the
+episode, replaying them one by one on scratch data (the same states and model, in the same run;
+the model as the episode left it, and the push of ``env.step`` not applied: neither moves the
+time of a step). Replayed back to back, these steps find the caches warm; the loop's own
+``mj_step`` (``env_physics``) does not, and costs about twice as much (docs/performance.md §12).
+
+Nothing runs between one step's ``env.step`` and the next ``policy(obs)`` but the profiler's
+bookkeeping: measuring the floor or the unit there would evict the caches the loop works in and
+slow the steps they precede. Measured on KrangTray-v0 with ``unified`` (8000 steps, blocks of
+250 steps with a floor and a reference step after every control step alternating with blocks
+without, docs/performance.md §12): the control step's median 0.82 times, its mean 0.87 times, what
+it is with them.
 
 The unit (``benchmarks.speed.yardstick``): ``reference_step_us``, the median of a bare, warm
 ``mj_step`` of Krang-v0's model at its reset state, timed in this process before and after the
-episode and once after every control step (outside the timed parts, so that its samples see
-the machine's load as the episode's do); ``per_step_units`` and ``control_time_units`` are
-the same figures divided by it, so that they compare across machines and loads.
+episode and in bursts of :data:`UNIT_BURST` steps every :data:`UNIT_EVERY` control steps (so
+that its samples see the machine's load as the episode's do; a burst perturbs the one control
+step after it); ``per_step_units`` and ``control_time_units`` are the same figures divided by
+it, so that they compare across machines and loads.
 
 JSON schema (``--json PATH``; times per control step in microseconds unless named otherwise)::
 
@@ -48,7 +61,8 @@ JSON schema (``--json PATH``; times per control step in microseconds unless name
         "control": ...,                   # the policy's __call__
         "low_level": ...,                 # control minus high_level
         "env_step": ...,                  # env.step
-        "env_overhead": ...,              # env_step minus mujoco_step
+        "env_physics": ...,               # the env's own mj_step calls in env.step
+        "env_overhead": ...,              # env_step minus env_physics: the env's own work
         "loop": ...                       # control + env_step
       },
       "per_step_units": {...},            # per_step_us / reference_step_us, same keys
@@ -65,8 +79,9 @@ JSON schema (``--json PATH``; times per control step in microseconds unless name
 
 The means of ``robot_model``, ``qp_assembly``, ``qp_solve``, ``high_level`` and
 ``python_overhead`` add up to the mean of ``control``; ``low_level`` + ``high_level`` is
-``control``; ``mujoco_step`` + ``env_overhead`` is ``env_step``; ``control`` + ``env_step`` is
-``loop`` (means).
+``control``; ``env_physics`` + ``env_overhead`` is ``env_step``; ``control`` + ``env_step`` is
+``loop`` (means). ``env_physics`` over ``mujoco_step`` is what the loop costs the physics: the
+same steps, in the loop and warm.
 """
 
 from __future__ import annotations
@@ -91,6 +106,12 @@ from benchmarks.speed.yardstick import ReferenceStep, reference_step_samples
 from controllers.registry import controller_names, make_policy
 
 PARTS = ("robot_model", "qp_assembly", "qp_solve", "high_level")
+UNIT_EVERY = 250
+"""Control steps between two bursts of the unit's reference step during an episode."""
+UNIT_BURST = 20
+"""Reference steps timed in one burst (after one untimed: ``ReferenceStep.burst``)."""
+STATE = mujoco.mjtState.mjSTATE_INTEGRATION
+"""What the floor's replay restores before each step: everything ``mj_step`` reads."""
 ROWS = (
     "mujoco_step",
     "robot_model",
@@ -101,6 +122,7 @@ ROWS = (
     "control",
     "low_level",
     "env_step",
+    "env_physics",
     "env_overhead",
     "loop",
 )
@@ -170,6 +192,44 @@ def _paths(iterations: np.ndarray | None) -> dict[str, int] | None:
     return {"shortcut": int(np.sum(iterations == 0)), "proxqp": int(np.sum(iterations > 0))}
 
 
+def replay_step(
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    state: np.ndarray,
+    action: np.ndarray,
+    frame_skip: int,
+) -> float:
+    """Restore ``state`` (a row of :data:`STATE`) into ``data``, set the control ``action`` and
+    time a bare ``mj_step(model, data, nstep=frame_skip)``; the wall time (s)."""
+    mujoco.mj_setState(model, data, state, STATE)
+    data.ctrl[:] = action
+    start = time.perf_counter()
+    mujoco.mj_step(model, data, nstep=frame_skip)
+    return time.perf_counter() - start
+
+
+def floor_times(
+    model: mujoco.MjModel, states: np.ndarray, actions: np.ndarray, frame_skip: int
+) -> np.ndarray:
+    """The floor of the steps an episode took: :func:`replay_step` from each row of
+    ``states`` (as ``mj_getState`` wrote them) with the same row of ``actions``, on scratch
+    data, in order; wall times (s)."""
+    size = mujoco.mj_stateSize(model, STATE)
+    if states.ndim != 2 or states.shape[1] != size:
+        raise ValueError(
+            f"states must be rows of {size} (the integration state), got {states.shape}"
+        )
+    if actions.shape != (len(states), model.nu):
+        raise ValueError(f"actions must be ({len(states)}, {model.nu}), got {actions.shape}")
+    scratch = mujoco.MjData(model)
+    return np.array(
+        [
+            replay_step(model, scratch, state, action, frame_skip)
+            for state, action in zip(states, actions, strict=True)
+        ]
+    )
+
+
 def make_env(env_id: str, env_kwargs: dict[str, Any]) -> gym.Env:
     """The profiled env: no time limit (the episode lasts ``--duration``)."""
     return gym.make(env_id, max_episode_steps=-1, **env_kwargs)
@@ -199,17 +259,20 @@ def profile_episode(
 
     base = env.unwrapped
     model, data = base.model, base.data
-    scratch = mujoco.MjData(model)
     frame_skip = int(base.frame_skip)
     dt = float(base.dt)
     steps = int(round(duration / dt))
     timers = _instrument(policy)
+    physics_timer = _Timer()
+    base.do_simulation = physics_timer.wrap(base.do_simulation)
+    physics = np.zeros(steps)
     parts = {name: np.zeros(steps) for name in (*PARTS, "qp_solve_total")}
     control = np.zeros(steps)
     env_step = np.zeros(steps)
-    floor = np.zeros(steps)
+    states = np.zeros((steps, mujoco.mj_stateSize(model, STATE)))
+    actions = np.zeros((steps, model.nu))
     reference_step = ReferenceStep()
-    interleaved = np.zeros(steps)
+    unit_samples: list[float] = []
     fell = False
     n = 0
     for n in range(steps):
@@ -218,26 +281,25 @@ def profile_episode(
         tock = time.perf_counter()
         for name, timer in timers.items():
             parts[name][n] = timer.take()
-        # the floor, on a copy of the state the env is about to step, outside the timed loop
-        mujoco.mj_copyData(scratch, model, data)
-        scratch.ctrl[:] = action
-        start = time.perf_counter()
-        mujoco.mj_step(model, scratch, nstep=frame_skip)
-        floor[n] = time.perf_counter() - start
+        mujoco.mj_getState(model, data, states[n], STATE)  # the floor's, timed after
+        actions[n] = action
         start = time.perf_counter()
         observation, _, terminated, truncated, info = env.step(action)
         env_step[n] = time.perf_counter() - start
+        physics[n] = physics_timer.take()
         control[n] = tock - tick
-        interleaved[n] = reference_step.sample()
+        if (n + 1) % UNIT_EVERY == 0:
+            unit_samples += reference_step.burst(UNIT_BURST)
         fell = fell or bool(info.get("fallen", False))
         if terminated or truncated:
             break
-    env.close()
     k = n + 1
+    floor = floor_times(model, states[:k], actions[:k], frame_skip)
+    env.close()
     reference = float(
-        np.median(np.concatenate([reference_before, interleaved[:k], reference_step_samples()]))
+        np.median(np.concatenate([reference_before, unit_samples, reference_step_samples()]))
     )
-    control, env_step, floor = control[:k], env_step[:k], floor[:k]
+    control, env_step, physics = control[:k], env_step[:k], physics[:k]
     parts = {name: values[:k] for name, values in parts.items()}
     present = {name: name in timers for name in ("robot_model", "qp_assembly", "high_level")}
     present["qp_solve"] = "qp_solve_total" in timers
@@ -251,7 +313,8 @@ def profile_episode(
         "control": _stats(control),
         "low_level": _stats(control - high_level),
         "env_step": _stats(env_step),
-        "env_overhead": _stats(env_step - floor),
+        "env_physics": _stats(physics),
+        "env_overhead": _stats(env_step - physics),
         "loop": _stats(control + env_step),
     }
     diagnostics = getattr(policy, "diagnostics", {})

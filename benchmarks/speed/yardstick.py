@@ -28,8 +28,8 @@ REFERENCE_SEED = 0
 
 
 class ReferenceStep:
-    """The reference workload, ready to be timed one step at a time: interleaved with a
-    benchmark's own steps, its samples see the same machine load as they do."""
+    """The reference workload, ready to be timed between a benchmark's own steps, so that its
+    samples see the same machine load as they do (in warm bursts: :meth:`burst`)."""
 
     def __init__(self) -> None:
         env = gym.make(REFERENCE_ENV)
@@ -48,6 +48,19 @@ class ReferenceStep:
         start = time.perf_counter()
         mujoco.mj_step(self.model, self.data)
         return time.perf_counter() - start
+
+    def burst(self, count: int = 20) -> list[float]:
+        """``count`` timed samples after one untimed: the step warm, as the unit defines it.
+
+        One sample taken right after a benchmark's own step is not: the benchmark's work has
+        evicted the caches the reference step works in, and such samples measured 1.5 times a
+        warm step on KrangTray-v0's closed loop (docs/performance.md §12). A benchmark that
+        follows the machine's load through an episode takes a burst every few hundred of its
+        steps instead (``wip-bench profile``: every 250 control steps)."""
+        if count < 1:
+            raise ValueError(f"count must be >= 1, got {count}")
+        self.sample()
+        return [self.sample() for _ in range(count)]
 
 
 def reference_step_samples(repeats: int = 400, warmup: int = 50) -> np.ndarray:
