@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -26,6 +27,7 @@ from benchmarks.speed.closed_loop_table import table as closed_loop_table
 from benchmarks.speed.env_own_work import own_work_us
 from benchmarks.speed.profile import ROWS, floor_times, profile_episode, replay_step
 from benchmarks.speed.yardstick import REFERENCE_ENV, ReferenceStep, reference_step_us
+from benchmarks.speed.yardstick_check import main as yardstick_check_main
 
 TOP_KEYS = {
     "env",
@@ -291,3 +293,16 @@ def test_closed_loop_table_refuses_an_unknown_base(capsys: pytest.CaptureFixture
         closed_loop_main(["--base", "no-such-revision-here", "--rounds", "1"])
     assert raised.value.code == 2
     assert "no-such-revision-here" in capsys.readouterr().err
+
+
+def test_yardstick_check_prints_its_ratios(capsys: pytest.CaptureFixture[str]) -> None:
+    """``benchmarks.speed.yardstick_check`` (docs/performance.md §12) runs its blocks and the
+    MPC and prints each comparison as a finite ratio; too few steps are refused."""
+    assert yardstick_check_main(["--steps", "500", "--mpc-steps", "50"]) == 0
+    printed = capsys.readouterr().out
+    ratio = re.search(r"plain over perturbed blocks: median ([0-9.]+), mean ([0-9.]+)", printed)
+    assert ratio is not None and all(0 < float(v) < 10 for v in ratio.groups())
+    assert "warm bursts" in printed and printed.count("MPC ") == 2
+    with pytest.raises(SystemExit) as refused:
+        yardstick_check_main(["--steps", "100"])
+    assert refused.value.code == 2
