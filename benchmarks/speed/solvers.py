@@ -24,7 +24,7 @@ JSON (``--json PATH``), beyond the details of each half (``ddp``, ``qp``):
 * ``optimum_checks``: the DDP cost agreement (plan and MPC step) and each QP solver's agreement;
 * ``reference_step_us``: the unit (``benchmarks.speed.yardstick``: a bare, warm ``mj_step`` of
   Krang-v0 at its reset state), the median of its timings before and after the DDP half and
-  after every timed MPC step (the same load as the steps);
+  of warm bursts every 50 timed MPC steps (the same load as the steps; docs/performance.md §12);
   ``mpc_step_units``: ``{planar|3d: {median, p99}}``, our MPC step in that unit;
 * ``targets``: the solver speed targets and the MPC's in units, each ``{figure, limit, met}``
   (:func:`targets`).
@@ -254,11 +254,11 @@ def run_benchmark(quick: bool = False, mpc_steps: int | None = None) -> dict[str
     unit_before = reference_step_samples()
     ddp_bench.REFERENCE_SAMPLES.clear()
     ddp = ddp_bench.run(ddp_config)
-    interleaved = np.array(ddp_bench.REFERENCE_SAMPLES)
+    bursts = np.array(ddp_bench.REFERENCE_SAMPLES)
     unit_after = reference_step_samples()
     qp = qp_bench.run(qp_config)
     machine["load_average_1min_at_end"] = os.getloadavg()[0]
-    unit_us = float(np.median(np.concatenate([unit_before, interleaved, unit_after])) * 1e6)
+    unit_us = float(np.median(np.concatenate([unit_before, bursts, unit_after])) * 1e6)
     return {
         "command": "wip-bench solvers" + (" --quick" if quick else ""),
         "quick": quick,
