@@ -20,13 +20,14 @@ import pytest
 
 import benchmarks.speed.profile as profile_module
 from benchmarks.cli import main
+from benchmarks.speed.closed_loop_table import MissingFigure
 from benchmarks.speed.closed_loop_table import comparison as closed_loop_comparison
 from benchmarks.speed.closed_loop_table import figure as closed_loop_figure
 from benchmarks.speed.closed_loop_table import main as closed_loop_main
 from benchmarks.speed.closed_loop_table import table as closed_loop_table
 from benchmarks.speed.env_own_work import own_work_us
 from benchmarks.speed.profile import ROWS, floor_times, profile_episode, replay_step
-from benchmarks.speed.yardstick import REFERENCE_ENV, ReferenceStep, reference_step_us
+from benchmarks.speed.yardstick import REFERENCE_ENV, ReferenceStep, burst_due, reference_step_us
 from benchmarks.speed.yardstick_check import main as yardstick_check_main
 
 TOP_KEYS = {
@@ -203,6 +204,62 @@ def test_a_burst_of_the_unit_is_warm_samples() -> None:
         reference.burst(0)
 
 
+def test_a_burst_is_due_every_so_many_steps_and_after_the_last() -> None:
+    due = [step for step in range(7) if burst_due(step, 3, 7)]
+    assert due == [2, 5, 6]
+    assert [step for step in range(2) if burst_due(step, 50, 2)] == [1]  # a short run too
+    with pytest.raises(ValueError, match=">= 1"):
+        burst_due(0, 0, 5)
+
+
+def test_the_envs_physics_is_its_own_part(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``DELAY_S`` put into the env's ``do_simulation`` lands in ``env_physics`` and not in the
+    env's own work; the two add up to the env step (means)."""
+    plain = profile_episode("PlanarTray-v0", "unified", duration=0.2)
+    real_make_env = profile_module.make_env
+
+    def slow_physics_env(*args: Any) -> gym.Env:
+        env = real_make_env(*args)
+        env.unwrapped.do_simulation = _delayed(env.unwrapped.do_simulation)
+        return env
+
+    monkeypatch.setattr(profile_module, "make_env", slow_physics_env)
+    result = profile_episode("PlanarTray-v0", "unified", duration=0.2)
+    parts, before = result["per_step_us"], plain["per_step_us"]
+    assert parts["env_physics"]["median"] * 1e-6 >= DELAY_S
+    assert plain["per_step_us"]["env_physics"]["median"] > 0
+    overhead_growth = parts["env_overhead"]["median"] - before["env_overhead"]["median"]
+    assert overhead_growth * 1e-6 < 0.5 * DELAY_S
+    total = parts["env_physics"]["mean"] + parts["env_overhead"]["mean"]
+    assert total == pytest.approx(parts["env_step"]["mean"], rel=1e-9)
+
+
+class _EndsAfter(gym.Wrapper):
+    """Terminates the episode at its ``steps``-th step."""
+
+    def __init__(self, env: gym.Env, steps: int) -> None:
+        super().__init__(env)
+        self.left = steps
+
+    def step(self, action: Any) -> Any:
+        observation, reward, terminated, truncated, info = self.env.step(action)
+        self.left -= 1
+        return observation, reward, terminated or self.left == 0, truncated, info
+
+
+def test_an_episode_that_ends_early_is_profiled_to_its_end(monkeypatch: pytest.MonkeyPatch) -> None:
+    """An episode terminated at step 7 of 200: 7 steps profiled, with a finite, positive floor;
+    a duration under one control step is refused."""
+    real_make_env = profile_module.make_env
+    monkeypatch.setattr(profile_module, "make_env", lambda *a: _EndsAfter(real_make_env(*a), 7))
+    result = profile_episode("PlanarTray-v0", "unified", duration=0.2)
+    assert result["steps"] == 7
+    floor = result["per_step_us"]["mujoco_step"]
+    assert all(0 < v < math.inf for v in floor.values())
+    with pytest.raises(ValueError, match="less than one control step"):
+        profile_episode("PlanarTray-v0", "unified", duration=1e-4)
+
+
 def test_the_unit_is_a_bare_krang_step() -> None:
     """Interleaved with the test's own timing (same load), over five rounds."""
     ratios = [reference_step_us() / _own_reference_us() for _ in range(5)]
@@ -280,12 +337,21 @@ def test_closed_loop_comparison_shows_each_columns_rounds_before_and_after() -> 
     assert lines[3] == "| control, p99 | 57.0 [54.0, 60.0] | 45.0 | 12 |"
     assert "| of which the task rows and QP (mean) | 2.0 [2.0, 2.0] | 2.0 |  |" in lines
     assert "| of which its physics (mean) | 1.0 [1.0, 1.0] | 1.0 |  |" in lines
-    lacking = {"KrangTray": [profile(20.0, 15.0, physics=False)]}  # no env_physics: "-"
-    assert (
-        "| of which its physics (mean) | - | 1.0 |  |"
-        in closed_loop_comparison(lacking, after).splitlines()
-    )
     assert lines[-1] == "unit (bare mj_step of Krang-v0): 14.0 to 16.0 us"
+    # a base from before the warm yardstick: its missing figure is "-", and the table says
+    # that its figures were measured another way
+    lacking = {"KrangTray": [profile(20.0, 15.0, physics=False)]}
+    old = closed_loop_comparison(lacking, after).splitlines()
+    assert "| of which its physics (mean) | - | 1.0 |  |" in old
+    assert "predate the warm yardstick" in old[-1]
+    # ... but a run of this checkout without the figure is an error, not a "-"
+    with pytest.raises(MissingFigure):
+        closed_loop_comparison(before, lacking)
+    # a null part in the middle of a path is refused as such
+    nulled = profile(15.0, 15.5)
+    nulled["per_step_units"]["env_physics"] = None
+    with pytest.raises(ValueError, match="null"):
+        closed_loop_figure(nulled, ("per_step_units", "env_physics", "mean"))
 
 
 def test_closed_loop_table_refuses_an_unknown_base(capsys: pytest.CaptureFixture[str]) -> None:
@@ -302,7 +368,13 @@ def test_yardstick_check_prints_its_ratios(capsys: pytest.CaptureFixture[str]) -
     printed = capsys.readouterr().out
     ratio = re.search(r"plain over perturbed blocks: median ([0-9.]+), mean ([0-9.]+)", printed)
     assert ratio is not None and all(0 < float(v) < 10 for v in ratio.groups())
-    assert "warm bursts" in printed and printed.count("MPC ") == 2
+    for pattern in (
+        r"warm bursts [0-9.]+ us \(ratio ([0-9.]+)\)",
+        r"replayed [0-9.]+ us .*ratio ([0-9.]+)\)",
+    ):
+        found = re.search(pattern, printed)
+        assert found is not None and 0 < float(found.group(1)) < 10, pattern
+    assert printed.count("MPC ") == 2 and "units), in warm bursts" in printed
     with pytest.raises(SystemExit) as refused:
         yardstick_check_main(["--steps", "100"])
     assert refused.value.code == 2

@@ -62,10 +62,16 @@ ROWS: tuple[tuple[str, tuple[str, ...], float | None], ...] = (
 )
 
 
+class MissingFigure(ValueError):
+    """A profile without the figure's key: written before the figure existed (a ``--base``
+    revision's)."""
+
+
 def figure(result: dict[str, Any], path: Sequence[str]) -> float:
     """The number at ``path`` of one profile's JSON; ``qp_assembly`` also counts ``qp_solve``
     (the task rows and the QP kernel are one compiled call: the split between them is not
-    meaningful)."""
+    meaningful). Raises :class:`MissingFigure` for a key the profile lacks, ``ValueError``
+    for a part it has as ``null`` (a controller without it)."""
     if tuple(path) == ("per_step_units", "qp_assembly", "mean"):
         parts = [result["per_step_units"][k] for k in ("qp_assembly", "qp_solve")]
         if any(part is None for part in parts):
@@ -73,11 +79,13 @@ def figure(result: dict[str, Any], path: Sequence[str]) -> float:
         return float(sum(part["mean"] for part in parts))
     value: Any = result
     for key in path:
-        if key not in value:  # a profile older than the figure (a --base revision's)
-            raise ValueError(f"the profile has no figure at {'.'.join(path)}")
+        if value is None:
+            raise ValueError(f"the profile has no figure at {'.'.join(path)} (null)")
+        if key not in value:
+            raise MissingFigure(f"the profile has no key {'.'.join(path)}")
         value = value[key]
     if value is None:
-        raise ValueError(f"the profile has no figure at {'.'.join(path)}")
+        raise ValueError(f"the profile has no figure at {'.'.join(path)} (null)")
     return float(value)
 
 
@@ -137,14 +145,12 @@ def _profile(
     return dict(json.loads(path.read_text()))
 
 
-def _figures(runs: Sequence[dict[str, Any]], path: Sequence[str]) -> list[float]:
-    """The figure at ``path`` of each run, none if the runs lack it (a ``--base`` revision's
-    profile from before the figure existed)."""
+def _base_figures(runs: Sequence[dict[str, Any]], path: Sequence[str]) -> list[float]:
+    """The figure at ``path`` of each of a ``--base`` revision's runs; none if they predate it
+    (:class:`MissingFigure`)."""
     try:
         return [figure(r, path) for r in runs]
-    except ValueError:
-        if path[0] == "per_step_units" and path[1] in ("qp_assembly", "qp_solve"):
-            raise  # a profile without a task QP: not a revision's difference
+    except MissingFigure:
         return []
 
 
@@ -166,13 +172,23 @@ def comparison(
     header = " | ".join(f"{t} before | {t} after" for t in titles)
     lines = [f"| per 1 ms step, units | {header} | target |", "|---" * (2 * len(titles) + 2) + "|"]
     for title, path, target in ROWS:
-        cells = [spread(_figures(runs[t], path)) for t in titles for runs in (before, after)]
+        cells = [
+            spread(values)
+            for t in titles
+            for values in (_base_figures(before[t], path), [figure(r, path) for r in after[t]])
+        ]
         lines.append(
             f"| {title} | " + " | ".join(cells) + f" | {'' if target is None else f'{target:g}'} |"
         )
     units = [r["reference_step_us"] for runs in (before, after) for t in titles for r in runs[t]]
     lines.append("")
     lines.append(f"unit (bare mj_step of Krang-v0): {min(units):.1f} to {max(units):.1f} us")
+    if any("env_physics" not in r["per_step_units"] for t in titles for r in before[t]):
+        lines.append(
+            "the base's profiles predate the warm yardstick (docs/performance.md §12): their "
+            "unit was sampled cold, their floor taken after the control step and their env's own "
+            "work counted from it; compare them with these only as ratios within each version"
+        )
     return "\n".join(lines)
 
 

@@ -54,7 +54,7 @@ from tqdm import tqdm
 import wip_gym  # noqa: F401  (registers the environments)
 from benchmarks.speed.crocoddyl_wipm import CrocoddylWIPM
 from benchmarks.speed.numpy_ilqr import NumpyILQR
-from benchmarks.speed.yardstick import ReferenceStep
+from benchmarks.speed.yardstick import ReferenceStep, burst_due
 from controllers.high_level.mpc import ModelPredictiveController, MPCConfig, mpc_problem
 from controllers.high_level.planning import Plan, PlanConfig, plan_to_goal, planning_problem
 from controllers.policy import make_robot
@@ -210,15 +210,20 @@ def _mpc_times(
     step: Callable[[int], Any], warmup: Callable[[], Any], steps: int, label: str
 ) -> tuple[float, list[float]]:
     """``mpc_compile_s`` (a throwaway first step minus the median) and the step times (s).
-    Every ``REFERENCE_EVERY`` steps a burst of reference steps (``ReferenceStep.burst``: warm,
-    as the unit is defined) is timed too, into ``REFERENCE_SAMPLES``, so that the unit sees
-    the same machine load as the steps."""
+    After every ``REFERENCE_EVERY`` steps a burst of reference steps (``ReferenceStep.burst``:
+    warm, as the unit is defined) is timed too, into ``REFERENCE_SAMPLES``, so that the unit
+    sees the same machine load as the steps; the step after a burst, which the burst slowed, is
+    run but not counted."""
     first, _ = _timed(warmup)
     reference = ReferenceStep()
     times = []
+    after_burst = False
     for i in tqdm(range(steps), desc=label, leave=False, disable=None):
-        times.append(_timed(lambda i=i: step(i))[0])
-        if (i + 1) % REFERENCE_EVERY == 0 or i + 1 == steps:
+        seconds = _timed(lambda i=i: step(i))[0]
+        if not after_burst:
+            times.append(seconds)
+        after_burst = burst_due(i, REFERENCE_EVERY, steps)
+        if after_burst:
             REFERENCE_SAMPLES.extend(reference.burst())
     return max(first - statistics.median(times), 0.0), times
 

@@ -5,16 +5,15 @@ timed interleaved in one process, the MPC step in units (``benchmarks.speed.yard
 
 The revision's ``controllers/optimizer/ddp.py``, ``controllers/simplified/wipm_problem.py`` and
 ``controllers/high_level/mpc.py`` are loaded from ``git show REV:...`` as modules of their own
-(their imports of one another redirected to each other), so that both versions run side by
-side on the same plan (``wip-bench solvers``' problems: Krang's ``lambda(q)``, the plan to
-(2, 0) planar and (2, 1) 3-D). Per problem: each version's ``ModelPredictiveController`` along
-the plan's first ``--steps`` indices from the plan's states (``wip-bench solvers``' MPC
-workload), the versions alternating round by round, a burst of warm reference steps every 50
-MPC steps; the median per round, then the median of the rounds. Then the 3-D plan (``PlanConfig()``,
-N = 2000) solved ``--plans`` times by each version, alternating. Also printed: the largest
-difference between the versions' predicted states and controls over 20 MPC steps off the plan,
-and between their plans. On a shared machine only such interleaved figures compare.
-"""
+(their imports of one another redirected to each other), so that both versions run side by side on
+the same plan (``wip-bench solvers``' problems: Krang's ``lambda(q)``, the plan to (2, 0) planar and
+(2, 1) 3-D). Per problem: each version's ``ModelPredictiveController`` along the plan's first
+``--steps`` indices from the plan's states (``wip-bench solvers``' MPC workload), the versions
+alternating round by round, a burst of warm reference steps every 50 MPC steps (the step after it
+not counted); the median per round, then the median of the rounds. Then the 3-D plan
+(``PlanConfig()``, N = 2000) solved ``--plans`` times by each version, alternating. Also printed:
+the largest difference between the versions' predicted states and controls over 20 MPC steps off the
+plan, and between their plans. On a shared machine only such interleaved figures compare."""
 
 from __future__ import annotations
 
@@ -81,8 +80,14 @@ def main() -> None:
 
     import jax  # noqa: PLC0415
 
-    from benchmarks.speed.ddp_bench import GOALS, goal_state, initial_state, krang_params  # noqa: PLC0415
-    from benchmarks.speed.yardstick import ReferenceStep  # noqa: PLC0415
+    from benchmarks.speed.ddp_bench import (  # noqa: PLC0415
+        GOALS,
+        REFERENCE_EVERY,
+        goal_state,
+        initial_state,
+        krang_params,
+    )
+    from benchmarks.speed.yardstick import ReferenceStep, burst_due  # noqa: PLC0415
     from controllers.high_level import mpc  # noqa: PLC0415
     from controllers.high_level.planning import PlanConfig, plan_to_goal, planning_problem  # noqa: PLC0415
     from controllers.simplified import wipm_problem  # noqa: PLC0415
@@ -125,11 +130,14 @@ def main() -> None:
                 controller = module.ModelPredictiveController(plan)
                 controller.step(0, plan.states[0], params)
                 times = []
+                after_burst = False  # the step after a burst is run, not counted (ddp_bench)
                 for i in range(args.steps):
                     start = time.perf_counter()
                     controller.step(i, plan.states[i], params)
-                    times.append(time.perf_counter() - start)
-                    if (i + 1) % 50 == 0:  # warm bursts (ReferenceStep.burst), as the unit is
+                    if not after_burst:
+                        times.append(time.perf_counter() - start)
+                    after_burst = burst_due(i, REFERENCE_EVERY, args.steps)
+                    if after_burst:  # the unit warm, as defined (ReferenceStep.burst)
                         units.extend(reference.burst())
                 medians[name].append(float(np.median(times)))
                 p99s[name].append(float(np.percentile(times, 99)))

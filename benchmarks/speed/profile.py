@@ -24,13 +24,15 @@ part the controller lacks is ``null``. The floor, ``mujoco_step``, is a bare
 episode stepped, with the control the policy gave there: the state (``mj_getState``, the
 integration state) is recorded before every ``env.step`` and the floor is timed after the
 episode, replaying them one by one on scratch data (the same states and model, in the same run;
-the model as the episode left it, and the push of ``env.step`` not applied: neither moves the
-time of a step). Replayed back to back, these steps find the caches warm; the loop's own
-``mj_step`` (``env_physics``) does not, and costs about twice as much (docs/performance.md §12).
+the model as the episode left it, and an env push applied one step late, as the state before
+``env.step`` holds it: neither moves the time of a step). Replayed back to back, these steps
+find the caches warm; the loop's own ``mj_step`` (``env_physics``) does not, and costs 1.5 to
+2.5 times as much (docs/performance.md §12).
 
 Nothing runs between one step's ``env.step`` and the next ``policy(obs)`` but the profiler's
-bookkeeping: measuring the floor or the unit there would evict the caches the loop works in and
-slow the steps they precede. Measured on KrangTray-v0 with ``unified`` (8000 steps, blocks of
+bookkeeping and, once every :data:`UNIT_EVERY` steps, a burst of the unit: measuring the floor
+or the unit there at every step would evict the caches the loop works in and slow the steps
+they precede. Measured on KrangTray-v0 with ``unified`` (8000 steps, blocks of
 250 steps with a floor and a reference step after every control step alternating with blocks
 without, docs/performance.md §12): the control step's median 0.82 times, its mean 0.87 times, what
 it is with them.
@@ -102,14 +104,15 @@ import numpy as np
 from benchmarks.overrides import parse_assignment, resolve_run
 from benchmarks.presets import add_configuration_arguments
 from benchmarks.scenario import resolve_env_id
-from benchmarks.speed.yardstick import ReferenceStep, reference_step_samples
+from benchmarks.speed.yardstick import ReferenceStep, burst_due, reference_step_samples
 from controllers.registry import controller_names, make_policy
 
 PARTS = ("robot_model", "qp_assembly", "qp_solve", "high_level")
 UNIT_EVERY = 250
 """Control steps between two bursts of the unit's reference step during an episode."""
 UNIT_BURST = 20
-"""Reference steps timed in one burst (after one untimed: ``ReferenceStep.burst``)."""
+"""Reference steps timed in one burst (after one untimed: ``ReferenceStep.burst``); with 400
+before and 400 after the episode, an 8 s episode's unit has 1440 samples."""
 STATE = mujoco.mjtState.mjSTATE_INTEGRATION
 """What the floor's replay restores before each step: everything ``mj_step`` reads."""
 ROWS = (
@@ -262,6 +265,9 @@ def profile_episode(
     frame_skip = int(base.frame_skip)
     dt = float(base.dt)
     steps = int(round(duration / dt))
+    if steps < 1:
+        env.close()
+        raise ValueError(f"duration {duration} s is less than one control step ({dt} s)")
     timers = _instrument(policy)
     physics_timer = _Timer()
     base.do_simulation = physics_timer.wrap(base.do_simulation)
@@ -288,7 +294,7 @@ def profile_episode(
         env_step[n] = time.perf_counter() - start
         physics[n] = physics_timer.take()
         control[n] = tock - tick
-        if (n + 1) % UNIT_EVERY == 0:
+        if burst_due(n, UNIT_EVERY, steps):
             unit_samples += reference_step.burst(UNIT_BURST)
         fell = fell or bool(info.get("fallen", False))
         if terminated or truncated:

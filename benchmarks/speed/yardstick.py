@@ -53,14 +53,23 @@ class ReferenceStep:
         """``count`` timed samples after one untimed: the step warm, as the unit defines it.
 
         One sample taken right after a benchmark's own step is not: the benchmark's work has
-        evicted the caches the reference step works in, and such samples measured 1.5 times a
-        warm step on KrangTray-v0's closed loop (docs/performance.md §12). A benchmark that
-        follows the machine's load through an episode takes a burst every few hundred of its
-        steps instead (``wip-bench profile``: every 250 control steps)."""
+        evicted the caches the reference step works in, and such samples measured 1.3 to 1.5
+        times a warm step between KrangTray-v0's closed-loop steps and 2.1 to 2.4 times between
+        MPC steps (docs/performance.md §12). A benchmark that follows the machine's load takes
+        a burst every so many of its steps instead (:func:`burst_due`), and leaves the step
+        after a burst out of its percentiles where it can."""
         if count < 1:
             raise ValueError(f"count must be >= 1, got {count}")
         self.sample()
         return [self.sample() for _ in range(count)]
+
+
+def burst_due(step: int, every: int, steps: int) -> bool:
+    """Whether a burst of the unit follows a benchmark's ``step`` (0-based) of ``steps``: after
+    every ``every``-th step, and after the last (so that a short run has samples too)."""
+    if every < 1:
+        raise ValueError(f"every must be >= 1, got {every}")
+    return (step + 1) % every == 0 or step + 1 == steps
 
 
 def reference_step_samples(repeats: int = 400, warmup: int = 50) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""What the profiler's own timing did to what it measured, in one process (performance §12).
+"""What the profiler's old timing did to what it measured (docs/performance.md §12).
 
     python -m benchmarks.speed.yardstick_check [--env wip_gym/KrangTray-v0] [--steps 8000]
                                                [--mpc-steps 600]
@@ -28,10 +28,17 @@ import time
 import mujoco
 import numpy as np
 
+BLOCK = 250
+"""Control steps per block (perturbed and plain blocks alternate)."""
+MPC_BURST_EVERY = 50
+"""MPC steps between two warm bursts of the unit (as ``wip-bench solvers``)."""
+
 
 def loop_check(env_id: str, steps: int) -> None:
+    """The closed loop's blocks (module docstring): print the control step's ratio, the unit
+    sampled after every step against warm bursts, the old floor against the replayed one."""
     from benchmarks.speed.profile import STATE, floor_times, make_env  # noqa: PLC0415
-    from benchmarks.speed.yardstick import ReferenceStep  # noqa: PLC0415
+    from benchmarks.speed.yardstick import ReferenceStep, burst_due  # noqa: PLC0415
     from controllers.registry import make_policy  # noqa: PLC0415
 
     env = make_env(env_id, {})
@@ -68,7 +75,7 @@ def loop_check(env_id: str, steps: int) -> None:
             raise RuntimeError(f"the episode ended at step {n}: choose fewer --steps")
         if perturbed:
             single.append(reference.sample())
-        if (n + 1) % BLOCK == 0:
+        if burst_due(n, BLOCK, steps):
             burst += reference.burst()
     env.close()
     replayed = floor_times(model, states, actions, base.frame_skip)
@@ -95,8 +102,10 @@ def loop_check(env_id: str, steps: int) -> None:
 
 
 def mpc_check(steps: int) -> None:
+    """``steps`` MPC steps per problem: print the unit sampled after every step against warm
+    bursts, and the step in both units."""
     from benchmarks.speed.ddp_bench import GOALS, initial_state, krang_params  # noqa: PLC0415
-    from benchmarks.speed.yardstick import ReferenceStep  # noqa: PLC0415
+    from benchmarks.speed.yardstick import ReferenceStep, burst_due  # noqa: PLC0415
     from controllers.high_level.mpc import ModelPredictiveController  # noqa: PLC0415
     from controllers.high_level.planning import plan_to_goal  # noqa: PLC0415
 
@@ -108,14 +117,16 @@ def mpc_check(steps: int) -> None:
         plan = plan_to_goal(state, params, goal, planar=problem == "planar")
         controller = ModelPredictiveController(plan)
         controller.step(0, plan.states[0], params)  # compiles
-        times, single, burst = [], [], []
+        times: list[float] = []
+        single: list[float] = []
+        burst: list[float] = []
         for i in range(steps):
             index = i % (len(plan.states) - 1)
             start = time.perf_counter()
             controller.step(index, plan.states[index], params)
             times.append(time.perf_counter() - start)
             single.append(reference.sample())
-            if (i + 1) % 50 == 0:
+            if burst_due(i, MPC_BURST_EVERY, steps):
                 burst += reference.burst()
         step, cold, warm = np.median(times), np.median(single), np.median(burst)
         print(
@@ -124,10 +135,6 @@ def mpc_check(steps: int) -> None:
             f"({step / warm:.1f} units)",
             flush=True,
         )
-
-
-BLOCK = 250
-"""Control steps per block (perturbed and plain blocks alternate)."""
 
 
 def main(argv: list[str] | None = None) -> int:
