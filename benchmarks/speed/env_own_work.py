@@ -7,9 +7,9 @@ apart); at each, the median over ``--repeats`` of ``env.step`` and of a bare ``m
 env's model, each from that state restored by ``mj_copyData`` (the same restore in both, so it
 cancels); the env's own work is their difference, its median over the states is reported in
 units of a bare ``mj_step`` of Krang-v0 timed in the same process
-(``benchmarks.speed.yardstick``). Unlike ``wip-bench profile``'s ``env_overhead`` (the same
-difference inside the closed loop, where the controller's work evicts the env's data from the
-caches), it measures the env alone, warm.
+(``benchmarks.speed.yardstick``). Unlike ``wip-bench profile``'s ``env_overhead`` (``env.step``
+minus its own ``mj_step`` inside the closed loop, where the controller's work evicts the env's
+code and data from the caches), it measures the env alone, warm.
 """
 
 from __future__ import annotations
