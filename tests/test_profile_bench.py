@@ -112,6 +112,10 @@ def test_short_unified_profile_schema(tmp_path: Path, capsys: pytest.CaptureFixt
     rows_qp = parts["qp_assembly"]["mean"] + parts["qp_solve"]["mean"]
     assert f"| of which the task rows and QP (mean) | {rows_qp:.1f}, " in lines[5]
     assert lines[-1].endswith(f"{unit:.1f}, {unit:.1f}")
+    # the summary: the rounds' median [min, max] (here two rounds of the same run)
+    summary = closed_loop_table({"PlanarTray": [result, result]}, summary=True).splitlines()
+    mean = units["mean"]
+    assert summary[2] == f"| control, mean | {mean:.1f} [{mean:.1f}, {mean:.1f}] | 5 |"
 
 
 def test_a_known_delay_lands_in_its_own_part(monkeypatch: pytest.MonkeyPatch) -> None:

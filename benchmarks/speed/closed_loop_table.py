@@ -3,14 +3,15 @@
     python -m benchmarks.speed.closed_loop_table [--rounds 2] [--duration 8] [--out out/perf]
     python -m benchmarks.speed.closed_loop_table --base REV [--rounds 5] ...
 
-Each cell of the table is one ``wip-bench profile`` process (a fresh process per run, as a user
+Each figure of the table is one ``wip-bench profile`` process (a fresh process per run, as a user
 runs it; ``--json`` files kept in ``--out``) of the ``unified`` controller on one env and one
 setting: the paper's timing (the MPC inside every tenth control step) and the MPC beside the
 loop (``--set unified.high_level.mpc_delay_steps=5``). The runs go round by round, every
 column once per round, so that a change of the machine's load spreads over all columns; a cell
-shows its rounds' values side by side. Every figure is in units of a bare ``mj_step`` of
-Krang-v0 timed in the same process (``benchmarks.speed.yardstick``), so the table compares
-across machines; the rows are the issue's targets (docs/performance.md §7 to §9).
+shows its rounds' values side by side, and a second table their median [min, max]. Every
+figure is in units of a bare, warm ``mj_step`` of Krang-v0 timed in the same process
+(``benchmarks.speed.yardstick``), so the table compares across machines; the rows are the
+issue's targets (docs/performance.md §7 to §9, §12).
 
 ``--base REV`` measures a change: the git revision ``REV`` is checked out into a temporary
 worktree, and every round runs each column once at ``REV`` and once in this checkout; the table
@@ -89,16 +90,21 @@ def figure(result: dict[str, Any], path: Sequence[str]) -> float:
     return float(value)
 
 
-def table(results: dict[str, list[dict[str, Any]]]) -> str:
+def table(results: dict[str, list[dict[str, Any]]], summary: bool = False) -> str:
     """The markdown table: a row per :data:`ROWS` entry, a column per key of ``results`` (each
-    a list of profile JSONs, one per round), and the targets."""
+    a list of profile JSONs, one per round), and the targets. A cell lists its rounds' figures,
+    or with ``summary`` their median [min, max] (:func:`spread`)."""
     titles = list(results)
     lines = [
         "| per 1 ms step, units | " + " | ".join(titles) + " | target |",
         "|---" * (len(titles) + 2) + "|",
     ]
     for title, path, target in ROWS:
-        cells = [", ".join(f"{figure(r, path):.1f}" for r in results[t]) for t in titles]
+        values = [[figure(r, path) for r in results[t]] for t in titles]
+        if summary:
+            cells = [spread(v) for v in values]
+        else:
+            cells = [", ".join(f"{x:.1f}" for x in v) for v in values]
         lines.append(
             f"| {title} | " + " | ".join(cells) + f" | {'' if target is None else f'{target:g}'} |"
         )
@@ -257,6 +263,9 @@ def main(argv: list[str] | None = None) -> int:
                 _remove_worktree(trees["before"])
     if args.base is None:
         print(table(results["after"]))
+        if args.rounds > 1:
+            print("\nmedian [min, max] over the rounds:\n")
+            print(table(results["after"], summary=True))
     else:
         print(comparison(results["before"], results["after"]))
     return 0
