@@ -27,7 +27,13 @@ from benchmarks.speed.closed_loop_table import main as closed_loop_main
 from benchmarks.speed.closed_loop_table import table as closed_loop_table
 from benchmarks.speed.env_own_work import own_work_us
 from benchmarks.speed.profile import ROWS, floor_times, profile_episode, replay_step
-from benchmarks.speed.yardstick import REFERENCE_ENV, ReferenceStep, burst_due, reference_step_us
+from benchmarks.speed.yardstick import (
+    REFERENCE_ENV,
+    ReferenceStep,
+    burst_due,
+    reference_step_us,
+    times_between_bursts,
+)
 from benchmarks.speed.yardstick_check import main as yardstick_check_main
 
 TOP_KEYS = {
@@ -214,6 +220,25 @@ def test_a_burst_is_due_every_so_many_steps_and_after_the_last() -> None:
     assert [step for step in range(2) if burst_due(step, 50, 2)] == [1]  # a short run too
     with pytest.raises(ValueError, match=">= 1"):
         burst_due(0, 0, 5)
+
+
+def test_times_between_bursts_leave_out_the_step_after_each_burst() -> None:
+    """Seven timed steps, a burst after every third and after the last: the steps after a
+    burst (indices 3 and 6) are run but not counted, and each burst adds its samples."""
+    run: list[int] = []
+
+    def timed(i: int) -> float:
+        run.append(i)
+        return float(i)
+
+    reference = ReferenceStep()
+    samples: list[float] = []
+    times = times_between_bursts(timed, range(7), 7, 3, reference, samples)
+    assert run == list(range(7))
+    assert times == [0.0, 1.0, 2.0, 4.0, 5.0]
+    assert len(samples) == 3 * 20 and all(sample > 0 for sample in samples)
+    with pytest.raises(ValueError, match="warmup >= 0"):
+        reference.burst(3, warmup=-1)
 
 
 def test_the_envs_physics_is_its_own_part(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -54,7 +54,7 @@ from tqdm import tqdm
 import wip_gym  # noqa: F401  (registers the environments)
 from benchmarks.speed.crocoddyl_wipm import CrocoddylWIPM
 from benchmarks.speed.numpy_ilqr import NumpyILQR
-from benchmarks.speed.yardstick import ReferenceStep, burst_due
+from benchmarks.speed.yardstick import ReferenceStep, times_between_bursts
 from controllers.high_level.mpc import ModelPredictiveController, MPCConfig, mpc_problem
 from controllers.high_level.planning import Plan, PlanConfig, plan_to_goal, planning_problem
 from controllers.policy import make_robot
@@ -215,16 +215,14 @@ def _mpc_times(
     sees the same machine load as the steps; the step after a burst, which the burst slowed, is
     run but not counted."""
     first, _ = _timed(warmup)
-    reference = ReferenceStep()
-    times = []
-    after_burst = False
-    for i in tqdm(range(steps), desc=label, leave=False, disable=None):
-        seconds = _timed(lambda i=i: step(i))[0]
-        if not after_burst:
-            times.append(seconds)
-        after_burst = burst_due(i, REFERENCE_EVERY, steps)
-        if after_burst:
-            REFERENCE_SAMPLES.extend(reference.burst())
+    times = times_between_bursts(
+        lambda i: _timed(lambda: step(i))[0],
+        tqdm(range(steps), desc=label, leave=False, disable=None),
+        steps,
+        REFERENCE_EVERY,
+        ReferenceStep(),
+        REFERENCE_SAMPLES,
+    )
     return max(first - statistics.median(times), 0.0), times
 
 

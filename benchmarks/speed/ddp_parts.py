@@ -99,7 +99,7 @@ def measure(rounds: int = 3) -> dict[str, dict[str, float]]:
         for _ in range(rounds):
             for name in PIECES:
                 samples[name].append(median_call_us(calls[name]))
-                units.append(float(np.median([reference.sample() for _ in range(50)]) * 1e6))
+                units.append(float(np.median(reference.burst(50)) * 1e6))
         unit = float(np.median(units))
         out[problem] = {name: float(np.median(v)) / unit for name, v in samples.items()}
         out[problem]["unit_us"] = unit

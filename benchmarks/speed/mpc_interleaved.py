@@ -87,7 +87,7 @@ def main() -> None:
         initial_state,
         krang_params,
     )
-    from benchmarks.speed.yardstick import ReferenceStep, burst_due  # noqa: PLC0415
+    from benchmarks.speed.yardstick import ReferenceStep, times_between_bursts  # noqa: PLC0415
     from controllers.high_level import mpc  # noqa: PLC0415
     from controllers.high_level.planning import PlanConfig, plan_to_goal, planning_problem  # noqa: PLC0415
     from controllers.simplified import wipm_problem  # noqa: PLC0415
@@ -129,16 +129,15 @@ def main() -> None:
             for name, module in versions.items():
                 controller = module.ModelPredictiveController(plan)
                 controller.step(0, plan.states[0], params)
-                times = []
-                after_burst = False  # the step after a burst is run, not counted (ddp_bench)
-                for i in range(args.steps):
+
+                def timed(i: int, controller: Any = controller, states: Any = plan.states) -> float:
                     start = time.perf_counter()
-                    controller.step(i, plan.states[i], params)
-                    if not after_burst:
-                        times.append(time.perf_counter() - start)
-                    after_burst = burst_due(i, REFERENCE_EVERY, args.steps)
-                    if after_burst:  # the unit warm, as defined (ReferenceStep.burst)
-                        units.extend(reference.burst())
+                    controller.step(i, states[i], params)
+                    return time.perf_counter() - start
+
+                times = times_between_bursts(
+                    timed, range(args.steps), args.steps, REFERENCE_EVERY, reference, units
+                )
                 medians[name].append(float(np.median(times)))
                 p99s[name].append(float(np.percentile(times, 99)))
         unit = float(np.median(units))

@@ -32,10 +32,10 @@ find the caches warm; the loop's own ``mj_step`` (``env_physics``) does not, and
 Nothing runs between one step's ``env.step`` and the next ``policy(obs)`` but the profiler's
 bookkeeping and, once every :data:`UNIT_EVERY` steps, a burst of the unit: measuring the floor
 or the unit there at every step would evict the caches the loop works in and slow the steps
-they precede. Measured on KrangTray-v0 with ``unified`` (8000 steps, blocks of
-250 steps with a floor and a reference step after every control step alternating with blocks
-without, docs/performance.md §12): the control step's median 0.82 times, its mean 0.87 times, what
-it is with them.
+they precede. Measured on KrangTray-v0 with ``unified`` (8000 steps, blocks of 250 steps with
+a floor and a reference step after every control step alternating with blocks without, three
+runs, docs/performance.md §12): without them, the control step's median 0.74 to 0.82 times,
+its mean 0.84 to 0.88 times, what it is with them.
 
 The unit (``benchmarks.speed.yardstick``): ``reference_step_us``, the median of a bare, warm
 ``mj_step`` of Krang-v0's model at its reset state, timed in this process before and after the

@@ -15,7 +15,7 @@ figures also in its units.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 
 import gymnasium as gym
 import mujoco
@@ -49,18 +49,20 @@ class ReferenceStep:
         mujoco.mj_step(self.model, self.data)
         return time.perf_counter() - start
 
-    def burst(self, count: int = 20) -> list[float]:
-        """``count`` timed samples after one untimed: the step warm, as the unit defines it.
+    def burst(self, count: int = 20, warmup: int = 1) -> list[float]:
+        """``count`` timed samples after ``warmup`` untimed ones: the step warm, as the unit
+        defines it.
 
         One sample taken right after a benchmark's own step is not: the benchmark's work has
-        evicted the caches the reference step works in, and such samples measured 1.3 to 1.5
-        times a warm step between KrangTray-v0's closed-loop steps and 2.1 to 2.4 times between
+        evicted the caches the reference step works in, and such samples measured 1.25 to 1.33
+        times a warm step between KrangTray-v0's closed-loop steps and 1.5 to 2.2 times between
         MPC steps (docs/performance.md §12). A benchmark that follows the machine's load takes
-        a burst every so many of its steps instead (:func:`burst_due`), and leaves the step
-        after a burst out of its percentiles where it can."""
-        if count < 1:
-            raise ValueError(f"count must be >= 1, got {count}")
-        self.sample()
+        a burst every so many of its steps instead (:func:`burst_due`,
+        :func:`times_between_bursts`)."""
+        if count < 1 or warmup < 0:
+            raise ValueError(f"count must be >= 1 and warmup >= 0, got {count}, {warmup}")
+        for _ in range(warmup):
+            self.sample()
         return [self.sample() for _ in range(count)]
 
 
@@ -72,15 +74,35 @@ def burst_due(step: int, every: int, steps: int) -> bool:
     return (step + 1) % every == 0 or step + 1 == steps
 
 
+def times_between_bursts(
+    timed: Callable[[int], float],
+    indices: Iterable[int],
+    steps: int,
+    every: int,
+    reference: ReferenceStep,
+    samples: list[float],
+) -> list[float]:
+    """The wall times (s) that ``timed(i)`` returns for each of ``indices`` (``steps`` of them),
+    with a burst of ``reference`` (into ``samples``) after every ``every``-th (:func:`burst_due`);
+    the step after a burst, which the burst slowed, is run but not counted."""
+    times: list[float] = []
+    after_burst = False
+    for step, i in enumerate(indices):
+        seconds = timed(i)
+        if not after_burst:
+            times.append(seconds)
+        after_burst = burst_due(step, every, steps)
+        if after_burst:
+            samples.extend(reference.burst())
+    return times
+
+
 def reference_step_samples(repeats: int = 400, warmup: int = 50) -> np.ndarray:
     """Wall times (s) of ``repeats`` bare ``mj_step`` calls of :data:`REFERENCE_ENV`'s model,
     each from its reset state (seed :data:`REFERENCE_SEED`), after ``warmup`` untimed ones."""
     if repeats < 1 or warmup < 0:
         raise ValueError(f"repeats must be >= 1 and warmup >= 0, got {repeats}, {warmup}")
-    reference = ReferenceStep()
-    for _ in range(warmup):
-        reference.sample()
-    return np.array([reference.sample() for _ in range(repeats)])
+    return np.array(ReferenceStep().burst(repeats, warmup))
 
 
 def reference_step_us(repeats: int = 400, warmup: int = 50) -> float:
