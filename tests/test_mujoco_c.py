@@ -8,7 +8,7 @@ import mujoco
 import numpy as np
 import pytest
 from dynamics_reference import random_minimal_state
-from numba import njit
+from numba import carray, njit
 
 from wip_gym import mujoco_c as mjc
 from wip_gym.assets import mjcf_path
@@ -133,3 +133,35 @@ def test_compiled_quat2mat_equals_the_binding() -> None:
         got = np.full(9, np.nan)
         _quat2mat(quat, got)
         np.testing.assert_array_equal(got, expected)
+
+
+@njit
+def _contacts(model, data, ncon, geom_address, stride, geoms, forces) -> None:
+    result = np.empty(6)
+    for i in range(ncon):
+        pair = carray(mjc.int32_pointer(np.uint64(geom_address + i * stride)), 2)
+        geoms[i, 0], geoms[i, 1] = pair[0], pair[1]
+        mjc.mj_contactForce(model, data, i, result.ctypes.data)
+        forces[i] = result
+
+
+@pytest.mark.parametrize("cone", [mujoco.mjtCone.mjCONE_ELLIPTIC, mujoco.mjtCone.mjCONE_PYRAMIDAL])
+def test_compiled_contact_reads_equal_the_bindings(cone: mujoco.mjtCone) -> None:
+    """``int32_pointer`` reads the contacts' geom pairs where the bindings' view is, and
+    ``mj_contactForce`` gives the bindings' forces, for either friction cone."""
+    model = mujoco.MjModel.from_xml_path(str(mjcf_path("scene_krang.xml")))
+    model.opt.cone = cone
+    data = mujoco.MjData(model)
+    for _ in range(20):  # settle onto the wheels: contacts with forces
+        mujoco.mj_step(model, data)
+    n = data.ncon
+    assert n >= 2
+    geoms, forces = np.full((n, 2), -1, np.int32), np.full((n, 6), np.nan)
+    geom = data.contact.geom
+    _contacts(model._address, data._address, n, geom.ctypes.data, geom.strides[0], geoms, forces)
+    expected = np.zeros((n, 6))
+    for i in range(n):
+        mujoco.mj_contactForce(model, data, i, expected[i])
+    np.testing.assert_array_equal(geoms, geom)
+    np.testing.assert_array_equal(forces, expected)
+    assert (expected[:, 0] > 0).all()  # real forces, not zeros on both sides

@@ -8,13 +8,14 @@ import copy
 import pickle
 
 import gymnasium as gym
+import mujoco
 import numpy as np
 import pytest
 
 import wip_gym  # noqa: F401
 from tests.env_step_reference import reference_step
 from tests.test_env_step_reference import _assert_same
-from wip_gym.envs.measures import action_effort, step_measures
+from wip_gym.envs.measures import action_effort, contact_layout, step_measures
 
 
 @pytest.mark.parametrize("env_id", ["wip_gym/Planar-v0", "wip_gym/KrangTray-v0"])
@@ -76,3 +77,36 @@ def test_a_copied_env_measures_its_own_data() -> None:
         np.testing.assert_array_equal(obs_copy["cup_pose"], obs["cup_pose"])
         copied.step(5.0 * action)  # moves the copy alone
         assert not np.array_equal(copied._measures, env._measures)
+
+
+def test_the_contacts_stay_where_their_layout_was_taken() -> None:
+    """``contact_layout`` is taken once per MjData: MuJoCo keeps the contacts at the start of
+    the data's arena, through steps with varying contact counts and a reset."""
+    env = gym.make("wip_gym/KrangTray-v0").unwrapped
+    env.reset(seed=0)
+    layout = contact_layout(env.data)
+    counts = set()
+    action = 0.3 * env.action_space.high
+    for step in range(300):
+        env.step(action if step % 50 < 25 else -action)
+        counts.add(env.data.ncon)
+        assert contact_layout(env.data) == layout
+        assert tuple(env._measure_table[-3:]) == layout
+    env.reset(seed=1)
+    assert contact_layout(env.data) == layout
+    assert len(counts) > 1  # the count changed along the way
+
+
+def test_friction_use_with_pyramidal_cones_equals_the_bindings_reading() -> None:
+    """The compiled friction use reads the contact-frame forces with ``mj_contactForce``, so a
+    model switched to pyramidal cones gives what ``friction_use`` (the bindings) gives."""
+    env = gym.make("wip_gym/KrangTray-v0").unwrapped
+    env.model.opt.cone = mujoco.mjtCone.mjCONE_PYRAMIDAL
+    env.reset(seed=0)
+    action = 0.2 * env.action_space.high
+    uses = []
+    for _ in range(100):
+        *_, info = env.step(action)
+        uses.append(info["cup_friction_use"])
+        assert info["cup_friction_use"] == env._cup_friction_use()
+    assert max(uses) > 0.0

@@ -81,6 +81,7 @@ mj_jacDot = _declare("mj_jacDot", _ptr, _ptr, _ptr, _ptr, _ptr, _int)  # as mj_j
 mju_quat2Mat = _declare("mju_quat2Mat", _ptr, _ptr)  # (res[9], quat[4])
 mj_jacSite = _declare("mj_jacSite", _ptr, _ptr, _ptr, _ptr, _int)  # (m, d, jacp, jacr, site)
 mj_jacSubtreeCom = _declare("mj_jacSubtreeCom", _ptr, _ptr, _ptr, _int)  # (m, d, jacp, body)
+mj_contactForce = _declare("mj_contactForce", _ptr, _ptr, _int, _ptr)  # (m, d, id, result[6])
 
 
 def _pointer_intrinsic(element: types.Type) -> Any:
@@ -107,6 +108,8 @@ float64_pointer: Any = _pointer_intrinsic(types.float64)
 """``(double *) address`` in compiled code (:func:`float64_view`, ``wip_gym.array_table``)."""
 int64_pointer: Any = _pointer_intrinsic(types.int64)
 """``(int64_t *) address`` in compiled code (``wip_gym.array_table``)."""
+int32_pointer: Any = _pointer_intrinsic(types.int32)
+"""``(int *) address`` in compiled code (the contacts' geom ids: ``wip_gym.envs.measures``)."""
 
 
 @njit(cache=True)

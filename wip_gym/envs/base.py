@@ -339,7 +339,6 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         self._measure_ints, self._measure_floats = ints, floats
         self._measures = np.zeros(ms.N_OUT)
         self._values = self._measures.tolist()
-        self._no_contacts = (np.zeros((0, 2), np.int32), np.zeros(0, np.int32), np.zeros((0, 9)))
         ms.compile_once()
         self._bind_views()
 
@@ -352,8 +351,6 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         self._view_xmat = d.xmat
         self._view_push = d.xfrc_applied[self._push_body]
         self._step_dt = float(m.opt.timestep) * self.frame_skip
-        self._elliptic = m.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
-        self._measure_ints[ms.I_ELLIPTIC] = self._elliptic
         self._measure_table = ms.address_table(m, d)
 
     # ----------------------------------------------------------------- model
@@ -608,22 +605,8 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         m, d = self.model, self.data
         if self._views_of[1] is not d or self._views_of[0] is not m:
             self._bind_views()
-        if d.ncon:
-            contact = d.contact
-            geom, address, frame = contact.geom, contact.efc_address, contact.frame
-        else:
-            geom, address, frame = self._no_contacts
         out = self._measures
-        env_measures(
-            self._measure_table,
-            geom,
-            address,
-            frame,
-            d.efc_force,
-            self._measure_ints,
-            self._measure_floats,
-            out,
-        )
+        env_measures(self._measure_table, d.ncon, self._measure_ints, self._measure_floats, out)
         values = out.tolist()
         (
             self._x,
@@ -708,7 +691,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         info["cup_upright"] = upright
         info["cup_on_plate"] = on_plate
         info["cup_on_tray"] = on_tray = on_plate and upright
-        info["cup_friction_use"] = use if self._elliptic else self._cup_friction_use()
+        info["cup_friction_use"] = use
         info["tray_offset"] = out[ms.TRAY_OFFSET : ms.TRAY_OFFSET + 3].copy()
         info["tray_on_hand"] = on_hand
         return on_tray and on_hand

@@ -21,7 +21,7 @@ import math
 from typing import Any
 
 import numpy as np
-from numba import njit, types
+from numba import carray, njit, types
 
 from wip_gym import mujoco_c as mjc
 from wip_gym.scene import CUP_HALF_HEIGHT, CUP_RADIUS, TRAY_HALF_SIZE
@@ -40,8 +40,8 @@ _HALF_X, _HALF_Y, _HALF_Z = (float(v) for v in TRAY_HALF_SIZE)
 I_BASE, I_WHEEL_L, I_WHEEL_R, I_PLANAR = 0, 1, 2, 3
 I_ROOT_QPOS, I_ROOT_DOF, I_QPOS_L, I_QPOS_R, I_DOF_L, I_DOF_R = 4, 5, 6, 7, 8, 9
 I_EE_SITE, I_TRAY, I_FREE_TRAY, I_TRAY_BODY, I_CUP_BODY, I_REST_SITE = 10, 11, 12, 13, 14, 15
-I_FLOOR, I_TRAY_GEOM, I_ELLIPTIC = 16, 17, 18
-N_INTS = 19  # the geoms' bits follow
+I_FLOOR, I_TRAY_GEOM = 16, 17
+N_INTS = 18  # the geoms' bits follow
 GEOM_FALL, GEOM_CUP = 1, 2
 
 # the float parameters
@@ -77,16 +77,17 @@ def step_measures(
     subtree_mass: np.ndarray,
     body_mass: np.ndarray,
     contact_geom: np.ndarray,
-    efc_address: np.ndarray,
     contact_frame: np.ndarray,
-    efc_force: np.ndarray,
+    contact_force: np.ndarray,
     ints: np.ndarray,
     floats: np.ndarray,
     out: np.ndarray,
 ) -> None:
     """Fill ``out`` (``N_OUT`` floats) from the data's arrays after ``mj_kinematics``,
-    ``mj_comPos``, ``mj_comVel`` and ``mj_subtreeVel``, and its contacts (``contact_geom``,
-    ``efc_address``, ``contact_frame``: ``ncon`` rows; ``efc_force``).
+    ``mj_comPos``, ``mj_comVel`` and ``mj_subtreeVel``, and its contacts (``ncon`` rows each:
+    ``contact_geom``, the geom pair; ``contact_frame``; ``contact_force``, the first three
+    entries of ``mj_contactForce``: normal, tangent 1, tangent 2 in the contact frame, zeros
+    for a contact excluded from the constraints).
 
     Robot: heading ``psi`` (the base's yaw), ``psid``, ``x = r (phi_L + phi_R) / 2 + r q1``,
     ``xd`` (planar: the root slide), the axle (the base origin), and ``theta = atan2(X, Z)``,
@@ -101,9 +102,9 @@ def step_measures(
     the plate and above it, its lowest point at most ``CUP_PLATE_GAP`` above the plate's top);
     the tray's tilt (its normal against world z); a free tray's offset from its nominal place
     (the ``tray_rest`` site's frame) and whether it is on the hand (within ``TRAY_HAND_GAP``
-    along the normal, within the half-size across); elliptic cones: the cup's friction use on the
-    plate (``wip_gym.envs.base.friction_use``: the norm of the net tangential force over ``mu``
-    times the net normal force, 0 without contact; pyramidal cones: left to the caller).
+    along the normal, within the half-size across); the cup's friction use on the plate
+    (``wip_gym.envs.base.friction_use``: the norm of the net tangential force over ``mu`` times
+    the net normal force, 0 without contact; either friction cone).
     """
     base, wl, wr = ints[I_BASE], ints[I_WHEEL_L], ints[I_WHEEL_R]
     r = floats[F_WHEEL_RADIUS]
@@ -242,10 +243,7 @@ def step_measures(
     out[TRAY_OFFSET], out[TRAY_OFFSET + 1], out[TRAY_OFFSET + 2] = ox, oy, oz
     out[TRAY_ON_HAND] = 1.0 if on_hand else 0.0
 
-    # the cup's friction use on the plate (elliptic cones: the contact-frame force in efc_force)
-    out[CUP_FRICTION_USE] = 0.0
-    if not ints[I_ELLIPTIC]:
-        return
+    # the cup's friction use on the plate, from the contact-frame forces
     plate = ints[I_TRAY_GEOM]
     normal = tx = ty = tz = 0.0
     for i in range(ncon):
@@ -255,16 +253,14 @@ def step_measures(
             or (g2 == plate and ints[N_INTS + g1] & GEOM_CUP)
         ):
             continue
-        a = efc_address[i]
-        if a < 0:  # excluded from the constraints
-            continue
-        f_n, f_1, f_2 = efc_force[a], efc_force[a + 1], efc_force[a + 2]
+        f_n, f_1, f_2 = contact_force[i, 0], contact_force[i, 1], contact_force[i, 2]
         # rows of the contact frame: normal, tangent 1, tangent 2
         F = contact_frame[i]
         normal += f_n
         tx += f_1 * F[3] + f_2 * F[6]
         ty += f_1 * F[4] + f_2 * F[7]
         tz += f_1 * F[5] + f_2 * F[8]
+    out[CUP_FRICTION_USE] = 0.0
     if normal > 0.0:
         out[CUP_FRICTION_USE] = math.sqrt(tx * tx + ty * ty + tz * tz) / (
             floats[F_CUP_FRICTION] * normal
@@ -272,17 +268,34 @@ def step_measures(
 
 
 # the table of addresses of env_measures: the model, the data, the arrays step_measures reads
-# (in its order) and their lengths
+# (in its order), their lengths, and where the data's contacts are
 T_MODEL, T_DATA = 0, 1
 T_ARRAYS = 2  # 12 addresses: qpos, qvel, xpos ... site_xmat, body_subtreemass, body_mass
 T_NQ, T_NV, T_NBODY, T_NSITE = 14, 15, 16, 17
-N_TABLE = 18
+T_CONTACT_GEOM, T_CONTACT_FRAME, T_CONTACT_STRIDE = 18, 19, 20
+N_TABLE = 21
+
+
+def contact_layout(data: Any) -> tuple[int, int, int]:
+    """Where ``data``'s contacts are: the addresses of the first contact's ``geom`` and ``frame``
+    and the size of MuJoCo's ``mjContact`` (bytes). MuJoCo keeps the contacts at the start of
+    the data's arena, which is allocated once per MjData (``mj_resetData`` and ``mj_step`` do
+    not move it; ``tests/test_step_measures.py`` checks this along episodes), so the layout is
+    taken once and compiled code reads the first ``data.ncon`` contacts through it instead of
+    the bindings' per-step views (four Python objects and four arrays to unbox, about 3 us)."""
+    contact = data.contact
+    geom, frame = contact.geom, contact.frame
+    if geom.strides[0] != frame.strides[0] or geom.dtype != np.int32:
+        raise RuntimeError(
+            f"unexpected mjContact layout: {geom.dtype}, {geom.strides}, {frame.strides}"
+        )
+    return int(geom.ctypes.data), int(frame.ctypes.data), int(geom.strides[0])
 
 
 def address_table(model: Any, data: Any) -> np.ndarray:
     """The table of :func:`env_measures`: the addresses of ``model``, ``data`` and the arrays
     :func:`step_measures` reads (MuJoCo allocates them once per MjModel/MjData: the table is
-    valid while both live), and their sizes."""
+    valid while both live), their sizes, and the contacts' layout (:func:`contact_layout`)."""
     arrays = (
         data.qpos,
         data.qvel,
@@ -306,28 +319,34 @@ def address_table(model: Any, data: Any) -> np.ndarray:
         model.nbody,
         model.nsite,
     )
+    table[T_CONTACT_GEOM], table[T_CONTACT_FRAME], table[T_CONTACT_STRIDE] = contact_layout(data)
     return table
 
 
 @njit(cache=True)
 def env_measures(
-    table: np.ndarray,
-    contact_geom: np.ndarray,
-    efc_address: np.ndarray,
-    contact_frame: np.ndarray,
-    efc_force: np.ndarray,
-    ints: np.ndarray,
-    floats: np.ndarray,
-    out: np.ndarray,
+    table: np.ndarray, ncon: int, ints: np.ndarray, floats: np.ndarray, out: np.ndarray
 ) -> None:
     """MuJoCo's kinematics, ``mj_comPos``, ``mj_comVel`` and ``mj_subtreeVel`` on the data of
-    ``table`` (:func:`address_table`), then :func:`step_measures` on its arrays: the env's
-    measures after a step in one compiled call with eight arguments."""
+    ``table`` (:func:`address_table`), its first ``ncon`` (``data.ncon``) contacts' geom pairs,
+    frames and forces (``mj_contactForce``), then :func:`step_measures` on its arrays: the
+    env's measures after a step in one compiled call."""
     model, data = np.uint64(table[T_MODEL]), np.uint64(table[T_DATA])
     mjc.mj_kinematics(model, data)
     mjc.mj_comPos(model, data)
     mjc.mj_comVel(model, data)  # mj_subtreeVel reads the bodies' velocities (cvel)
     mjc.mj_subtreeVel(model, data)
+    geom = np.empty((ncon, 2), np.int32)
+    frame = np.empty((ncon, 9))
+    force = np.empty((ncon, 3))
+    result = np.empty(6)
+    stride = table[T_CONTACT_STRIDE]
+    for i in range(ncon):
+        pair = carray(mjc.int32_pointer(np.uint64(table[T_CONTACT_GEOM] + i * stride)), 2)
+        geom[i, 0], geom[i, 1] = pair[0], pair[1]
+        frame[i] = mjc.float64_view(table[T_CONTACT_FRAME] + i * stride, (9,))
+        mjc.mj_contactForce(model, data, i, result.ctypes.data)
+        force[i, 0], force[i, 1], force[i, 2] = result[0], result[1], result[2]
     nbody, nsite = table[T_NBODY], table[T_NSITE]
     a = T_ARRAYS
 
@@ -347,10 +366,9 @@ def env_measures(
         view(9, (nsite, 9)),
         view(10, (nbody,)),
         view(11, (nbody,)),
-        contact_geom,
-        efc_address,
-        contact_frame,
-        efc_force,
+        geom,
+        frame,
+        force,
         ints,
         floats,
         out,
@@ -373,33 +391,22 @@ def action_effort(action: np.ndarray, table: np.ndarray) -> float:
 
 
 _F1, _F2 = types.float64[::1], types.float64[:, ::1]
-#: the one version the env calls: MuJoCo's arrays (contiguous), the contacts' of any layout
-#: (strided views into MuJoCo's contact structs; numpy calls one row, or none, contiguous)
+#: the one version: MuJoCo's arrays and the contacts' (gathered by env_measures), contiguous
 SIGNATURE = types.void(
     *(_F1, _F1),  # qpos, qvel
     *(_F2,) * 8,  # xpos ... site_xmat
     *(_F1, _F1),  # body_subtreemass, body_mass
-    types.int32[:, :],
-    types.int32[:],
-    types.float64[:, :],
-    _F1,  # efc_force
+    types.int32[:, ::1],  # the contacts' geom pairs, frames and forces
+    _F2,
+    _F2,
     types.int64[::1],
     _F1,
     _F1,
 )
 
 
-#: the env's version: the contacts as in SIGNATURE
-ENV_SIGNATURE = types.void(
-    types.int64[::1],
-    types.int32[:, :],
-    types.int32[:],
-    types.float64[:, :],
-    _F1,
-    types.int64[::1],
-    _F1,
-    _F1,
-)
+#: the env's version: its table, ``data.ncon``, its parameters and results
+ENV_SIGNATURE = types.void(types.int64[::1], types.intp, types.int64[::1], _F1, _F1)
 
 #: an action of any layout, read-only too (``np.asarray`` of a JAX array)
 ACTION_SIGNATURE = types.float64(types.Array(types.float64, 1, "A", readonly=True), _F2)
