@@ -16,6 +16,11 @@ import wip_gym  # noqa: F401
 from controllers.hierarchical import HierarchicalConfig, HierarchicalController
 from controllers.high_level.mpc import ModelPredictiveController, MPCStep
 from controllers.high_level.receding_horizon import HighLevel, HighLevelConfig
+from controllers.low_level.compiled_step import rows_and_kernel
+from controllers.low_level.kernel import kernel_step
+from controllers.low_level.task_stack import stack_rows
+from wip_gym.envs.measures import env_measures
+from wip_gym.minimal_kernels import robot_update_at
 
 STEPS = 45
 
@@ -105,3 +110,13 @@ def test_delay_is_validated_and_a_pending_solve_survives_pickling() -> None:
     assert copy._executor is None and copy.config.mpc_delay_steps == 3
     assert copy._pending is not None and copy._pending[1] == 20
     np.testing.assert_array_equal(copy._pending[0].result().predicted_states, np.ones((3, 2)))
+
+
+def test_the_control_loops_compiled_calls_release_the_gil() -> None:
+    """A delayed MPC's thread needs the GIL to start its solve and to take its result; the
+    control thread holds it through Python and gives it up only in calls that release it
+    (MuJoCo's ``mj_step``, and these compiled calls). Held through them, the solve waited a
+    whole control step for each hand-over and was often not done ``d = 5`` steps later
+    (docs/performance.md §13)."""
+    for kernel in (robot_update_at, rows_and_kernel, stack_rows, kernel_step, env_measures):
+        assert kernel.targetoptions.get("nogil") is True, kernel.__name__

@@ -531,7 +531,7 @@ UPDATE_SCALARS = ("psi", "psid", "cos_psi", "sin_psi", "body_mass", "theta", "th
 """The entries of :func:`robot_update`'s ``scalars``, in order."""
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def robot_update_at(table: np.ndarray, dynamics: bool) -> bool:
     """:func:`robot_update` on the arrays of ``table`` (:data:`UPDATE_ENTRIES`): one array to
     unbox instead of :func:`robot_update`'s 33 array arguments (``wip_gym.array_table``).

@@ -238,7 +238,7 @@ def step_table(
     return ArrayTable([entries[name] for name in ENTRIES], ENTRIES)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def rows_and_kernel(table: NDArray[np.int64]) -> bool:
     """The robot's scalars into the stack's (:func:`robot_scalars_into`), :func:`stack_rows`,
     :func:`kernel_step` (with eq. ``iso3`` from the robot's ``A``, ``h``) and, when the

@@ -187,7 +187,7 @@ class LowLevelKernel:
         )
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def kernel_step(
     with_iso: bool,
     A: Array,

@@ -110,7 +110,7 @@ def robot_scalars_into(robot_scalars: np.ndarray, nu: np.ndarray, scalars: np.nd
     scalars[4] = 0.0 if index_psi < 0 else nu[index_psi]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def stack_rows(
     model: int,
     data: int,

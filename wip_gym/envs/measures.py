@@ -323,7 +323,7 @@ def address_table(model: Any, data: Any) -> np.ndarray:
     return table
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def env_measures(
     table: np.ndarray, ncon: int, ints: np.ndarray, floats: np.ndarray, out: np.ndarray
 ) -> None:
