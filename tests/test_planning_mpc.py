@@ -3,16 +3,17 @@
 from __future__ import annotations
 
 import gymnasium as gym
+import jax
 import numpy as np
 import pytest
 
 import wip_gym  # noqa: F401
 from controllers.baselines.decoupled import DecoupledLQRController
 from controllers.baselines.decoupled_mpc import DecoupledMPCController
-from controllers.high_level.mpc import ModelPredictiveController
+from controllers.high_level.mpc import ModelPredictiveController, pack_inputs, unpack_inputs
 from controllers.high_level.planning import PlanConfig, plan_to_goal
 from controllers.policy import make_robot
-from controllers.simplified.wipm import params_from_lambda, planar_dynamics
+from controllers.simplified.wipm import WIPMParams, params_from_lambda, planar_dynamics
 from controllers.simplified.wipm_problem import wipm_state
 
 
@@ -148,3 +149,23 @@ def test_decoupled_mpc_drives_to_the_goal_and_stops(env_id: str, goal) -> None:
     info = closed_loop(env_id, goal)
     assert info["goal_distance"] < 0.05
     assert abs(info["xd"]) < 0.05
+
+
+def test_the_packed_host_inputs_unpack_to_the_step_arguments() -> None:
+    """``pack_inputs`` puts the MPC step's host inputs in one vector (one transfer per step);
+    ``unpack_inputs``, inside the compiled step, gives back the index, the flag, the state and
+    every leaf of ``lambda(q)`` exactly, in their shapes."""
+    rng = np.random.default_rng(3)
+    params = WIPMParams(*rng.normal(size=3), rng.normal(size=(3, 3)), *rng.normal(size=7))
+    state = rng.normal(size=8)
+    plan_states, plan_controls = np.zeros((40, 8)), np.zeros((40, 2))
+    for index, first in ((0, True), (1234, False)):
+        host = pack_inputs(index, first, state, params)
+        assert host.shape == (2 + 8 + 19,)
+        i, f, s, p, *rest = jax.jit(unpack_inputs)(host, np.zeros(2), plan_states, plan_controls)
+        assert int(i) == index and bool(f) is first
+        np.testing.assert_array_equal(s, state)
+        for name, ours, theirs in zip(WIPMParams._fields, p, params, strict=True):
+            assert np.shape(ours) == np.shape(theirs), name
+            np.testing.assert_array_equal(ours, theirs, err_msg=name)
+        np.testing.assert_array_equal(rest[1], plan_states)

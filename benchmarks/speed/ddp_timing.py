@@ -17,7 +17,7 @@ import jax
 import numpy as np
 
 from benchmarks.speed.ddp_bench import GOALS, krang_params
-from controllers.high_level.mpc import ModelPredictiveController
+from controllers.high_level.mpc import ModelPredictiveController, pack_inputs
 from controllers.high_level.planning import PlanConfig, plan_to_goal, planning_problem
 from controllers.simplified.wipm import WIPMParams
 from controllers.simplified.wipm_problem import ddp_solver_for, refs_for
@@ -65,7 +65,8 @@ def bench(problem: str, params: WIPMParams, theta0: float, reps: int, mpc_steps:
     x0 = jax.device_put(plan.states[0])
     p = jax.device_put(params)
     bare = [_time(lambda: mpc.solver.jitted(x0, warm, p, refs_mpc)) for _ in range(mpc_steps)]
-    step_args = (0, False, x0, p, warm, mpc._plan_states, mpc._plan_controls)
+    host = jax.device_put(pack_inputs(0, False, plan.states[0], params))
+    step_args = (host, warm, mpc._plan_states, mpc._plan_controls)
     step_bare = [_time(lambda: mpc.compiled.jitted(*step_args)) for _ in range(mpc_steps)]
     return {
         "plan_ms": _median_ms(plan_times),

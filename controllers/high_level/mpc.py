@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass, field
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -125,7 +126,13 @@ class _CompiledStep:
     small-loop option) rather than dispatching each of its ~40 top-level operations (the
     parameters' broadcasts along the horizon, the window's slices, the acceptance test, the
     packing) through its runtime one by one. Measured: the 3-D step ~3-4 units faster, the
-    same results bit for bit."""
+    same results bit for bit.
+
+    The host's inputs (the plan index, the first-step flag, the state and ``lambda(q)``'s 11
+    leaves) come packed in one vector (:func:`pack_inputs`): one transfer per step instead of
+    fourteen. Each transfer hands the GIL over and takes it back; beside the control loop
+    (``mpc_delay_steps > 0``) every take waited for the control thread to let go of it
+    (docs/performance.md §13). The results are the same to the bit."""
 
     def __init__(self, problem: WIPMProblem, ddp: DDPConfig, horizon: int) -> None:
         self.solver = ddp_solver_for(problem, ddp)
@@ -135,25 +142,23 @@ class _CompiledStep:
         self.jitted = jax.jit(self._one_trip)
 
     def _one_trip(
-        self,
-        index: jax.Array,
-        first: jax.Array,
-        state: jax.Array,
-        params: WIPMParams,
-        warm: jax.Array,
-        plan_states: jax.Array,
-        plan_controls: jax.Array,
+        self, host: jax.Array, warm: jax.Array, plan_states: jax.Array, plan_controls: jax.Array
     ) -> tuple[jax.Array, jax.Array]:
-        """:meth:`_step` as the body of a ``while`` loop that stops after its first trip (a
-        flag, not a counter: XLA cannot see the trip count and inline the loop away)."""
+        """:meth:`_step` of the host's inputs packed in one vector (:func:`pack_inputs`,
+        unpacked inside the loop) as the body of a ``while`` loop that stops after its first
+        trip (a flag, not a counter: XLA cannot see the trip count and inline the loop away)."""
         self.trace_count += 1
-        args = (index, first, state, params, warm, plan_states, plan_controls)
+        inputs = (host, warm, plan_states, plan_controls)
+
+        def step(*values: jax.Array) -> tuple[jax.Array, jax.Array]:
+            return self._step(*unpack_inputs(*values))
+
         # the loop's carry before its trip: zeros shaped as _step's outputs
-        shapes = jax.eval_shape(self._step, *args)
+        shapes = jax.eval_shape(step, *inputs)
         initial = (*(jnp.zeros(a.shape, a.dtype) for a in shapes), jnp.array(False))
 
         def body(carry: tuple[jax.Array, ...]) -> tuple[jax.Array, ...]:
-            return (*self._step(*args), jnp.array(True))
+            return (*step(*inputs), jnp.array(True))
 
         packed, next_warm, _ = jax.lax.while_loop(lambda carry: ~carry[2], body, initial)
         return packed, next_warm
@@ -200,6 +205,50 @@ class _CompiledStep:
         return packed, next_warm
 
 
+#: the host's inputs of a packed MPC step before the state: the plan index and the first flag
+_HEAD = 2
+#: WIPMParams' leaves in one vector: its scalars, with ``inertia_body``'s 9 entries (row-major)
+#: in its place
+_PARAM_SIZES = (1, 1, 1, 9, 1, 1, 1, 1, 1, 1, 1)
+
+
+def pack_inputs(index: int, first: bool, state: np.ndarray, params: WIPMParams) -> np.ndarray:
+    """The MPC step's host inputs as one float64 vector ``[index, first, state, params]``
+    (:func:`unpack_inputs` is its inverse inside the compiled step; the index is exact in
+    float64)."""
+    n = len(state)
+    host = np.empty(_HEAD + n + sum(_PARAM_SIZES))
+    host[0], host[1] = index, first
+    host[_HEAD : _HEAD + n] = state
+    at = _HEAD + n
+    for leaf, size in zip(params, _PARAM_SIZES, strict=True):
+        host[at : at + size] = np.ravel(leaf)
+        at += size
+    return host
+
+
+def unpack_inputs(
+    host: jax.Array, warm: jax.Array, plan_states: jax.Array, plan_controls: jax.Array
+) -> tuple[Any, ...]:
+    """The arguments of ``_CompiledStep._step`` from :func:`pack_inputs`' vector."""
+    n = plan_states.shape[1]
+    leaves, at = [], _HEAD + n
+    for size in _PARAM_SIZES:
+        leaves.append(host[at] if size == 1 else host[at : at + size].reshape(3, 3))
+        at += size
+    index = host[0].astype(jnp.int32)
+    first = host[1] != 0.0
+    return (
+        index,
+        first,
+        host[_HEAD : _HEAD + n],
+        WIPMParams(*leaves),
+        warm,
+        plan_states,
+        plan_controls,
+    )
+
+
 @functools.lru_cache(maxsize=16)
 def compiled_step(problem: WIPMProblem, ddp: DDPConfig, horizon: int) -> _CompiledStep:
     """The shared compiled MPC step of a problem, solver settings and horizon."""
@@ -210,8 +259,8 @@ class ModelPredictiveController:
     """Receding-horizon DDP tracking a :class:`Plan` (see the module docstring).
 
     The plan (padded past its end: the goal state, zero controls) is put on the device once;
-    each :meth:`step` is one call of the shared compiled step (:func:`compiled_step`) and one
-    transfer of its packed result.
+    each :meth:`step` is one call of the shared compiled step (:func:`compiled_step`) with its
+    host inputs packed in one vector (:func:`pack_inputs`) and one transfer of its packed result.
     """
 
     def __init__(self, plan: Plan, config: MPCConfig | None = None) -> None:
@@ -244,8 +293,9 @@ class ModelPredictiveController:
         if not np.isfinite(state).all():
             raise ValueError(f"MPC state is not finite: {state}")
         index = min(max(int(index), 0), self._last_index)
+        host = pack_inputs(index, self._first, state, params)
         packed, self._warm = self.compiled.jitted(
-            index, self._first, state, params, self._warm, self._plan_states, self._plan_controls
+            host, self._warm, self._plan_states, self._plan_controls
         )
         self._first = False
         self.solves += 1
