@@ -20,12 +20,13 @@ import pytest
 
 import benchmarks.speed.profile as profile_module
 from benchmarks.cli import main
+from benchmarks.speed import mpc_phase
 from benchmarks.speed.closed_loop_table import MissingFigure
 from benchmarks.speed.closed_loop_table import comparison as closed_loop_comparison
 from benchmarks.speed.closed_loop_table import figure as closed_loop_figure
 from benchmarks.speed.closed_loop_table import main as closed_loop_main
 from benchmarks.speed.closed_loop_table import table as closed_loop_table
-from benchmarks.speed.env_own_work import own_work_us
+from benchmarks.speed.env_own_work import own_work
 from benchmarks.speed.profile import ROWS, floor_times, profile_episode, replay_step
 from benchmarks.speed.yardstick import (
     REFERENCE_ENV,
@@ -338,10 +339,10 @@ def test_closed_loop_table_refuses_a_profile_without_a_task_qp() -> None:
 def test_env_own_work_is_the_step_beyond_its_physics() -> None:
     """``benchmarks.speed.env_own_work``: positive (the env does work beyond ``mj_step``: its
     measures, observation and info) and finite; bad arguments refused."""
-    own = own_work_us("wip_gym/Planar-v0", states=3, repeats=20)
-    assert 0.0 < own < math.inf
+    units, us = own_work("wip_gym/Planar-v0", states=3, repeats=20)
+    assert 0.0 < units < math.inf and 0.0 < us < math.inf
     with pytest.raises(ValueError, match=">= 1"):
-        own_work_us("wip_gym/Planar-v0", states=0)
+        own_work("wip_gym/Planar-v0", states=0)
 
 
 def test_closed_loop_comparison_shows_each_columns_rounds_before_and_after() -> None:
@@ -407,3 +408,29 @@ def test_yardstick_check_prints_its_ratios(capsys: pytest.CaptureFixture[str]) -
     with pytest.raises(SystemExit) as refused:
         yardstick_check_main(["--steps", "100"])
     assert refused.value.code == 2
+
+
+def test_mpc_phase_groups_the_control_steps_by_their_place_in_the_mpc_period() -> None:
+    times = np.zeros(mpc_phase.SKIPPED_STEPS + 40)
+    steps = np.arange(len(times))
+    times[:] = 1e-6 * (100.0 + (steps % 10 == 5) * 400.0)  # phase 5 waits 400 us longer
+    times[: mpc_phase.SKIPPED_STEPS] = 1.0  # the start: left out
+    rows = mpc_phase.phase_table(times, 10)
+    assert [int(r["phase"]) for r in rows] == list(range(10))
+    for row in rows:
+        expected = 500.0 if row["phase"] == 5 else 100.0
+        for key in ("mean", "median", "p90", "p99"):
+            assert row[key] == pytest.approx(expected)
+    with pytest.raises(ValueError, match="too few control steps"):
+        mpc_phase.phase_table(times[: mpc_phase.SKIPPED_STEPS + 5], 10)
+    with pytest.raises(ValueError, match="steps_per_mpc"):
+        mpc_phase.phase_table(times, 0)
+
+
+def test_mpc_phase_runs_a_delayed_episode() -> None:
+    result = mpc_phase.run("wip_gym/PlanarTray-v0", delay=3, duration=0.3, seed=0)
+    assert len(result["phases"]) == 10
+    assert all(np.isfinite(row["mean"]) and row["mean"] > 0 for row in result["phases"])
+    assert result["mpc_step_us"]["median"] > 0
+    # the patch that times the solves is undone
+    assert mpc_phase.mpc_module.ModelPredictiveController.step.__name__ == "step"

@@ -5,11 +5,13 @@
 For every registered robot env: ``--states`` states of an episode under zero torques (5 steps
 apart); at each, the median over ``--repeats`` of ``env.step`` and of a bare ``mj_step`` of the
 env's model, each from that state restored by ``mj_copyData`` (the same restore in both, so it
-cancels); the env's own work is their difference, its median over the states is reported in
-units of a bare ``mj_step`` of Krang-v0 timed in the same process
-(``benchmarks.speed.yardstick``). Unlike ``wip-bench profile``'s ``env_overhead`` (``env.step``
-minus its own ``mj_step`` inside the closed loop, where the controller's work evicts the env's
-code and data from the caches), it measures the env alone, warm.
+cancels), and a warm burst of the unit (a bare ``mj_step`` of Krang-v0,
+``benchmarks.speed.yardstick``) right after: the state's own work is the difference of the
+two medians over the burst's median, and the env's figure is the median over the states. (The
+unit beside each state, not once at the end: this machine's speed drifts by 1.5 times within
+a minute.) Unlike ``wip-bench profile``'s ``env_overhead`` (``env.step`` minus its own
+``mj_step`` inside the closed loop, where the controller's work evicts the env's code and data
+from the caches), it measures the env alone, warm.
 """
 
 from __future__ import annotations
@@ -21,15 +23,20 @@ import mujoco
 import numpy as np
 
 import wip_gym  # noqa: F401  (registers the envs)
-from benchmarks.speed.yardstick import median_call_us, reference_step_us
+from benchmarks.speed.yardstick import ReferenceStep, median_call_us
 
 ENVS = ("wip_gym/KrangTray-v0", "wip_gym/PlanarTray-v0", "wip_gym/Krang-v0", "wip_gym/Planar-v0")
 
 
-def own_work_us(env_id: str, states: int = 40, repeats: int = 100) -> float:
-    """The median over ``states`` states of ``env.step`` minus a bare ``mj_step`` (us)."""
+def own_work(
+    env_id: str, states: int = 40, repeats: int = 100, reference: ReferenceStep | None = None
+) -> tuple[float, float]:
+    """The env's own work ``(units, us)``: the medians over ``states`` states of ``env.step``
+    minus a bare ``mj_step``, in units of the burst of ``reference`` taken at that state, and
+    in microseconds."""
     if states < 1 or repeats < 1:
         raise ValueError(f"states and repeats must be >= 1, got {states}, {repeats}")
+    reference = reference or ReferenceStep()
     env = gym.make(env_id).unwrapped
     env.reset(seed=0)
     m, d = env.model, env.data
@@ -41,7 +48,7 @@ def own_work_us(env_id: str, states: int = 40, repeats: int = 100) -> float:
         snapshot = mujoco.MjData(m)
         mujoco.mj_copyData(snapshot, m, d)
         saved.append(snapshot)
-    differences = []
+    differences, units = [], []
     for snapshot in saved:
 
         def full(snapshot: mujoco.MjData = snapshot) -> None:
@@ -53,8 +60,10 @@ def own_work_us(env_id: str, states: int = 40, repeats: int = 100) -> float:
             mujoco.mj_step(m, d)
 
         differences.append(median_call_us(full, repeats) - median_call_us(bare, repeats))
+        units.append(1e6 * float(np.median(reference.burst())))
     env.close()
-    return float(np.median(differences))
+    ratios = np.asarray(differences) / np.asarray(units)
+    return float(np.median(ratios)), float(np.median(differences))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -64,11 +73,11 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.states < 1 or args.repeats < 1:
         parser.error("--states and --repeats must be >= 1")
-    figures = {env_id: own_work_us(env_id, args.states, args.repeats) for env_id in ENVS}
-    unit = reference_step_us()
-    print(f"env's own work per step, units (unit {unit:.1f} us, target <= 1):")
-    for env_id, us in figures.items():
-        print(f"  {env_id:24s} {us / unit:5.2f}  ({us:.1f} us)")
+    reference = ReferenceStep()
+    figures = {env_id: own_work(env_id, args.states, args.repeats, reference) for env_id in ENVS}
+    print("env's own work per step, units (target <= 1), and in us:")
+    for env_id, (units, us) in figures.items():
+        print(f"  {env_id:24s} {units:5.2f}  ({us:.1f} us)")
     return 0
 
 
