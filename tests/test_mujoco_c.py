@@ -136,7 +136,15 @@ def test_compiled_quat2mat_equals_the_binding() -> None:
 
 
 @njit
-def _contacts(model, data, ncon, geom_address, stride, geoms, forces) -> None:
+def _contacts(
+    model: int,
+    data: int,
+    ncon: int,
+    geom_address: int,
+    stride: int,
+    geoms: np.ndarray,
+    forces: np.ndarray,
+) -> None:
     result = np.empty(6)
     for i in range(ncon):
         pair = carray(mjc.int32_pointer(np.uint64(geom_address + i * stride)), 2)

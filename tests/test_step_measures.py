@@ -15,7 +15,13 @@ import pytest
 import wip_gym  # noqa: F401
 from tests.env_step_reference import reference_step
 from tests.test_env_step_reference import _assert_same
-from wip_gym.envs.measures import action_effort, contact_layout, step_measures
+from wip_gym.envs.measures import (
+    T_CONTACT_GEOM,
+    action_effort,
+    contact_layout,
+    gather_contacts,
+    step_measures,
+)
 
 
 @pytest.mark.parametrize("env_id", ["wip_gym/Planar-v0", "wip_gym/KrangTray-v0"])
@@ -67,6 +73,8 @@ def test_a_copied_env_measures_its_own_data() -> None:
         env.step(action)
     for copied in (copy.deepcopy(env), pickle.loads(pickle.dumps(env))):
         assert copied._measure_table[1] == copied.data._address != env.data._address
+        assert tuple(copied._measure_table[T_CONTACT_GEOM:]) == contact_layout(copied.data)
+        assert contact_layout(copied.data)[0] != contact_layout(env.data)[0]
         copied.set_state(env.data.qpos.copy(), env.data.qvel.copy())  # the same state
         copied.data.time = env.data.time
         copied.data.qacc_warmstart[:] = env.data.qacc_warmstart  # the solver's start too
@@ -91,7 +99,7 @@ def test_the_contacts_stay_where_their_layout_was_taken() -> None:
         env.step(action if step % 50 < 25 else -action)
         counts.add(env.data.ncon)
         assert contact_layout(env.data) == layout
-        assert tuple(env._measure_table[-3:]) == layout
+        assert tuple(env._measure_table[T_CONTACT_GEOM:]) == layout
     env.reset(seed=1)
     assert contact_layout(env.data) == layout
     assert len(counts) > 1  # the count changed along the way
@@ -110,3 +118,19 @@ def test_friction_use_with_pyramidal_cones_equals_the_bindings_reading() -> None
         uses.append(info["cup_friction_use"])
         assert info["cup_friction_use"] == env._cup_friction_use()
     assert max(uses) > 0.0
+
+
+def test_gather_contacts_refuses_more_contacts_than_the_arena_holds() -> None:
+    env = gym.make("wip_gym/Krang-v0").unwrapped
+    env.reset(seed=0)
+    for _ in range(5):  # forces of a step taken
+        env.step(np.zeros(env.action_space.shape))
+    table = env._measure_table
+    n = env.data.ncon
+    geom, frame, force = gather_contacts(table, n, True)
+    np.testing.assert_array_equal(geom, env.data.contact.geom)
+    np.testing.assert_array_equal(frame, env.data.contact.frame)
+    assert (force[:, 0] > 0).all()  # the wheels on the floor
+    assert not gather_contacts(table, n, False)[2].any()  # no forces asked: zeros
+    with pytest.raises(ValueError, match="data.ncon"):
+        gather_contacts(table, int(contact_layout(env.data)[3]) + 1, False)

@@ -1,12 +1,13 @@
 """The arithmetic of ``WIPEnv.step`` around its MuJoCo calls, compiled by numba.
 
 ``WIPEnv._measure`` makes one call of :func:`env_measures`, which runs MuJoCo's kinematics and
-subtree passes on the env's data and then :func:`step_measures`, which computes, from the
-data's arrays, every number of the step's observation, reward and info into a preallocated
-float buffer (indices below): the robot's measures (``psi``, ``x``, ``theta`` ... of
-``RobotModel``), the goal distance, the fall, the end effector's drift, and on a tray task the
-cup's pose in the tray frame and its state, the tray's place on the hand and the cup's friction
-use on the plate. The same arithmetic in plain Python floats is kept in
+subtree passes on the env's data, reads its contacts through addresses taken once per MjData
+(:func:`contact_layout`; the count is ``data.ncon``, passed in) and then :func:`step_measures`,
+which computes, from the data's arrays, every number of the step's observation, reward and
+info into a preallocated float buffer (indices below): the robot's measures (``psi``, ``x``,
+``theta`` ... of ``RobotModel``), the goal distance, the fall, the end effector's drift, and on
+a tray task the cup's pose in the tray frame and its state, the tray's place on the hand and
+the cup's friction use on the plate. The same arithmetic in plain Python floats is kept in
 ``tests/env_step_reference.py`` and compared step by step with the env
 (``tests/test_env_step_reference.py``).
 
@@ -170,6 +171,8 @@ def step_measures(
         floor = ints[I_FLOOR]
         for i in range(ncon):
             g1, g2 = contact_geom[i, 0], contact_geom[i, 1]
+            if g1 < 0 or g2 < 0:  # a flex's contact, not a pair of geoms
+                continue
             if (g1 == floor and ints[N_INTS + g2] & GEOM_FALL) or (
                 g2 == floor and ints[N_INTS + g1] & GEOM_FALL
             ):
@@ -248,9 +251,13 @@ def step_measures(
     normal = tx = ty = tz = 0.0
     for i in range(ncon):
         g1, g2 = contact_geom[i, 0], contact_geom[i, 1]
-        if not (
-            (g1 == plate and ints[N_INTS + g2] & GEOM_CUP)
-            or (g2 == plate and ints[N_INTS + g1] & GEOM_CUP)
+        if (
+            g1 < 0
+            or g2 < 0
+            or not (
+                (g1 == plate and ints[N_INTS + g2] & GEOM_CUP)
+                or (g2 == plate and ints[N_INTS + g1] & GEOM_CUP)
+            )
         ):
             continue
         f_n, f_1, f_2 = contact_force[i, 0], contact_force[i, 1], contact_force[i, 2]
@@ -272,24 +279,26 @@ def step_measures(
 T_MODEL, T_DATA = 0, 1
 T_ARRAYS = 2  # 12 addresses: qpos, qvel, xpos ... site_xmat, body_subtreemass, body_mass
 T_NQ, T_NV, T_NBODY, T_NSITE = 14, 15, 16, 17
-T_CONTACT_GEOM, T_CONTACT_FRAME, T_CONTACT_STRIDE = 18, 19, 20
-N_TABLE = 21
+T_CONTACT_GEOM, T_CONTACT_FRAME, T_CONTACT_STRIDE, T_CONTACT_CAPACITY = 18, 19, 20, 21
+N_TABLE = 22
 
 
-def contact_layout(data: Any) -> tuple[int, int, int]:
-    """Where ``data``'s contacts are: the addresses of the first contact's ``geom`` and ``frame``
-    and the size of MuJoCo's ``mjContact`` (bytes). MuJoCo keeps the contacts at the start of
-    the data's arena, which is allocated once per MjData (``mj_resetData`` and ``mj_step`` do
-    not move it; ``tests/test_step_measures.py`` checks this along episodes), so the layout is
-    taken once and compiled code reads the first ``data.ncon`` contacts through it instead of
-    the bindings' per-step views (four Python objects and four arrays to unbox, about 3 us)."""
+def contact_layout(data: Any) -> tuple[int, int, int, int]:
+    """Where ``data``'s contacts are: the addresses of the first contact's ``geom`` and ``frame``,
+    the size of MuJoCo's ``mjContact`` (bytes) and how many fit in the data's arena. MuJoCo
+    keeps the contacts at the start of the arena, which is allocated once per MjData
+    (``mj_resetData`` and ``mj_step`` do not move it; ``tests/test_step_measures.py`` checks
+    this along episodes), so the layout is taken once and compiled code reads the first
+    ``data.ncon`` contacts through it instead of the bindings' per-step views (four Python
+    objects and four arrays to unbox, about 3 us)."""
     contact = data.contact
     geom, frame = contact.geom, contact.frame
     if geom.strides[0] != frame.strides[0] or geom.dtype != np.int32:
         raise RuntimeError(
             f"unexpected mjContact layout: {geom.dtype}, {geom.strides}, {frame.strides}"
         )
-    return int(geom.ctypes.data), int(frame.ctypes.data), int(geom.strides[0])
+    stride = int(geom.strides[0])
+    return int(geom.ctypes.data), int(frame.ctypes.data), stride, int(data.narena) // stride
 
 
 def address_table(model: Any, data: Any) -> np.ndarray:
@@ -319,8 +328,34 @@ def address_table(model: Any, data: Any) -> np.ndarray:
         model.nbody,
         model.nsite,
     )
-    table[T_CONTACT_GEOM], table[T_CONTACT_FRAME], table[T_CONTACT_STRIDE] = contact_layout(data)
+    table[T_CONTACT_GEOM : T_CONTACT_CAPACITY + 1] = contact_layout(data)
     return table
+
+
+@njit(cache=True)
+def gather_contacts(
+    table: np.ndarray, ncon: int, forces: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The first ``ncon`` contacts of the data of ``table`` (:func:`address_table`), read
+    through :func:`contact_layout`: their geom pairs, frames and, if ``forces``, the first three
+    entries of ``mj_contactForce`` (normal, tangent 1, tangent 2 in the contact frame; zeros
+    otherwise). Raises if ``ncon`` is more than the arena holds (it must be ``data.ncon``)."""
+    if ncon < 0 or ncon > table[T_CONTACT_CAPACITY]:
+        raise ValueError("ncon must be data.ncon: more contacts than the data's arena holds")
+    model, data = np.uint64(table[T_MODEL]), np.uint64(table[T_DATA])
+    geom = np.empty((ncon, 2), np.int32)
+    frame = np.empty((ncon, 9))
+    force = np.zeros((ncon, 3))
+    result = np.empty(6)
+    stride = table[T_CONTACT_STRIDE]
+    for i in range(ncon):
+        pair = carray(mjc.int32_pointer(np.uint64(table[T_CONTACT_GEOM] + i * stride)), 2)
+        geom[i, 0], geom[i, 1] = pair[0], pair[1]
+        frame[i] = mjc.float64_view(table[T_CONTACT_FRAME] + i * stride, (9,))
+        if forces:
+            mjc.mj_contactForce(model, data, i, result.ctypes.data)
+            force[i, 0], force[i, 1], force[i, 2] = result[0], result[1], result[2]
+    return geom, frame, force
 
 
 @njit(cache=True, nogil=True)
@@ -328,25 +363,16 @@ def env_measures(
     table: np.ndarray, ncon: int, ints: np.ndarray, floats: np.ndarray, out: np.ndarray
 ) -> None:
     """MuJoCo's kinematics, ``mj_comPos``, ``mj_comVel`` and ``mj_subtreeVel`` on the data of
-    ``table`` (:func:`address_table`), its first ``ncon`` (``data.ncon``) contacts' geom pairs,
-    frames and forces (``mj_contactForce``), then :func:`step_measures` on its arrays: the
-    env's measures after a step in one compiled call."""
+    ``table`` (:func:`address_table`), its first ``ncon`` (``data.ncon``) contacts
+    (:func:`gather_contacts`; their forces only on a tray task, for the cup's friction use),
+    then :func:`step_measures` on its arrays: the env's measures after a step in one compiled
+    call."""
     model, data = np.uint64(table[T_MODEL]), np.uint64(table[T_DATA])
     mjc.mj_kinematics(model, data)
     mjc.mj_comPos(model, data)
     mjc.mj_comVel(model, data)  # mj_subtreeVel reads the bodies' velocities (cvel)
     mjc.mj_subtreeVel(model, data)
-    geom = np.empty((ncon, 2), np.int32)
-    frame = np.empty((ncon, 9))
-    force = np.empty((ncon, 3))
-    result = np.empty(6)
-    stride = table[T_CONTACT_STRIDE]
-    for i in range(ncon):
-        pair = carray(mjc.int32_pointer(np.uint64(table[T_CONTACT_GEOM] + i * stride)), 2)
-        geom[i, 0], geom[i, 1] = pair[0], pair[1]
-        frame[i] = mjc.float64_view(table[T_CONTACT_FRAME] + i * stride, (9,))
-        mjc.mj_contactForce(model, data, i, result.ctypes.data)
-        force[i, 0], force[i, 1], force[i, 2] = result[0], result[1], result[2]
+    geom, frame, force = gather_contacts(table, ncon, ints[I_TRAY] != 0)
     nbody, nsite = table[T_NBODY], table[T_NSITE]
     a = T_ARRAYS
 
