@@ -169,3 +169,16 @@ def test_the_packed_host_inputs_unpack_to_the_step_arguments() -> None:
             assert np.shape(ours) == np.shape(theirs), name
             np.testing.assert_array_equal(ours, theirs, err_msg=name)
         np.testing.assert_array_equal(rest[1], plan_states)
+    # a state of another length than the plan's is refused, not read as parameters
+    with pytest.raises(ValueError, match="packed MPC inputs"):
+        unpack_inputs(
+            pack_inputs(0, True, state, params), np.zeros(2), plan_states[:, :4], plan_controls
+        )
+
+
+def test_the_mpc_refuses_a_state_of_another_length_than_its_plan() -> None:
+    env, robot, params, state = robot_state("wip_gym/Planar-v0")
+    plan = plan_to_goal(state, params, np.array([0.5, 0.0]), planar=True)
+    mpc = ModelPredictiveController(plan)
+    with pytest.raises(ValueError, match="MPC state must have shape"):
+        mpc.step(0, np.zeros(8), params)

@@ -7,23 +7,27 @@ One episode of ``unified`` with the MPC beside the loop (``mpc_delay_steps = --d
 control steps grouped by ``step % steps_per_mpc``: phase 0 starts the solve in the background
 thread, phase ``d`` takes its solution (and waits if the solve is not done). Each phase's mean,
 median, p90 and p99 (us) and, for the episode, the MPC step's own time in its thread (median
-and p90: from the call of ``ModelPredictiveController.step`` to its return). The first 100
-steps (the start) are left out. Times in microseconds of the machine it runs on: compare runs
+and p90: from the call of ``ModelPredictiveController.step`` to its return) and the control
+thread's wait for it at phase ``d`` (``HighLevel._wait_pending``). The first 100 steps (the
+start) are left out of the phases. Times in microseconds of the machine it runs on: compare runs
 of one process, or runs alternated with the same command (docs/performance.md §13).
 """
 
 from __future__ import annotations
 
 import argparse
+import threading
 import time
 from collections.abc import Sequence
 from typing import Any
+from unittest import mock
 
 import numpy as np
 
 from benchmarks.overrides import resolve_run
 from benchmarks.rollout import rollout
 from controllers.high_level import mpc as mpc_module
+from controllers.high_level.receding_horizon import HighLevel
 from controllers.optimizer import jax_setup
 
 SKIPPED_STEPS = 100
@@ -57,49 +61,65 @@ def phase_table(control_times_s: np.ndarray, steps_per_mpc: int) -> list[dict[st
 
 
 def run(env_id: str, delay: int, duration: float, seed: int) -> dict[str, Any]:
-    """One episode (see the module docstring); the phase table and the MPC step's times."""
+    """One episode (see the module docstring); the phase table, the MPC step's times in its
+    thread and the control thread's waits for a solve (``HighLevel._wait_pending``), in us."""
+    if delay < 1:
+        raise ValueError(f"delay must be >= 1 (a solve beside the loop), got {delay}")
     overrides = {"unified.high_level.mpc_delay_steps": delay}
     spec = resolve_run(
         env_id, ["unified"], None, overrides=overrides, ignore_other_controllers=True
     )
-    solve_times: list[float] = []
-    step = mpc_module.ModelPredictiveController.step
+    solves: list[float] = []
+    waits: list[float] = []
+    solve, wait = mpc_module.ModelPredictiveController.step, HighLevel._wait_pending
 
-    def timed(self: Any, *args: Any, **kwargs: Any) -> Any:
+    def timed_solve(self: Any, *args: Any, **kwargs: Any) -> Any:
         start = time.perf_counter()
-        result = step(self, *args, **kwargs)
-        solve_times.append(time.perf_counter() - start)
+        result = solve(self, *args, **kwargs)
+        if threading.current_thread() is not threading.main_thread():  # beside the loop
+            solves.append(time.perf_counter() - start)
         return result
 
-    mpc_module.ModelPredictiveController.step = timed  # type: ignore[method-assign]
-    try:
+    def timed_wait(self: Any) -> None:
+        start = time.perf_counter()
+        wait(self)
+        waits.append(time.perf_counter() - start)
+
+    with (
+        mock.patch.object(mpc_module.ModelPredictiveController, "step", timed_solve),
+        mock.patch.object(HighLevel, "_wait_pending", timed_wait),
+    ):
         episode = rollout(
             env_id, spec.env_kwargs, "unified", spec.configs["unified"], seed, duration
         )
-    finally:
-        mpc_module.ModelPredictiveController.step = step  # type: ignore[method-assign]
+    if not solves:
+        raise ValueError(f"no MPC solve ran beside the loop in {duration} s: run longer")
     steps_per_mpc = episode.policy.high_level.steps_per_mpc
-    solves = np.asarray(solve_times[2:]) * 1e6  # after reset's compiling solve and the first
+    solve_us, wait_us = np.asarray(solves) * 1e6, np.asarray(waits) * 1e6
+    control = episode.control_times[SKIPPED_STEPS:]
     return {
         "phases": phase_table(episode.control_times, steps_per_mpc),
         "mpc_step_us": {
-            "median": float(np.median(solves)),
-            "p90": float(np.percentile(solves, 90)),
+            "median": float(np.median(solve_us)),
+            "p90": float(np.percentile(solve_us, 90)),
         },
-        "control_mean_us": float(episode.control_times[SKIPPED_STEPS:].mean() * 1e6),
-        "control_p99_us": float(np.percentile(episode.control_times[SKIPPED_STEPS:], 99) * 1e6),
+        "wait_us": {"median": float(np.median(wait_us)), "p90": float(np.percentile(wait_us, 90))},
+        "control_mean_us": float(control.mean() * 1e6),
+        "control_p99_us": float(np.percentile(control, 99) * 1e6),
     }
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--env", default="wip_gym/KrangTray-v0")
-    parser.add_argument("--delay", type=int, default=5)
+    parser.add_argument("--delay", type=int, default=5, help="mpc_delay_steps, >= 1")
     parser.add_argument("--duration", type=float, default=8.0)
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
     if args.duration <= 0:
         parser.error("--duration must be positive")
+    if args.delay < 1:
+        parser.error("--delay must be >= 1 (the MPC beside the loop)")
     jax_setup.configure()
     result = run(args.env, args.delay, args.duration, args.seed)
     print(f"unified on {args.env}, mpc_delay_steps = {args.delay}, seed {args.seed}")
@@ -110,10 +130,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"| {int(row['phase'])} | {row['mean']:.0f} | {row['median']:.0f} | "
             f"{row['p90']:.0f} | {row['p99']:.0f} |"
         )
-    mpc = result["mpc_step_us"]
+    mpc, waits = result["mpc_step_us"], result["wait_us"]
     print(
         f"control mean {result['control_mean_us']:.0f} us, p99 {result['control_p99_us']:.0f} us; "
-        f"MPC step in its thread: median {mpc['median']:.0f} us, p90 {mpc['p90']:.0f} us"
+        f"MPC step in its thread: median {mpc['median']:.0f} us, p90 {mpc['p90']:.0f} us; "
+        f"the control step's wait for it: median {waits['median']:.0f} us, "
+        f"p90 {waits['p90']:.0f} us"
     )
     return 0
 

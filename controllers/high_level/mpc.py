@@ -129,10 +129,9 @@ class _CompiledStep:
     same results bit for bit.
 
     The host's inputs (the plan index, the first-step flag, the state and ``lambda(q)``'s 11
-    leaves) come packed in one vector (:func:`pack_inputs`): one transfer per step instead of
-    fourteen. Each transfer hands the GIL over and takes it back; beside the control loop
-    (``mpc_delay_steps > 0``) every take waited for the control thread to let go of it
-    (docs/performance.md §13). The results are the same to the bit."""
+    leaves) come packed in one vector (:func:`pack_inputs`): one argument to hand over instead
+    of fourteen. The results are the same to the bit, the step slightly faster
+    (docs/performance.md §13)."""
 
     def __init__(self, problem: WIPMProblem, ddp: DDPConfig, horizon: int) -> None:
         self.solver = ddp_solver_for(problem, ddp)
@@ -230,8 +229,14 @@ def pack_inputs(index: int, first: bool, state: np.ndarray, params: WIPMParams) 
 def unpack_inputs(
     host: jax.Array, warm: jax.Array, plan_states: jax.Array, plan_controls: jax.Array
 ) -> tuple[Any, ...]:
-    """The arguments of ``_CompiledStep._step`` from :func:`pack_inputs`' vector."""
+    """The arguments of ``_CompiledStep._step`` from :func:`pack_inputs`' vector (its state
+    as long as the plan's; another length is refused when the step is traced)."""
     n = plan_states.shape[1]
+    if host.shape != (_HEAD + n + sum(_PARAM_SIZES),):
+        raise ValueError(
+            f"packed MPC inputs of shape {host.shape} for a plan of {n} states: expected "
+            f"({_HEAD + n + sum(_PARAM_SIZES)},)"
+        )
     leaves, at = [], _HEAD + n
     for size in _PARAM_SIZES:
         leaves.append(host[at] if size == 1 else host[at : at + size].reshape(3, 3))
@@ -290,6 +295,10 @@ class ModelPredictiveController:
     def step(self, index: int, state: np.ndarray, params: WIPMParams) -> MPCStep:
         """Solve at plan time index ``index`` from WIPM ``state`` with parameters ``params``."""
         state = np.asarray(state, dtype=np.float64)
+        if state.shape != (self._shapes[0][1],):
+            raise ValueError(
+                f"MPC state must have shape ({self._shapes[0][1]},) (the plan's), got {state.shape}"
+            )
         if not np.isfinite(state).all():
             raise ValueError(f"MPC state is not finite: {state}")
         index = min(max(int(index), 0), self._last_index)

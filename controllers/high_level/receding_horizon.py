@@ -9,11 +9,11 @@ With ``mpc_delay_steps = d > 0`` the MPC runs as on a robot whose MPC computes b
 control loop: the solve from the state at step ``k`` runs in a background thread (the compiled
 DDP releases the GIL; so do the control loop's compiled calls and ``mj_step``, where the thread
 takes it to start the solve and to take its result) and its solution is applied from step
-``k + d`` on; until then the low
-level follows the previous solution further along its prediction. Step ``k + d`` waits for the
-solve if it is not done, so an episode is the same whatever the machine's speed (deterministic),
-and the control step's worst case no longer holds a whole MPC solve. ``d = 0`` (the default,
-the paper's timing) solves in the control step that uses it.
+``k + d`` on; until then the low level follows the previous solution further along its
+prediction. Step ``k + d`` waits for the solve if it is not done, so an episode is the same
+whatever the machine's speed (deterministic), and the control step's worst case no longer
+holds a whole MPC solve. ``d = 0`` (the default, the paper's timing) solves in the control step
+that uses it.
 """
 
 from __future__ import annotations
