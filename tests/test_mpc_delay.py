@@ -35,14 +35,21 @@ def _run(delay: int) -> tuple[np.ndarray, list[Any], list[Any], HierarchicalCont
     policy.reset(obs, info)
     mpc = policy.high_level.mpc
     calls: list[Any] = []
-    solve = mpc.step
+    inputs, solve = mpc.inputs, mpc.solve
 
-    def recorded(index: int, state: np.ndarray, params: Any) -> MPCStep:
-        solution = solve(index, state, params)
-        calls.append((index, np.array(state), params, solution))
+    # a solve is its inputs (on the control thread) and then the solve (in the MPC's thread
+    # when delayed): one at a time, in order
+    def recorded_inputs(index: int, state: np.ndarray, params: Any) -> np.ndarray:
+        calls.append([index, np.array(state), params, None])
+        return inputs(index, state, params)
+
+    def recorded_solve(host: np.ndarray) -> MPCStep:
+        solution = solve(host)
+        next(call for call in calls if call[3] is None)[3] = solution
         return solution
 
-    mpc.step = recorded  # type: ignore[method-assign]
+    mpc.inputs = recorded_inputs  # type: ignore[method-assign]
+    mpc.solve = recorded_solve  # type: ignore[method-assign]
     actions, in_use = [], []
     for _ in range(STEPS):
         action = policy(obs)

@@ -7,7 +7,7 @@ One episode of ``unified`` with the MPC beside the loop (``mpc_delay_steps = --d
 control steps grouped by ``step % steps_per_mpc``: phase 0 starts the solve in the background
 thread, phase ``d`` takes its solution (and waits if the solve is not done). Each phase's mean,
 median, p90 and p99 (us) and, for the episode, the MPC step's own time in its thread (median
-and p90: from the call of ``ModelPredictiveController.step`` to its return) and the control
+and p90: from the call of ``ModelPredictiveController.solve`` to its return) and the control
 thread's wait for it at phase ``d`` (``HighLevel._wait_pending``). The first 100 steps (the
 start) are left out of the phases. Times in microseconds of the machine it runs on: compare runs
 of one process, or runs alternated with the same command (docs/performance.md §13).
@@ -71,7 +71,7 @@ def run(env_id: str, delay: int, duration: float, seed: int) -> dict[str, Any]:
     )
     solves: list[float] = []
     waits: list[float] = []
-    solve, wait = mpc_module.ModelPredictiveController.step, HighLevel._wait_pending
+    solve, wait = mpc_module.ModelPredictiveController.solve, HighLevel._wait_pending
 
     def timed_solve(self: Any, *args: Any, **kwargs: Any) -> Any:
         start = time.perf_counter()
@@ -86,7 +86,7 @@ def run(env_id: str, delay: int, duration: float, seed: int) -> dict[str, Any]:
         waits.append(time.perf_counter() - start)
 
     with (
-        mock.patch.object(mpc_module.ModelPredictiveController, "step", timed_solve),
+        mock.patch.object(mpc_module.ModelPredictiveController, "solve", timed_solve),
         mock.patch.object(HighLevel, "_wait_pending", timed_wait),
     ):
         episode = rollout(

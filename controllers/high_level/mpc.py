@@ -294,6 +294,12 @@ class ModelPredictiveController:
 
     def step(self, index: int, state: np.ndarray, params: WIPMParams) -> MPCStep:
         """Solve at plan time index ``index`` from WIPM ``state`` with parameters ``params``."""
+        return self.solve(self.inputs(index, state, params))
+
+    def inputs(self, index: int, state: np.ndarray, params: WIPMParams) -> np.ndarray:
+        """The next :meth:`solve`'s host inputs (checked, packed: :func:`pack_inputs`). A solve
+        beside the control loop packs them on the control thread, so that its own thread
+        needs the GIL for as little Python as possible."""
         state = np.asarray(state, dtype=np.float64)
         if state.shape != (self._shapes[0][1],):
             raise ValueError(
@@ -302,7 +308,10 @@ class ModelPredictiveController:
         if not np.isfinite(state).all():
             raise ValueError(f"MPC state is not finite: {state}")
         index = min(max(int(index), 0), self._last_index)
-        host = pack_inputs(index, self._first, state, params)
+        return pack_inputs(index, self._first, state, params)
+
+    def solve(self, host: np.ndarray) -> MPCStep:
+        """One MPC step from :meth:`inputs`' vector (made after the previous solve)."""
         packed, self._warm = self.compiled.jitted(
             host, self._warm, self._plan_states, self._plan_controls
         )

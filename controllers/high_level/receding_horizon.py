@@ -123,7 +123,8 @@ class HighLevel:
         if self._executor is None:
             self._executor = ThreadPoolExecutor(1, thread_name_prefix="wip-gym-mpc")
         assert self.mpc is not None
-        self._pending = (self._executor.submit(self.mpc.step, index, state, params), self._step)
+        host = self.mpc.inputs(index, state, params)  # checked and packed here, not in the thread
+        self._pending = (self._executor.submit(self.mpc.solve, host), self._step)
 
     def _wait_pending(self) -> None:
         """Take the pending solve's solution (waiting for it) as the one in use."""
