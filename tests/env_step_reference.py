@@ -41,21 +41,12 @@ def friction_use(
     ]
     if not rows:
         return 0.0
-    address = contact.efc_address[:n].tolist()
     frames = contact.frame[:n].tolist()
-    elliptic = model.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
-    force = data.efc_force.tolist() if elliptic else []
     wrench = np.zeros(6)
     normal = tx = ty = tz = 0.0
     for i in rows:
-        a = address[i]
-        if a < 0:
-            continue
-        if elliptic:
-            f_n, f_1, f_2 = force[a], force[a + 1], force[a + 2]
-        else:
-            mujoco.mj_contactForce(model, data, i, wrench)
-            f_n, f_1, f_2 = wrench[:3].tolist()
+        mujoco.mj_contactForce(model, data, i, wrench)  # zeros for an excluded contact
+        f_n, f_1, f_2 = wrench[:3].tolist()
         _, _, _, a0, a1, a2, b0, b1, b2 = frames[i]
         normal += f_n
         tx += f_1 * a0 + f_2 * b0

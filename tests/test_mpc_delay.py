@@ -37,15 +37,18 @@ def _run(delay: int) -> tuple[np.ndarray, list[Any], list[Any], HierarchicalCont
     calls: list[Any] = []
     inputs, solve = mpc.inputs, mpc.solve
 
-    # a solve is its inputs (on the control thread) and then the solve (in the MPC's thread
-    # when delayed): one at a time, in order
+    # a solve is its inputs (on the control thread) and then the solve of those inputs (in the
+    # MPC's thread when delayed), one at a time
     def recorded_inputs(index: int, state: np.ndarray, params: Any) -> np.ndarray:
-        calls.append([index, np.array(state), params, None])
-        return inputs(index, state, params)
+        assert all(call[3] is not None for call in calls), "inputs made before the last solve"
+        host = inputs(index, state, params)
+        calls.append([index, np.array(state), params, None, host])
+        return host
 
     def recorded_solve(host: np.ndarray) -> MPCStep:
         solution = solve(host)
-        next(call for call in calls if call[3] is None)[3] = solution
+        (call,) = [call for call in calls if call[4] is host]
+        call[3] = solution
         return solution
 
     mpc.inputs = recorded_inputs  # type: ignore[method-assign]
@@ -71,7 +74,7 @@ def test_delayed_solutions_are_the_solves_of_d_steps_before() -> None:
         assert solution is calls[tick][3], k
     # the same solves made synchronously in the same order give the same solutions
     replay = ModelPredictiveController(policy.plan, policy.config.high_level.mpc)
-    for index, state, params, solution in calls:
+    for index, state, params, solution, _ in calls:
         again = replay.step(index, state, params)
         np.testing.assert_array_equal(again.predicted_states, solution.predicted_states)
         np.testing.assert_array_equal(again.predicted_controls, solution.predicted_controls)

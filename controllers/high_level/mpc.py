@@ -266,6 +266,8 @@ class ModelPredictiveController:
     The plan (padded past its end: the goal state, zero controls) is put on the device once;
     each :meth:`step` is one call of the shared compiled step (:func:`compiled_step`) with its
     host inputs packed in one vector (:func:`pack_inputs`) and one transfer of its packed result.
+    ``step`` is :meth:`solve` of :meth:`inputs`: a solve beside the control loop makes its
+    inputs on the control thread and solves in its own thread, one solve after the other.
     """
 
     def __init__(self, plan: Plan, config: MPCConfig | None = None) -> None:

@@ -6,9 +6,11 @@ Between MPC steps the low level tracks the *current MPC solution's* predicted ``
 the offline plan is only the MPC's reference, so the low level never fights a re-plan.
 
 With ``mpc_delay_steps = d > 0`` the MPC runs as on a robot whose MPC computes beside its
-control loop: the solve from the state at step ``k`` runs in a background thread (the compiled
-DDP releases the GIL; so do the control loop's compiled calls and ``mj_step``, where the thread
-takes it to start the solve and to take its result) and its solution is applied from step
+control loop: the solve from the state at step ``k`` (its inputs checked and packed at step
+``k`` on the control thread, ``ModelPredictiveController.inputs``) runs in a background thread
+(the compiled DDP releases the GIL; so do the control loop's compiled calls and ``mj_step``,
+where the thread takes it to start the solve and to take its result) and its solution is
+applied from step
 ``k + d`` on; until then the low level follows the previous solution further along its
 prediction. Step ``k + d`` waits for the solve if it is not done, so an episode is the same
 whatever the machine's speed (deterministic), and the control step's worst case no longer

@@ -285,7 +285,8 @@ N_TABLE = 22
 
 def contact_layout(data: Any) -> tuple[int, int, int, int]:
     """Where ``data``'s contacts are: the addresses of the first contact's ``geom`` and ``frame``,
-    the size of MuJoCo's ``mjContact`` (bytes) and how many fit in the data's arena. MuJoCo
+    the size of MuJoCo's ``mjContact`` (bytes) and a bound on their count (the arena's size over
+    that: the arena also holds the constraints and the stack, so fewer fit). MuJoCo
     keeps the contacts at the start of the arena, which is allocated once per MjData
     (``mj_resetData`` and ``mj_step`` do not move it; ``tests/test_step_measures.py`` checks
     this along episodes), so the layout is taken once and compiled code reads the first
