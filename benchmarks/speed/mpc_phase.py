@@ -63,8 +63,12 @@ def phase_table(control_times_s: np.ndarray, steps_per_mpc: int) -> list[dict[st
     return rows
 
 
+def _median_p90(values_us: np.ndarray) -> dict[str, float]:
+    return {"median": float(np.median(values_us)), "p90": float(np.percentile(values_us, 90))}
+
+
 def run(env_id: str, delay: int, duration: float, seed: int) -> dict[str, Any]:
-    """One episode (see the module docstring); the phase table, the MPC step's times in its
+    """One episode (see the module docstring); the phase table, the solve's times in the MPC's
     thread and the control thread's waits for a solve (``HighLevel._wait_pending``), in us."""
     if delay < 1:
         raise ValueError(f"delay must be >= 1 (a solve beside the loop), got {delay}")
@@ -104,11 +108,8 @@ def run(env_id: str, delay: int, duration: float, seed: int) -> dict[str, Any]:
     control = episode.control_times[SKIPPED_STEPS:]
     return {
         "phases": phase_table(episode.control_times, steps_per_mpc),
-        "solve_us": {
-            "median": float(np.median(solve_us)),
-            "p90": float(np.percentile(solve_us, 90)),
-        },
-        "wait_us": {"median": float(np.median(wait_us)), "p90": float(np.percentile(wait_us, 90))},
+        "solve_us": _median_p90(solve_us),
+        "wait_us": _median_p90(wait_us),
         "control_mean_us": float(control.mean() * 1e6),
         "control_p99_us": float(np.percentile(control, 99) * 1e6),
     }

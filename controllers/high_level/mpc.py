@@ -209,6 +209,7 @@ _HEAD = 2
 #: WIPMParams' leaves in one vector: its scalars, with ``inertia_body``'s 9 entries (row-major)
 #: in its place
 _PARAM_SIZES = (1, 1, 1, 9, 1, 1, 1, 1, 1, 1, 1)
+_N_PARAMS = sum(_PARAM_SIZES)
 
 
 def pack_inputs(index: int, first: bool, state: np.ndarray, params: WIPMParams) -> np.ndarray:
@@ -216,7 +217,7 @@ def pack_inputs(index: int, first: bool, state: np.ndarray, params: WIPMParams) 
     (:func:`unpack_inputs` is its inverse inside the compiled step; the index is exact in
     float64)."""
     n = len(state)
-    host = np.empty(_HEAD + n + sum(_PARAM_SIZES))
+    host = np.empty(_HEAD + n + _N_PARAMS)
     host[0], host[1] = index, first
     host[_HEAD : _HEAD + n] = state
     at = _HEAD + n
@@ -232,10 +233,10 @@ def unpack_inputs(
     """The arguments of ``_CompiledStep._step`` from :func:`pack_inputs`' vector (its state
     as long as the plan's; another length is refused when the step is traced)."""
     n = plan_states.shape[1]
-    if host.shape != (_HEAD + n + sum(_PARAM_SIZES),):
+    if host.shape != (_HEAD + n + _N_PARAMS,):
         raise ValueError(
             f"packed MPC inputs of shape {host.shape} for a plan of {n} states: expected "
-            f"({_HEAD + n + sum(_PARAM_SIZES)},)"
+            f"({_HEAD + n + _N_PARAMS},)"
         )
     leaves, at = [], _HEAD + n
     for size in _PARAM_SIZES:

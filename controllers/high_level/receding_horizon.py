@@ -10,12 +10,11 @@ control loop: the solve from the state at step ``k`` (its inputs checked and pac
 ``k`` on the control thread, ``ModelPredictiveController.inputs``) runs in a background thread
 (the compiled DDP releases the GIL; so do the control loop's compiled calls and ``mj_step``,
 where the thread takes it to start the solve and to take its result) and its solution is
-applied from step
-``k + d`` on; until then the low level follows the previous solution further along its
-prediction. Step ``k + d`` waits for the solve if it is not done, so an episode is the same
-whatever the machine's speed (deterministic), and the control step's worst case no longer
-holds a whole MPC solve. ``d = 0`` (the default, the paper's timing) solves in the control step
-that uses it.
+applied from step ``k + d`` on; until then the low level follows the previous solution further
+along its prediction. Step ``k + d`` waits for the solve if it is not done, so an episode is
+the same whatever the machine's speed (deterministic), and the control step's worst case no
+longer holds a whole MPC solve. ``d = 0`` (the default, the paper's timing) solves in the
+control step that uses it.
 """
 
 from __future__ import annotations
