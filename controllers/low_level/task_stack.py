@@ -9,11 +9,15 @@ the two frame tasks optionally wrapped by ``DisturbanceRejectingTask``) into the
    at the robot's state (``mj_jacSite``), and at the motion probe's idealised state the origin's
    and each site's Jacobian and its time derivative (``mj_jac``, ``mj_jacDot``), and the subtree
    rows of the CoM drift (``mj_subtreeVel``, ``mj_rnePostConstraint``; only with a theta task);
-2. reads the tasks' parameters (gains, targets, weights: the task objects stay their one
-   source, so a target changed between steps is seen);
+2. reads the tasks' parameters (gains, targets, weights) where they live: in this stack's
+   arrays (``params``, ``targets``, ``row_target``, ``weights``), which the tasks were given
+   when the stack was built (``controllers.low_level.tasks.StoredParameters``: an assignment
+   to a task, or a change in place of its target, writes there, so a target changed between
+   steps is seen without copying anything per step);
 3. makes one call of the compiled function.
 
-Step 2 runs first, in Python; steps 1 and 3 are then one compiled call (:func:`stack_rows`).
+Steps 1 and 3 are one compiled call (:func:`stack_rows`); before it, Python only marks which
+observers advance and copies the weights into the QP's row buffer (:meth:`prepare_parameters`).
 
 The disturbance observers keep their state in one array of this stack
 (``DisturbanceRejectingTask.adopt_memory``), advanced by the compiled call.
@@ -360,23 +364,13 @@ class CompiledTaskStack:
             if isinstance(task, PostureTask):
                 start, stop = self.row_start[k], self.row_start[k + 1]
                 self.row_column[start:stop] = task.columns
-        # what _pack_parameters reads and writes, per task: its kind and object (Python ints),
-        # its parameter row, its target (a view: 3, 3 x 3 or the posture rows) and its rows
-        self._packing: list[tuple[int, object, Array, Array | None, int, int]] = []
-        for k, task in enumerate(self._inner):
-            kind, start, stop = (
-                int(self.kinds[k]),
-                int(self.row_start[k]),
-                int(self.row_start[k + 1]),
-            )
-            target: Array | None = None
-            if kind == ct.POSITION:
-                target = self.targets[k, :3]
-            elif kind == ct.ORIENTATION:
-                target = self.targets[k].reshape(3, 3)
-            elif kind == ct.POSTURE:
-                target = self.row_target[start:stop]
-            self._packing.append((kind, task, self.params[k], target, start, stop))
+        # every task's gains, targets and weights live in the stack's arrays (the tasks'
+        # StoredParameters): the compiled call reads them in place, nothing is copied per step
+        self.weights = np.zeros(self.rows)
+        self._owner = object()  # what the tasks hold of this stack (not the stack: no cycle)
+        self._stored = [(task, self._parameter_slots(k)) for k, task in enumerate(self._inner)]
+        for task, slots in self._stored:
+            task.store_parameters(self._owner, slots)  # type: ignore[attr-defined]
         n_sites, nv = len(sites), m.nv
         self.scalars = np.zeros(6)
         self.scalars[5] = -1 if lay.index_psi is None else lay.index_psi
@@ -430,46 +424,56 @@ class CompiledTaskStack:
             "tasks instead of copying it (TaskQP does so by itself)"
         )
 
-    def _pack_parameters(self, w: Array) -> None:
-        """Step 2: gains, targets and weights from the task objects (item by item into views
-        made once: a tuple or a ravel per task cost more than the stores)."""
-        theta, spin, position, orientation = ct.THETA, ct.SPIN, ct.POSITION, ct.ORIENTATION
-        for kind, task, p, target, start, stop in self._packing:
-            if kind == theta:
-                p[0] = task.kp  # type: ignore[attr-defined]
-                p[1] = task.kv  # type: ignore[attr-defined]
-                p[2] = task.theta_d  # type: ignore[attr-defined]
-                p[3] = task.thetad_d  # type: ignore[attr-defined]
-                p[4] = task.thdd_d  # type: ignore[attr-defined]
-                w[start] = task.weight  # type: ignore[attr-defined]
-            elif kind == spin:
-                p[0] = task.kp  # type: ignore[attr-defined]
-                p[1] = task.kv  # type: ignore[attr-defined]
-                p[2] = task.psi_d  # type: ignore[attr-defined]
-                p[3] = task.psid_d  # type: ignore[attr-defined]
-                p[4] = task.psidd_d  # type: ignore[attr-defined]
-                w[start] = task.weight  # type: ignore[attr-defined]
-            else:
-                p[0] = task.kp  # type: ignore[attr-defined]
-                p[1] = task.kv  # type: ignore[attr-defined]
-                target[...] = task.target  # type: ignore[attr-defined,index]
-                w[start:stop] = (
-                    task.joint_weights  # type: ignore[attr-defined]
-                    if kind != position and kind != orientation
-                    else task.weight  # type: ignore[attr-defined]
+    def _parameter_slots(self, k: int) -> dict[str, tuple[Array, object]]:
+        """Where task ``k``'s parameters live in the stack's arrays (``StoredParameters``):
+        ``params[k]`` holds ``kp, kv`` and a theta or spin task's desired value, rate and
+        acceleration; ``targets[k]`` a frame task's target (3, or 3 x 3 row-major), the
+        posture rows of ``row_target`` a posture task's; ``weights`` every row's weight."""
+        kind, start, stop = (
+            int(self.kinds[k]),
+            int(self.row_start[k]),
+            int(self.row_start[k + 1]),
+        )
+        p = self.params[k]
+        slots: dict[str, tuple[Array, object]] = {"kp": (p, 0), "kv": (p, 1)}
+        if kind == ct.THETA or kind == ct.SPIN:
+            names = (
+                ("theta_d", "thetad_d", "thdd_d")
+                if kind == ct.THETA
+                else (
+                    "psi_d",
+                    "psid_d",
+                    "psidd_d",
                 )
+            )
+            for column, name in enumerate(names, start=2):
+                slots[name] = (p, column)
+            slots["weight"] = (self.weights, start)
+        elif kind == ct.POSTURE:
+            slots["target"] = (self.row_target[start:stop], None)
+            slots["joint_weights"] = (self.weights[start:stop], None)
+        else:
+            view = self.targets[k, :3] if kind == ct.POSITION else self.targets[k].reshape(3, 3)
+            slots["target"] = (view, None)
+            slots["weight"] = (self.weights, slice(start, stop))
+        return slots
 
     def prepare_parameters(self, robot: RobotModel, w: Array) -> None:
-        """Whether each observer advances at this state, and step 2 (the weights into
-        ``w``): what the one-call step (``controllers.low_level.compiled_step``) needs done in
-        Python before its call."""
+        """Whether each observer advances at this state, and the weights into ``w``: what the
+        one-call step (``controllers.low_level.compiled_step``) needs done in Python before
+        its call. A task another stack has stored since (``StoredParameters``) is stored here
+        again."""
         if robot is not self._robot:
             raise ValueError("a compiled task stack serves the robot model it was built for")
         cache = robot.cache
         advance = self.observer_advance
         for slot, key in enumerate(self._observer_keys):
             advance[slot] = key not in cache
-        self._pack_parameters(w)
+        owner = self._owner
+        for task, slots in self._stored:
+            if task._stored_by is not owner:  # type: ignore[attr-defined]
+                task.store_parameters(owner, slots)  # another stack took it since: take it back
+        w[:] = self.weights
 
     def prepare(self, robot: RobotModel, w: Array) -> None:
         """What :meth:`fill` does before its compiled call: :meth:`prepare_parameters`, then

@@ -16,6 +16,7 @@ docs/DESIGN.md §4, docs/ERRATA.md §5).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -25,6 +26,78 @@ from controllers.low_level.motion_probe import MotionProbe
 from wip_gym.robot_model import RobotModel
 
 Array = NDArray[np.float64]
+
+
+class StoredParameters:
+    """Where a task's gains, targets and weights live once a compiled task stack holds them.
+
+    ``controllers.low_level.task_stack.CompiledTaskStack`` keeps every task's parameters in
+    its own arrays, which its compiled call reads in place: it *stores* a task's parameters
+    there once (:meth:`store_parameters`), instead of copying them from the object every
+    step. From then on the stack's arrays are the parameters' one source, and the object
+    stays the way to change them:
+
+    * an assigned scalar (``task.kp = 3.0``, ``task.theta_d = ...``, ``task.weight = ...``)
+      is written into the stack's array too;
+    * an array parameter (a ``target``, ``joint_weights``) *is* a view on the stack's array:
+      an assignment of the same shape copies the new values into it (``task.target = R``),
+      and a change in place (``task.target[0] += 0.1``) is seen as well. An array passed in
+      before is not shared any more: change the task's own, not the one it was built from.
+      An assignment of another shape leaves the stack's arrays: the stack stores the task
+      again before its next call (a shape it cannot hold is refused there), or a new stack
+      is built when the task's structure changed with it (a posture task's columns).
+
+    A copy or a pickle of a task holds its own values and no stack's. A task taken by a
+    second stack is stored there (the first stack takes it back on its next step).
+    """
+
+    _stored_slots: dict[str, tuple[Array, Any]] | None = None  # set by store_parameters
+    _stored_by: object | None = None
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        slots = self._stored_slots
+        if slots is not None:
+            slot = slots.get(name)
+            if slot is not None:
+                array, index = slot
+                if index is None:  # an array parameter: the attribute is the stack's view
+                    if np.shape(value) == array.shape:
+                        array[...] = value
+                        return
+                    # another shape: the task leaves the stack's arrays; the stack stores it
+                    # again before its next call (and refuses a shape it cannot hold), or is
+                    # built anew if the task's structure changed (its posture columns)
+                    state = self.__dict__
+                    state["_stored_slots"] = state["_stored_by"] = None
+                else:
+                    array[index] = value
+        object.__setattr__(self, name, value)
+
+    def store_parameters(self, owner: object, slots: dict[str, tuple[Array, Any]]) -> None:
+        """Keep the parameters named in ``slots`` in ``owner``'s arrays: ``(array, index)`` for
+        a scalar (``array[index]``, a slice for a weight spread over several rows), ``(view,
+        None)`` for an array parameter, which then becomes ``view``. The current values are
+        written there first."""
+        state = self.__dict__
+        for name, (array, index) in slots.items():
+            value = state[name]
+            if index is None:
+                array[...] = value
+                state[name] = array
+            else:
+                array[index] = value
+        state["_stored_slots"] = slots
+        state["_stored_by"] = owner
+
+    def stored_by(self) -> object | None:
+        """The owner of the arrays that hold this task's parameters (None: the object)."""
+        return self._stored_by
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = dict(self.__dict__)
+        state.pop("_stored_slots", None)
+        state.pop("_stored_by", None)
+        return state
 
 
 def _skew(v: Array) -> Array:
@@ -93,7 +166,7 @@ def site_in_axle_frame(robot: RobotModel, site: int) -> tuple[Array, Array, Arra
 
 
 @dataclass
-class ThetaTask:
+class ThetaTask(StoredParameters):
     """Track the CoM pitch ``theta`` (the MPC's prediction, its ``thdd`` as feed-forward).
     Gains: the authors' COMAngleControl mode, KpCOM 50, KvCOM 100, weight 10."""
 
@@ -138,7 +211,7 @@ class ThetaTask:
 
 
 @dataclass
-class SpinTask:
+class SpinTask(StoredParameters):
     """Track the heading ``psi`` of the MPC's prediction (3-D)."""
 
     weight: float = 10.0
@@ -171,7 +244,7 @@ class SpinTask:
 
 
 @dataclass
-class FramePositionTask:
+class FramePositionTask(StoredParameters):
     """Hold a site's position in the axle frame (authors: KpEE 750, KvEE 250)."""
 
     site: int
@@ -205,7 +278,7 @@ class FramePositionTask:
 
 
 @dataclass
-class FrameOrientationTask:
+class FrameOrientationTask(StoredParameters):
     """Hold a site's orientation in the axle frame (authors: KpOr 150, KvOr 50, weight 10).
     ``target`` may be changed every step (the waiter's tray)."""
 
@@ -244,7 +317,7 @@ class FrameOrientationTask:
 
 
 @dataclass
-class PostureTask:
+class PostureTask(StoredParameters):
     """Regularise the body joints toward a posture (authors: KpPose 10, KvPose 20)."""
 
     target: Array
