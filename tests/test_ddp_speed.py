@@ -1,6 +1,7 @@
 """Correctness guards of the DDP's speed work: the offline plan and the MPC give the
 results recorded before it (tests/data/ddp_recorded.npz, see tests/ddp_recorded.py), the
-closed-form running-cost derivatives equal autodiff's, the MPC step is compiled once, and the
+closed-form running-cost derivatives and the dynamics' derivatives along fewer directions equal
+autodiff's, the MPC step is compiled once, and the
 persistent compilation cache works from an empty directory."""
 
 from __future__ import annotations
@@ -122,6 +123,48 @@ def test_penalty_depends_only_on_its_inputs(planar: bool, reference: dict[str, n
         g = np.asarray(gradient(v))
         assert np.all(g[others] == 0.0)
     assert active >= 4
+
+
+@pytest.mark.parametrize("planar", [True, False])
+@pytest.mark.parametrize("kind", ["plan", "mpc"])
+def test_dynamics_derivatives_equal_autodiff(
+    planar: bool, kind: str, reference: dict[str, np.ndarray]
+) -> None:
+    """The DDP's ``f_x``, ``f_u`` (autodiff along ``dynamics_inputs`` only) equal
+    ``jax.jacfwd`` of the discrete step, with and without the rate input."""
+    params = ddp_recorded.params_from_arrays(reference)
+    if kind == "plan":
+        problem = planning_problem(planar, PlanConfig(), a_max=1.0, heading_given=False)
+    else:
+        problem = mpc_problem(planar, MPCConfig(), a_max=1.0, theta_max=0.25)
+    derivatives = jax.jit(problem.dynamics_derivatives())
+    jacobian = jax.jit(jax.jacfwd(problem.dynamics(), argnums=(0, 1)))
+    for z, w in _random_points(problem, np.random.default_rng(8), 24):
+        for got, want in zip(derivatives(z, w, params), jacobian(z, w, params), strict=True):
+            assert got.shape == want.shape
+            scale = max(float(np.max(np.abs(want))), 1.0)
+            np.testing.assert_allclose(got, want, rtol=0.0, atol=1e-15 * scale)
+
+
+@pytest.mark.parametrize("planar", [True, False])
+def test_dynamics_depend_only_on_their_inputs(
+    planar: bool, reference: dict[str, np.ndarray]
+) -> None:
+    """``dynamics_inputs`` names every entry of ``[s, u]`` the continuous model reads: its
+    Jacobian is exactly zero in the others (and not in these)."""
+    params = ddp_recorded.params_from_arrays(reference)
+    problem = mpc_problem(planar, MPCConfig(), a_max=1.0, theta_max=0.25)
+    n = problem.n_state
+
+    def value(v: np.ndarray) -> jax.Array:
+        return problem.continuous(v[:n], v[n:], params)
+
+    jacobian = jax.jit(jax.jacfwd(value))
+    read = np.zeros(n + problem.n_control, dtype=bool)
+    for z, w in _random_points(problem, np.random.default_rng(9), 24):
+        columns = np.any(np.asarray(jacobian(np.concatenate([z, w]))) != 0.0, axis=0)
+        read |= columns
+    assert tuple(np.flatnonzero(read)) == problem.dynamics_inputs
 
 
 def test_mpc_step_is_traced_once(reference: dict[str, np.ndarray]) -> None:

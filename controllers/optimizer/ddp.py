@@ -146,6 +146,8 @@ RunningCost = Callable[[Array, Array, PyTree], Array]
 TerminalCost = Callable[[Array, PyTree], Array]
 # (x, u, ref) -> (l_x, l_u, l_xx, l_ux, l_uu) of the running cost at one step
 RunningDerivatives = Callable[[Array, Array, PyTree], tuple[Array, Array, Array, Array, Array]]
+# (x, u, params) -> (f_x, f_u) of the discrete dynamics at one step
+DynamicsDerivatives = Callable[[Array, Array, PyTree], tuple[Array, Array]]
 
 
 _ALPHAS_ALONE = 2
@@ -381,12 +383,14 @@ class DDPSolver:
         terminal: TerminalCost,
         config: DDPConfig,
         running_derivatives: RunningDerivatives | None = None,
+        dynamics_derivatives: DynamicsDerivatives | None = None,
     ) -> None:
         self.dynamics = dynamics
         self.running = running
         self.terminal = terminal
         self.config = config
         self.running_derivatives = running_derivatives
+        self.dynamics_derivatives = dynamics_derivatives
         self.trace_count = 0
         jax_setup.check()  # warns once if float64 or XLA's loop option is missing
         self.jitted: Callable[[Array, Array, PyTree, PyTree], DDPResult] = jax.jit(self._solve)
@@ -433,6 +437,14 @@ class DDPSolver:
                 f"dynamics(x, u, params) must return shape ({n},) like x0, got "
                 f"{getattr(x_next, 'shape', type(x_next))}"
             )
+        if self.dynamics_derivatives is not None:
+            fx, fu = jax.eval_shape(self.dynamics_derivatives, x0, U[0], params)
+            m = U.shape[1]
+            if (fx.shape, fu.shape) != ((n, n), (n, m)):
+                raise ValueError(
+                    f"dynamics_derivatives(x, u, params) must return (f_x, f_u) of shapes "
+                    f"({n}, {n}) and ({n}, {m}), got {fx.shape} and {fu.shape}"
+                )
         ref0 = jax.tree.map(lambda r: r[0], refs)
         stage = jax.eval_shape(self.running, x0, U[0], ref0)
         if getattr(stage, "shape", None) != ():
@@ -444,7 +456,10 @@ class DDPSolver:
     def _stage_derivatives(self, x: Array, u: Array, r: PyTree, params: PyTree) -> tuple:
         """``(l_x, l_u, l_xx, l_ux, l_uu, f_x, f_u[, f_xx, f_ux, f_uu])`` at one step."""
         dyn, run = self.dynamics, self.running
-        fx, fu = jax.jacfwd(dyn, argnums=(0, 1))(x, u, params)
+        if self.dynamics_derivatives is not None:
+            fx, fu = self.dynamics_derivatives(x, u, params)
+        else:
+            fx, fu = jax.jacfwd(dyn, argnums=(0, 1))(x, u, params)
         if self.running_derivatives is not None:
             lx, lu, lxx, lux, luu = self.running_derivatives(x, u, r)
         else:
@@ -748,17 +763,20 @@ def make_ddp_solver(
     terminal: TerminalCost,
     config: DDPConfig | None = None,
     running_derivatives: RunningDerivatives | None = None,
+    dynamics_derivatives: DynamicsDerivatives | None = None,
 ) -> DDPSolver:
     """Build a solver; call it as ``solver(x0, U_init, params, refs) -> DDPResult``.
 
     ``running_derivatives(x, u, ref) -> (l_x, l_u, l_xx, l_ux, l_uu)``, if given, replaces the
     autodiff gradient and Hessian of ``running`` (it must be exact: a cheaper closed form).
+    ``dynamics_derivatives(x, u, params) -> (f_x, f_u)``, if given, replaces ``jax.jacfwd`` of
+    ``dynamics`` (exact too: autodiff along fewer directions, for example).
 
     One compilation per distinct input shape (horizon) and pytree structure; reuse the same
     solver object in an MPC loop so that every call after the first runs compiled code.
     """
     config = config if config is not None else DDPConfig()
-    return DDPSolver(dynamics, running, terminal, config, running_derivatives)
+    return DDPSolver(dynamics, running, terminal, config, running_derivatives, dynamics_derivatives)
 
 
 @functools.lru_cache(maxsize=32)

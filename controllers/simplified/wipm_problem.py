@@ -93,6 +93,14 @@ class WIPMProblem:
         does not read ``x``, ``psi``, ``X0``, ``Y0``), the centripetal part on ``xd, psid``."""
         return (0, 1, 4) if self.planar else (2, 3, 4, 5, 8, 9)
 
+    @property
+    def dynamics_inputs(self) -> tuple[int, ...]:
+        """The entries of ``[s, u]`` that :meth:`continuous` reads (its Jacobian is exactly 0
+        in the others): planar ``theta, thetad, xd, thdd`` (not ``x``); 3-D ``psi`` (the
+        axle's world velocity), ``theta``, ``nu = [xd, psid, thetad]`` and ``u`` (not ``x``,
+        ``X0``, ``Y0``)."""
+        return (0, 1, 3, 4) if self.planar else (1, 2, 3, 4, 5, 8, 9)
+
     def continuous(self, s: Array, u: Array, params: WIPMParams) -> Array:
         if self.planar:
             return planar_dynamics(s, u[0], params)
@@ -119,6 +127,46 @@ class WIPMProblem:
             return jnp.concatenate([s + dt * self.continuous(s, u, params), u + dt * w])
 
         return step
+
+    def dynamics_derivatives(self) -> Callable[[Array, Array, WIPMParams], tuple[Array, Array]]:
+        """``(f_x, f_u)`` of :meth:`dynamics`, exact: forward-mode autodiff of
+        :meth:`continuous` along only the directions of :attr:`dynamics_inputs` (7 of 10 3-D,
+        4 of 5 planar; ``jax.jacfwd`` of the discrete step pushes 10 and 5, or 12 and 7 with
+        the rate input, through the whole model), the Euler step's identity and ``dt`` blocks
+        assembled around them. Equal to ``jax.jacfwd(dynamics())`` (tests/test_ddp_speed.py)."""
+        n, m, dt = self.n_state, self.n_control, self.dt
+        inputs = list(self.dynamics_inputs)
+        directions = np.eye(n + m)[inputs]
+        identity_s, identity_u = np.eye(n), np.eye(m)
+
+        def continuous_jacobian(s: Array, u: Array, params: WIPMParams) -> Array:
+            """``d continuous / d[s, u]`` (``n`` x ``n + m``), zero outside ``inputs``."""
+
+            def value(v: Array) -> Array:
+                return self.continuous(v[:n], v[n:], params)
+
+            _, jvp = jax.linearize(value, jnp.concatenate([s, u]))
+            columns = jax.vmap(jvp)(jnp.asarray(directions))  # (len(inputs), n)
+            zero = jnp.zeros(n, columns.dtype)
+            # stacked, not scattered: a scatter inside the DDP's loops keeps XLA from compiling
+            # each loop into one kernel (3 to 5 times slower, measured)
+            return jnp.stack(
+                [columns[inputs.index(i)] if i in inputs else zero for i in range(n + m)], axis=1
+            )
+
+        def derivatives(z: Array, w: Array, params: WIPMParams) -> tuple[Array, Array]:
+            s, u = self._split(z, w)
+            jacobian = continuous_jacobian(s, u, params)
+            f_s = identity_s + dt * jacobian[:, :n]  # s + dt f(s, u)
+            f_u = dt * jacobian[:, n:]
+            if not self.rate_input:
+                return f_s, f_u
+            # z = [s, u]: u_{k+1} = u_k + dt w
+            f_z = jnp.block([[f_s, f_u], [jnp.zeros((m, n)), identity_u]])
+            f_w = jnp.concatenate([jnp.zeros((n, m)), dt * identity_u])
+            return f_z, f_w
+
+        return derivatives
 
     def penalty(self, s: Array, u: Array, params: WIPMParams) -> Array:
         """``w_acc relu(a - a_lim)^2 + w_theta relu(|theta| - theta_lim)^2`` (module docstring),
@@ -232,6 +280,7 @@ def ddp_solver_for(problem: WIPMProblem, ddp: DDPConfig) -> DDPSolver:
         terminal,
         ddp,
         running_derivatives=problem.running_derivatives(),
+        dynamics_derivatives=problem.dynamics_derivatives(),
     )
 
 
