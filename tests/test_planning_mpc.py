@@ -169,6 +169,9 @@ def test_the_packed_host_inputs_unpack_to_the_step_arguments() -> None:
             assert np.shape(ours) == np.shape(theirs), name
             np.testing.assert_array_equal(ours, theirs, err_msg=name)
         np.testing.assert_array_equal(rest[1], plan_states)
+    # a parameter leaf of another size is refused
+    with pytest.raises(ValueError, match="WIPM parameter of 4 entries"):
+        pack_inputs(0, True, state, params._replace(inertia_body=np.eye(2)))
     # a state of another length than the plan's is refused, not read as parameters
     with pytest.raises(ValueError, match="packed MPC inputs"):
         unpack_inputs(

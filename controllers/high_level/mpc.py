@@ -216,15 +216,18 @@ def pack_inputs(index: int, first: bool, state: np.ndarray, params: WIPMParams) 
     """The MPC step's host inputs as one float64 vector ``[index, first, state, params]``
     (:func:`unpack_inputs` is its inverse inside the compiled step; the index is exact in
     float64)."""
-    n = len(state)
-    host = np.empty(_HEAD + n + _N_PARAMS)
-    host[0], host[1] = index, first
-    host[_HEAD : _HEAD + n] = state
-    at = _HEAD + n
+    values = [float(index), float(first), *np.asarray(state, dtype=np.float64).tolist()]
     for leaf, size in zip(params, _PARAM_SIZES, strict=True):
-        host[at : at + size] = np.ravel(leaf)
-        at += size
-    return host
+        if size == 1:
+            values.append(float(leaf))
+        else:
+            flat = np.asarray(leaf, dtype=np.float64).ravel()
+            if flat.size != size:
+                raise ValueError(f"a WIPM parameter of {flat.size} entries: expected {size}")
+            values.extend(flat.tolist())
+    # one array from Python floats: a slice assignment per leaf cost ~1.5 us each (16 us in
+    # all in a tight loop, 60 us per MPC tick in the closed loop)
+    return np.array(values)
 
 
 def unpack_inputs(
