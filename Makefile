@@ -8,7 +8,7 @@ PYTHON ?= python3
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: install test lint typecheck demo clean
+.PHONY: install test lint typecheck demo clean clean-caches
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -38,3 +38,10 @@ demo: $(STAMP)
 
 clean:
 	rm -rf $(VENV) build dist *.egg-info
+
+# numba's on-disk cache checks only the file that defines a compiled function: after an edit
+# to a function it calls from another file, the caller's cached code (with the old callee
+# inlined) is still used. Run this after editing compiled code; it compiles everything again.
+clean-caches: $(STAMP)
+	find wip_gym controllers benchmarks -name '*.nbi' -delete -o -name '*.nbc' -delete
+	$(PY) -m benchmarks.warm_caches
