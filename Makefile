@@ -41,7 +41,8 @@ clean:
 
 # numba's on-disk cache checks only the file that defines a compiled function: after an edit
 # to a function it calls from another file, the caller's cached code (with the old callee
-# inlined) is still used. Run this after editing compiled code; it compiles everything again.
+# inlined) is still used. Run this after editing compiled code: it deletes the cache and
+# compiles again what `warm_caches` runs (the rest compiles on first use).
 clean-caches: $(STAMP)
 	find wip_gym controllers benchmarks -name '*.nbi' -delete -o -name '*.nbc' -delete
 	$(PY) -m benchmarks.warm_caches

@@ -5,6 +5,7 @@ objects reaches the compiled rows as it reaches the Python path."""
 from __future__ import annotations
 
 import copy
+import dataclasses
 import pickle
 
 import numpy as np
@@ -14,7 +15,7 @@ from test_compiled_tasks import _close, _python_rows, _random_rotation, _task_se
 from test_wbc import _load
 
 from controllers.low_level.motion_probe import MotionProbe
-from controllers.low_level.task_stack import CompiledTaskStack
+from controllers.low_level.task_stack import CompiledTaskStack, supports
 from controllers.low_level.tasks import (
     FrameOrientationTask,
     FramePositionTask,
@@ -52,6 +53,9 @@ def _change(tasks: list[Task], step: int) -> None:
     positions[0].target[0] += 0.01  # in place
     positions[-1].target = positions[-1].target + np.array([0.0, 0.005, -0.01])
     positions[0].weight = 2.0 + step
+    weights = np.asarray(positions[-1].weight)
+    if weights.ndim:  # a per-row weight: changed in place
+        weights[1] += 0.5
     orientations = _of(tasks, FrameOrientationTask)
     orientations[0].target = orientations[0].target @ _random_rotation(
         np.random.default_rng(step), 0.05
@@ -94,18 +98,27 @@ def test_every_change_to_a_task_reaches_the_compiled_rows(name: str) -> None:
 
 
 def test_a_copied_task_holds_its_own_values() -> None:
-    """A copy or a pickle of a stored task writes into no stack."""
+    """A copy (shallow or deep), a pickle or a ``dataclasses.replace`` of a stored task writes
+    into no stack."""
     robot = RobotModel(_load("krang"))
     robot.update(*robot.full_state(*random_minimal_state(robot, np.random.default_rng(2))))
     tasks = _task_set(robot, False)
     stack = CompiledTaskStack(robot, MotionProbe(robot), tasks)
     params, targets, weights = stack.params.copy(), stack.targets.copy(), stack.weights.copy()
-    for twin in (copy.deepcopy(tasks), pickle.loads(pickle.dumps(tasks))):
+    row_target = stack.row_target.copy()
+    twins = (
+        [copy.copy(task) for task in tasks],
+        copy.deepcopy(tasks),
+        pickle.loads(pickle.dumps(tasks)),
+        [dataclasses.replace(task) for task in tasks],
+    )
+    for twin in twins:
         assert all(task.stored_by() is None for task in twin)
         _change(twin, 3)
         np.testing.assert_array_equal(stack.params, params)
         np.testing.assert_array_equal(stack.targets, targets)
         np.testing.assert_array_equal(stack.weights, weights)
+        np.testing.assert_array_equal(stack.row_target, row_target)
     # the original still writes into its stack
     _of(tasks, ThetaTask)[0].theta_d = 0.123
     assert stack.params[0, 2] == 0.123
@@ -139,8 +152,18 @@ def test_a_target_of_another_shape_is_refused_at_the_next_call() -> None:
     position = _of(tasks, FramePositionTask)[0]
     position.target = np.zeros(4)  # the task leaves the stack's arrays ...
     assert position.stored_by() is None
-    with pytest.raises(ValueError, match="broadcast"):
+    with pytest.raises(ValueError, match=r"task 'ee_position': its target of shape \(4,\)"):
         stack.fill(robot, *buffers)  # ... and the stack cannot hold it
     position.target = np.zeros(3)
     stack.fill(robot, *buffers)
     np.testing.assert_array_equal(stack.targets[2, :3], 0.0)
+
+
+def test_a_task_listed_twice_runs_the_python_path() -> None:
+    """One task object twice in a list: its parameters could live in one place of the arrays
+    only, so the compiled rows are not used for it."""
+    robot = RobotModel(_load("krang"))
+    robot.update(*robot.full_state(*random_minimal_state(robot, np.random.default_rng(1))))
+    tasks = _task_set(robot, False)
+    assert supports(tasks, robot.layout.planar)
+    assert not supports([*tasks, tasks[2]], robot.layout.planar)

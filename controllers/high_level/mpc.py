@@ -218,7 +218,7 @@ def pack_inputs(index: int, first: bool, state: np.ndarray, params: WIPMParams) 
     float64)."""
     values = [float(index), float(first), *np.asarray(state, dtype=np.float64).tolist()]
     for leaf, size in zip(params, _PARAM_SIZES, strict=True):
-        if size == 1:
+        if size == 1 and np.ndim(leaf) == 0:
             values.append(float(leaf))
         else:
             flat = np.asarray(leaf, dtype=np.float64).ravel()

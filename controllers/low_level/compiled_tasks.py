@@ -178,25 +178,6 @@ def _relative_drift(
 
 
 @njit(cache=True)
-def relative_drift(
-    p: np.ndarray,
-    v: np.ndarray,
-    a: np.ndarray,
-    p_o: np.ndarray,
-    v_o: np.ndarray,
-    a_o: np.ndarray,
-    c: float,
-    s: float,
-    psid: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``MotionProbe.relative_drift``: a world point's position, velocity and drift
-    acceleration relative to the axle midpoint in the axle frame (turning at ``psid``)."""
-    rel, rel_d, rel_dd = np.empty(3), np.empty(3), np.empty(3)
-    _relative_drift(p, v, a, p_o, v_o, a_o, c, s, psid, rel, rel_d, rel_dd)
-    return rel, rel_d, rel_dd
-
-
-@njit(cache=True)
 def _heading_transpose(i: int, k: int, c: float, s: float) -> float:
     """Entry ``(i, k)`` of ``Rz(psi)^T = [[c, s, 0], [-s, c, 0], [0, 0, 1]]``."""
     if i == 2 or k == 2:
@@ -268,45 +249,6 @@ def site_in_axle_frame_into(
     Jp[0, index_psi] += rel[1]
     Jp[1, index_psi] -= rel[0]
     Jr[2, index_psi] -= 1.0
-
-
-@njit(cache=True)
-def site_in_axle_frame(
-    site_pos: np.ndarray,
-    site_mat: np.ndarray,
-    site_jac: np.ndarray,
-    origin_pos: np.ndarray,
-    origin_jac: np.ndarray,
-    J_tf: np.ndarray,
-    J_pattern: np.ndarray,
-    c: float,
-    s: float,
-    index_psi: int,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`site_in_axle_frame_into` into new arrays ``(rel, R, Jp, Jr)``."""
-    n = J_tf.shape[1]
-    rel, R = np.empty(3), np.empty((3, 3))
-    Jp, Jr = np.empty((3, n)), np.empty((3, n))
-    jac, JJ = np.empty((6, site_jac.shape[1])), np.empty((6, n))
-    site_in_axle_frame_into(
-        site_pos,
-        site_mat,
-        site_jac,
-        origin_pos,
-        origin_jac,
-        J_tf,
-        J_pattern,
-        c,
-        s,
-        index_psi,
-        jac,
-        JJ,
-        rel,
-        R,
-        Jp,
-        Jr,
-    )
-    return rel, R, Jp, Jr
 
 
 @njit(cache=True)

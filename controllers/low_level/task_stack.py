@@ -270,8 +270,11 @@ def _unwrap(task: object) -> tuple[object, DisturbanceRejectingTask | None]:
 
 def supports(tasks: Sequence[object], planar: bool) -> bool:
     """Whether every task is of a kind the compiled rows know (exact types: a subclass may
-    change the arithmetic, and then runs the Python path). An observer may wrap a frame task;
-    a planar robot has no heading task."""
+    change the arithmetic, and then runs the Python path) and appears once. An observer may
+    wrap a frame task; a planar robot has no heading task."""
+    inners = [id(_unwrap(task)[0]) for task in tasks]
+    if len(set(inners)) != len(inners):
+        return False  # a task twice: its parameters can live in one place of the arrays only
     for task in tasks:
         inner, observer = _unwrap(task)
         kind = _KINDS.get(type(inner))

@@ -16,7 +16,7 @@ docs/DESIGN.md §4, docs/ERRATA.md §5).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import mujoco
 import numpy as np
@@ -39,53 +39,77 @@ class StoredParameters:
 
     * an assigned scalar (``task.kp = 3.0``, ``task.theta_d = ...``, ``task.weight = ...``)
       is written into the stack's array too;
-    * an array parameter (a ``target``, ``joint_weights``) *is* a view on the stack's array:
-      an assignment of the same shape copies the new values into it (``task.target = R``),
-      and a change in place (``task.target[0] += 0.1``) is seen as well. An array passed in
-      before is not shared any more: change the task's own, not the one it was built from.
+    * an array parameter (a ``target``, ``joint_weights``, a frame task's per-row
+      ``weight``) *is* a view on the stack's array: an assignment of the same shape copies
+      the new values into it (``task.target = R``), and a change in place
+      (``task.target[0] += 0.1``) is seen as well. So an array read from the task before
+      an assignment (``old = task.target``) shows the new values too: copy it to keep it.
       An assignment of another shape leaves the stack's arrays: the stack stores the task
-      again before its next call (a shape it cannot hold is refused there), or a new stack
-      is built when the task's structure changed with it (a posture task's columns).
+      again before its next call (a value that does not broadcast to the parameter's shape
+      is refused there, naming the task and the parameter), or a new stack is built when
+      the task's structure changed with it (a posture task's columns).
 
-    A copy or a pickle of a task holds its own values and no stack's. A task taken by a
-    second stack is stored there (the first stack takes it back on its next step).
+    A task owns its arrays: an array given to its constructor (or by
+    ``dataclasses.replace``) is copied, and a copy or a pickle of a task holds copies of its
+    arrays and no stack's. A task taken by a second stack is stored there (the first stack
+    takes it back before its next call).
     """
 
     _stored_slots: dict[str, tuple[Array, Any]] | None = None  # set by store_parameters
     _stored_by: object | None = None
 
-    def __setattr__(self, name: str, value: Any) -> None:
-        slots = self._stored_slots
-        if slots is not None:
-            slot = slots.get(name)
-            if slot is not None:
-                array, index = slot
-                if index is None:  # an array parameter: the attribute is the stack's view
-                    if np.shape(value) == array.shape:
-                        array[...] = value
-                        return
-                    # another shape: the task leaves the stack's arrays; the stack stores it
-                    # again before its next call (and refuses a shape it cannot hold), or is
-                    # built anew if the task's structure changed (its posture columns)
-                    state = self.__dict__
-                    state["_stored_slots"] = state["_stored_by"] = None
-                else:
-                    array[index] = value
-        object.__setattr__(self, name, value)
+    def __post_init__(self) -> None:
+        state = self.__dict__
+        for name, value in state.items():
+            if isinstance(value, np.ndarray):
+                state[name] = value.copy()
+
+    if not TYPE_CHECKING:  # mypy would accept any attribute name with __setattr__ defined
+
+        def __setattr__(self, name: str, value: Any) -> None:
+            slots = self._stored_slots
+            if slots is not None:
+                slot = slots.get(name)
+                if slot is not None:
+                    array, index = slot
+                    if isinstance(index, int) or (index is not None and np.ndim(value) == 0):
+                        array[index] = value  # a scalar: the attribute stays the value
+                    else:
+                        view = array if index is None else array[index]
+                        if np.shape(value) == view.shape:
+                            view[...] = value
+                            return  # the attribute is the view already
+                        # another shape: the task leaves the stack's arrays; the stack
+                        # stores it again before its next call (and refuses a shape it
+                        # cannot hold), or is built anew if the task's structure changed
+                        state = self.__dict__
+                        state["_stored_slots"] = state["_stored_by"] = None
+            object.__setattr__(self, name, value)
 
     def store_parameters(self, owner: object, slots: dict[str, tuple[Array, Any]]) -> None:
-        """Keep the parameters named in ``slots`` in ``owner``'s arrays: ``(array, index)`` for
-        a scalar (``array[index]``, a slice for a weight spread over several rows), ``(view,
-        None)`` for an array parameter, which then becomes ``view``. The current values are
-        written there first."""
+        """Keep the parameters named in ``slots`` in ``owner``'s arrays: ``(array, index)``
+        for a scalar (``array[index]``; a slice for a weight spread over several rows),
+        ``(view, None)`` for an array parameter. An array-valued parameter then becomes the
+        view (``array[index]`` or ``view``); its current values are written there first.
+        ``ValueError`` naming the task and the parameter if one does not fit."""
         state = self.__dict__
         for name, (array, index) in slots.items():
             value = state[name]
-            if index is None:
-                array[...] = value
-                state[name] = array
-            else:
-                array[index] = value
+            scalar = isinstance(index, int) or (index is not None and np.ndim(value) == 0)
+            view = array if index is None or scalar else array[index]
+            try:
+                if scalar:
+                    array[index] = value
+                else:
+                    view[...] = value  # broadcast as the Python path's arithmetic would
+            except (ValueError, TypeError) as error:
+                raise ValueError(
+                    f"task {getattr(self, 'name', type(self).__name__)!r}: its {name} of "
+                    f"shape {np.shape(value)} does not fit the compiled task stack's "
+                    f"{np.shape(array[index] if index is not None else array)}"
+                ) from error
+            if not scalar:
+                state[name] = view
         state["_stored_slots"] = slots
         state["_stored_by"] = owner
 
@@ -94,10 +118,11 @@ class StoredParameters:
         return self._stored_by
 
     def __getstate__(self) -> dict[str, Any]:
-        state = dict(self.__dict__)
-        state.pop("_stored_slots", None)
-        state.pop("_stored_by", None)
-        return state
+        return {
+            name: value.copy() if isinstance(value, np.ndarray) else value
+            for name, value in self.__dict__.items()
+            if name not in ("_stored_slots", "_stored_by")
+        }
 
 
 def _skew(v: Array) -> Array:

@@ -17,7 +17,9 @@ Algorithm (Jacobson & Mayne 1970 DDP; regularisation and line search after Tassa
 Todorov 2012, "Synthesis and stabilization of complex behaviors through online trajectory
 optimization", section II). All derivatives come from autodiff (``jax.jacfwd`` of the
 dynamics, ``jax.grad``/``jax.hessian`` of the costs, ``jax.hessian`` of the dynamics for the
-second-order terms), evaluated step by step inside the backward scan.
+second-order terms), evaluated step by step inside the backward scan; a problem may give its
+own exact ``running_derivatives`` and ``dynamics_derivatives`` instead (the WIPM's: closed
+forms, and autodiff along only the inputs its model reads).
 
 Backward pass (a reverse ``lax.scan``), with ``V'`` the value expansion at step ``k + 1``,
 ``V_x(N) = terminal_x``, ``V_xx(N) = terminal_xx``:
@@ -131,6 +133,7 @@ from controllers.optimizer import jax_setup
 __all__ = [
     "DDPConfig",
     "DDPResult",
+    "DynamicsDerivatives",
     "RunningDerivatives",
     "DDPSolver",
     "ddp_solve",

@@ -133,7 +133,8 @@ class WIPMProblem:
         :meth:`continuous` along only the directions of :attr:`dynamics_inputs` (7 of 10 3-D,
         4 of 5 planar; ``jax.jacfwd`` of the discrete step pushes 10 and 5, or 12 and 7 with
         the rate input, through the whole model), the Euler step's identity and ``dt`` blocks
-        assembled around them. Equal to ``jax.jacfwd(dynamics())`` (tests/test_ddp_speed.py)."""
+        assembled around them. Equal to ``jax.jacfwd(dynamics())`` to round-off (1e-15 of its
+        scale, tests/test_ddp_speed.py; the recorded plans and MPC steps to 1e-9)."""
         n, m, dt = self.n_state, self.n_control, self.dt
         inputs = list(self.dynamics_inputs)
         directions = np.eye(n + m)[inputs]
