@@ -153,14 +153,13 @@ def _relative_drift(
     c: float,
     s: float,
     psid: float,
-    rel: np.ndarray,
-    rel_d: np.ndarray,
-    rel_dd: np.ndarray,
+    out: np.ndarray,
 ) -> None:
-    """``MotionProbe.relative_drift`` into ``rel``, ``rel_d``, ``rel_dd``: a world point's
+    """``MotionProbe.relative_drift`` into the rows of ``out`` (3 x 3): a world point's
     position, velocity and drift acceleration relative to the axle midpoint in the axle frame
     (turning at ``psid``); ``p``, ``v``, ``a`` and the origin's are read from their first
     three entries."""
+    rel, rel_d, rel_dd = out[0], out[1], out[2]
     d0, d1 = p[0] - p_o[0], p[1] - p_o[1]
     r0, r1, r2 = c * d0 + s * d1, -s * d0 + c * d1, p[2] - p_o[2]
     d0, d1 = v[0] - v_o[0], v[1] - v_o[1]
@@ -418,20 +417,7 @@ def task_rows(
                 work[2, j] = (
                     force[base, 3 + j] - force[left, 3 + j] - force[right, 3 + j]
                 ) / mass + gravity[j]
-            _relative_drift(
-                work[0],
-                work[1],
-                work[2],
-                p_o,
-                v_o,
-                a_o,
-                c,
-                s,
-                psid,
-                drift3[0],
-                drift3[1],
-                drift3[2],
-            )
+            _relative_drift(work[0], work[1], work[2], p_o, v_o, a_o, c, s, psid, drift3)
             cp, cd, cdd = drift3[0], drift3[1], drift3[2]
             X, Z = cp[0], cp[2]
             D = X * X + Z * Z
@@ -463,18 +449,7 @@ def task_rows(
                 for row in range(3):
                     reference[row] = -kp * (rel[i, row] - targets[k, row]) - kv * velocity[row]
                 _relative_drift(
-                    probe_site_xpos[site_ids[i]],
-                    v,
-                    a,
-                    p_o,
-                    v_o,
-                    a_o,
-                    c,
-                    s,
-                    psid,
-                    drift3[0],
-                    drift3[1],
-                    drift3[2],
+                    probe_site_xpos[site_ids[i]], v, a, p_o, v_o, a_o, c, s, psid, drift3
                 )
                 for row in range(3):
                     jdot_nu[start + row] = drift3[2, row]

@@ -262,6 +262,14 @@ _KINDS: dict[type, int] = {
 }
 
 
+_DESIRED: dict[int, tuple[str, str, str]] = {
+    ct.THETA: ("theta_d", "thetad_d", "thdd_d"),
+    ct.SPIN: ("psi_d", "psid_d", "psidd_d"),
+}
+"""A theta or spin task's desired value, rate and acceleration: columns 2 to 4 of its
+``params`` row (``compiled_tasks.PARAMETERS``)."""
+
+
 def _unwrap(task: object) -> tuple[object, DisturbanceRejectingTask | None]:
     if type(task) is DisturbanceRejectingTask:
         return task.task, task
@@ -439,17 +447,8 @@ class CompiledTaskStack:
         )
         p = self.params[k]
         slots: dict[str, tuple[Array, object]] = {"kp": (p, 0), "kv": (p, 1)}
-        if kind == ct.THETA or kind == ct.SPIN:
-            names = (
-                ("theta_d", "thetad_d", "thdd_d")
-                if kind == ct.THETA
-                else (
-                    "psi_d",
-                    "psid_d",
-                    "psidd_d",
-                )
-            )
-            for column, name in enumerate(names, start=2):
+        if kind in _DESIRED:
+            for column, name in enumerate(_DESIRED[kind], start=2):
                 slots[name] = (p, column)
             slots["weight"] = (self.weights, start)
         elif kind == ct.POSTURE:

@@ -28,6 +28,13 @@ from wip_gym.robot_model import RobotModel
 Array = NDArray[np.float64]
 
 
+def _scalar_slot(index: Any, value: Any) -> bool:
+    """Whether ``value`` is stored as a scalar at ``array[index]`` (the attribute keeps the
+    value) rather than as an array whose attribute becomes the stack's view: an int index,
+    or a scalar spread over a slice of rows (a frame task's one weight)."""
+    return isinstance(index, int) or (index is not None and np.ndim(value) == 0)
+
+
 class StoredParameters:
     """Where a task's gains, targets and weights live once a compiled task stack holds them.
 
@@ -72,7 +79,7 @@ class StoredParameters:
                 slot = slots.get(name)
                 if slot is not None:
                     array, index = slot
-                    if isinstance(index, int) or (index is not None and np.ndim(value) == 0):
+                    if _scalar_slot(index, value):
                         array[index] = value  # a scalar: the attribute stays the value
                     else:
                         view = array if index is None else array[index]
@@ -95,7 +102,7 @@ class StoredParameters:
         state = self.__dict__
         for name, (array, index) in slots.items():
             value = state[name]
-            scalar = isinstance(index, int) or (index is not None and np.ndim(value) == 0)
+            scalar = _scalar_slot(index, value)
             view = array if index is None or scalar else array[index]
             try:
                 if scalar:
