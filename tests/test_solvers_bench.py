@@ -194,3 +194,28 @@ def test_first_call_script_runs(capsys: pytest.CaptureFixture[str]) -> None:
 
     main()
     assert capsys.readouterr().out.startswith("first plan ")
+
+
+@pytest.mark.parametrize("planar", [True, False])
+def test_ddp_parts_ablations_leave_out_only_what_they_say(planar: bool) -> None:
+    """``benchmarks.speed.ddp_parts``' ablated backward passes: ``backward_quadratic``'s cost
+    derivatives are the problem's where the penalty is inactive (it leaves out the penalty
+    only), and ``backward_riccati``'s stand-in Jacobians have the shapes of the problem's."""
+    import jax.numpy as jnp
+
+    from benchmarks.speed.ddp_parts import _ablated_solvers
+
+    params, _ = krang_params()
+    wipm = mpc_problem(planar, MPCConfig(), a_max=1e6, theta_max=10.0)  # penalty never active
+    quadratic, riccati = _ablated_solvers(wipm, MPCConfig().ddp)
+    rng = np.random.default_rng(3)
+    z = jnp.asarray(rng.normal(scale=0.1, size=wipm.n_state))
+    w = jnp.asarray(rng.normal(scale=0.1, size=wipm.n_control))
+    ref = (jnp.asarray(rng.normal(scale=0.1, size=wipm.n_state)), params)
+    assert not bool(wipm.penalty(z, w, params)[1])
+    exact = wipm.running_derivatives()(z, w, ref)
+    for mine, theirs in zip(quadratic.running_derivatives(z, w, ref), exact, strict=True):
+        np.testing.assert_allclose(mine, theirs, rtol=1e-14, atol=1e-14)
+    real = wipm.dynamics_derivatives()(z, w, params)
+    stand_in = riccati.dynamics_derivatives(z, w, params)
+    assert [a.shape for a in stand_in] == [a.shape for a in real]

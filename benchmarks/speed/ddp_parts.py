@@ -11,19 +11,28 @@ own jitted call (median of 200 calls, then the median over ``--rounds`` interlea
 * ``rollout``: one ``lax.scan`` of the dynamics over the horizon;
 * ``cost``: the trajectory cost (``trajectory_cost``: a ``lax.map`` of the running cost);
 * ``backward``: one backward pass (derivatives of every step and the Riccati recursion);
+* ``backward_quadratic``: the same with the running cost's derivatives of its quadratic terms
+  only (the acceleration and pitch penalty's left out: its activity test and, where active, its
+  Hessian);
+* ``backward_riccati``: the same again with the dynamics' Jacobians replaced by stand-ins of
+  the same shapes that cost nothing (``I + 1e-3 dt 1 x'`` and ``dt u_0 1``): the Riccati
+  recursion (2)-(5) and the loop alone, the floor of a backward pass in XLA:CPU's code;
 * ``solve_0``, ``solve_1``, ``solve_2``: the MPC's DDP with a budget of 0, 1, 2 iterations
   (0: the warm start's rollout, its cost and one backward pass).
 
 A piece's cost minus ``empty_call`` over the horizon is its cost per step of the loop.
-Measured (2 shared cores, load 4; units of 12-16 us), planar / 3-D: empty_call 1.1 / 1.5,
-rollout 3.0 / 7.3, cost 4.0 / 5.2, backward 12.2 / 24.4, solve_0 14.6 / 29.4, solve_2 22.3 /
-59.7 units. With XLA's small-loop option (``controllers.optimizer.jax_setup``) a loop step costs
-little beyond its arithmetic (the option off doubles ``cost``); the time is the arithmetic of the
-backward pass (about 1.7 / 2.9 us per step: every step's ``jacfwd`` of the dynamics, the
-penalty's derivatives, the Riccati step), then the rollouts with their costs, then the floor of
-one call. Separate top-level loops of one call cost more than the same loops nested in one
-(four rollouts as four loops: 130 us, nested in one loop: 47 us, one alone: 31 us), which is
-why ``controllers.optimizer.ddp`` runs the warm start's rollout inside its iteration loop.
+Measured (2 shared cores, 2026-11-27, two runs of ``--rounds 5``; units of 12.2 to 18.8 us),
+planar / 3-D: empty_call 1.1 / 0.7 to 1.2, rollout 3.0 / 4.1 to 6.3, cost 3.8 to 5.2 / 2.7 to
+3.7, backward 10.6 to 11.1 / 12.3 to 14.0, backward_quadratic 4.5 to 4.7 / 10.7 to 11.2,
+backward_riccati 2.6 to 2.7 / 6.0, solve_2 20.0 to 21.8 / 32.1 to 37.4 units. So in the 3-D
+backward pass about half is the Riccati recursion and the loop (about 1 us per step: the
+floor of this code in XLA:CPU), most of the rest the dynamics' Jacobians; the planar plan is in
+its acceleration phase at index 400, where the penalty's Hessian is half of the pass. With
+XLA's small-loop option (``controllers.optimizer.jax_setup``) a loop step costs little beyond
+its arithmetic (the option off doubles ``cost``). Separate top-level loops of one call cost
+more than the same loops nested in one (four rollouts as four loops: 130 us, nested in one
+loop: 47 us, one alone: 31 us), which is why ``controllers.optimizer.ddp`` runs the warm
+start's rollout inside its iteration loop.
 """
 
 from __future__ import annotations
@@ -36,7 +45,17 @@ import numpy as np
 
 from benchmarks.speed.yardstick import ReferenceStep, median_call_us
 
-PIECES = ("empty_call", "rollout", "cost", "backward", "solve_0", "solve_1", "solve_2")
+PIECES = (
+    "empty_call",
+    "rollout",
+    "cost",
+    "backward",
+    "backward_quadratic",
+    "backward_riccati",
+    "solve_0",
+    "solve_1",
+    "solve_2",
+)
 
 
 def _problem_calls(problem: str, params: Any, theta0: float) -> dict[str, Callable[[], Any]]:
@@ -68,11 +87,14 @@ def _problem_calls(problem: str, params: Any, theta0: float) -> dict[str, Callab
         for it in (0, 1, 2)
     }
     mu = jnp.asarray(1e-3)
+    quadratic, riccati = _ablated_solvers(wipm, base)
     jitted = {
         "empty_call": jax.jit(lambda X, U, p, r: X[0]),
         "rollout": jax.jit(lambda X, U, p, r: rollout(dynamics, X[0], U, p)),
         "cost": jax.jit(lambda X, U, p, r: trajectory_cost(running, terminal, X, U, r)),
         "backward": jax.jit(lambda X, U, p, r: solvers[2]._backward(X, U, p, r, mu).K),
+        "backward_quadratic": jax.jit(lambda X, U, p, r: quadratic._backward(X, U, p, r, mu).K),
+        "backward_riccati": jax.jit(lambda X, U, p, r: riccati._backward(X, U, p, r, mu).K),
     }
     calls: dict[str, Callable[[], Any]] = {
         name: (lambda f=f: jax.block_until_ready(f(X, U, params, refs)))
@@ -83,6 +105,41 @@ def _problem_calls(problem: str, params: Any, theta0: float) -> dict[str, Callab
             s.jitted(x0, U, params, refs).U
         )
     return calls
+
+
+def _ablated_solvers(wipm: Any, config: Any) -> tuple[Any, Any]:
+    """Solvers of ``wipm`` whose backward pass leaves out work (``backward_quadratic``,
+    ``backward_riccati``: the module docstring); their results are not the problem's."""
+    import jax.numpy as jnp  # noqa: PLC0415
+
+    from controllers.optimizer.ddp import make_ddp_solver  # noqa: PLC0415
+
+    n, m, dt = wipm.n_state, wipm.n_control, wipm.dt
+    q, r = np.asarray(wipm.weights.q), np.asarray(wipm.weights.r)
+
+    def quadratic_derivatives(z: Any, w: Any, ref: Any) -> tuple[Any, ...]:
+        s_ref, _ = ref
+        return (
+            2.0 * dt * q * (z - s_ref),
+            2.0 * dt * r * w,
+            jnp.diag(2.0 * dt * q),
+            jnp.zeros((m, n)),
+            jnp.diag(2.0 * dt * r),
+        )
+
+    def stand_in_jacobians(z: Any, w: Any, params: Any) -> tuple[Any, Any]:
+        # depends on the inputs, so that XLA cannot fold the recursion's products away
+        return jnp.eye(n) + 1e-3 * dt * jnp.outer(jnp.ones(n), z), dt * w[0] * jnp.ones((n, m))
+
+    running, terminal = wipm.costs()
+    dynamics, jacobians = wipm.dynamics(), wipm.dynamics_derivatives()
+    quadratic = make_ddp_solver(
+        dynamics, running, terminal, config, quadratic_derivatives, jacobians
+    )
+    riccati = make_ddp_solver(
+        dynamics, running, terminal, config, quadratic_derivatives, stand_in_jacobians
+    )
+    return quadratic, riccati
 
 
 def measure(rounds: int = 3) -> dict[str, dict[str, float]]:
