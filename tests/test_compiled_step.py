@@ -237,7 +237,7 @@ def test_the_robot_update_through_its_table_equals_the_call_with_arguments(name:
     """``RobotModel.update`` calls ``robot_update_at`` (its arrays in one table): the same
     results, to the bit, as ``robot_update`` with each array passed, on a second model; the
     properties are copies that stay as they were after the next update."""
-    from wip_gym.minimal_kernels import robot_update
+    from wip_gym.minimal_kernels import UPDATE_SCALARS, robot_update
 
     robot, reference = RobotModel(_load(name)), RobotModel(_load(name))
     r = reference
@@ -248,7 +248,7 @@ def test_the_robot_update_through_its_table_equals_the_call_with_arguments(name:
         robot.update(qpos, qvel, dynamics=dynamics)
         r._qpos_in[:], r._qvel_in[:] = qpos, qvel
         scalars, com, J_com, J_theta = (
-            np.zeros(7),
+            np.zeros(len(UPDATE_SCALARS)),
             np.zeros(3),
             np.zeros((3, r.layout.n_min)),
             np.zeros(r.layout.n_min),
@@ -293,8 +293,14 @@ def test_the_robot_update_through_its_table_equals_the_call_with_arguments(name:
             B,
             dynamics,
         )
-        psi, psid, c, s, mass, theta, thetad = scalars.tolist()
+        psi, psid, c, s, mass, theta, thetad, x, xd, axle_x, axle_y = scalars.tolist()
         assert (robot.theta, robot.thetad, robot.body_mass, robot.psi) == (theta, thetad, mass, psi)
+        np.testing.assert_array_equal(
+            robot.wipm_state(),
+            [theta, thetad, x, xd]
+            if robot.layout.planar
+            else [x, psi, theta, xd, psid, thetad, axle_x, axle_y],
+        )
         np.testing.assert_array_equal(robot.com, com)
         np.testing.assert_array_equal(robot.J_com, J_com)
         np.testing.assert_array_equal(robot.J_theta, J_theta)

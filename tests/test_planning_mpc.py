@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import gymnasium as gym
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -169,6 +170,17 @@ def test_the_packed_host_inputs_unpack_to_the_step_arguments() -> None:
             assert np.shape(ours) == np.shape(theirs), name
             np.testing.assert_array_equal(ours, theirs, err_msg=name)
         np.testing.assert_array_equal(rest[1], plan_states)
+    # leaves of other kinds (0-d arrays, Python floats, nested lists, JAX arrays) pack the same
+    others = WIPMParams(
+        np.asarray(params[0]),
+        float(params[1]),
+        jnp.asarray(params[2]),
+        params.inertia_body.tolist(),
+        *(np.asarray(leaf) for leaf in params[4:]),
+    )
+    np.testing.assert_array_equal(
+        pack_inputs(7, False, state, others), pack_inputs(7, False, state, params)
+    )
     # a parameter leaf of another size is refused
     with pytest.raises(ValueError, match="WIPM parameter of 4 entries"):
         pack_inputs(0, True, state, params._replace(inertia_body=np.eye(2)))

@@ -57,6 +57,30 @@ def test_full_state_round_trip(robot: RobotModel) -> None:
         np.testing.assert_allclose(robot.nu, nu, atol=1e-12)
 
 
+def test_wipm_state_is_the_minimal_state_the_pitch_and_the_axle(robot: RobotModel) -> None:
+    """``RobotModel.wipm_state`` (read from the compiled update's scalars) is, bit for bit, the
+    state composed from the public accessors, on random states off the home pose."""
+    rng = np.random.default_rng(4)
+    for _ in range(10):
+        q, nu = random_minimal_state(robot, rng)
+        axle_xy = rng.uniform(-3.0, 3.0, size=2)
+        robot.update(*robot.full_state(q, nu, axle_xy))
+        q_now, nu_now, axle = robot.q, robot.nu, robot.axle_position
+        if robot.layout.planar:
+            expected = [robot.theta, robot.thetad, q_now[0], nu_now[0]]
+        else:
+            expected = [
+                *(q_now[0], q_now[1], robot.theta),
+                *(nu_now[0], nu_now[1], robot.thetad),
+                *(axle[0], axle[1]),
+            ]
+        state = robot.wipm_state()
+        assert state.dtype == np.float64
+        np.testing.assert_array_equal(state, np.array(expected))
+        state[0] += 1.0  # a new array: the robot's state is not changed through it
+        np.testing.assert_array_equal(robot.wipm_state(), np.array(expected))
+
+
 def test_dynamics_equal_exact_constrained_dynamics(robot: RobotModel) -> None:
     """Level 1: A nu_dot + h = B tau reproduces MuJoCo's constrained dynamics to 1e-9."""
     rng = np.random.default_rng(1)

@@ -428,8 +428,8 @@ def robot_update(
     :func:`minimal_dynamics` (else ``A_out``, ``h_out``, ``B_out`` are left as they are).
     ``bodies``: ``(base, wheel_left, wheel_right)``; ``J_pattern``: where ``J`` (``J_tf``) may
     be nonzero. Written into the ``*_out`` buffers, and ``(psi, psid, cos psi, sin psi, mass,
-    theta, thetad)`` into ``scalars`` (:data:`UPDATE_SCALARS`): returning new arrays would
-    cost their boxing at every call."""
+    theta, thetad, x, xd, axle_x, axle_y)`` into ``scalars`` (:data:`UPDATE_SCALARS`):
+    returning new arrays would cost their boxing at every call."""
     data_qpos[: len(qpos)] = qpos
     data_qvel[: len(qvel)] = qvel
     mjc.mj_kinematics(model, data)
@@ -472,6 +472,8 @@ def robot_update(
     )
     scalars[0], scalars[1], scalars[2], scalars[3] = psi, psid, c, s
     scalars[4], scalars[5], scalars[6] = mass, theta, thetad
+    scalars[7], scalars[8] = q[0], nu[0]
+    scalars[9], scalars[10] = xpos[base, 0], xpos[base, 1]
     com_out[:] = com
     J_com_out[:] = J_com
     J_theta_out[:] = J_theta
@@ -527,8 +529,21 @@ UPDATE_ENTRIES = (
 """The rows of :func:`robot_update_at`'s table, by name: :func:`robot_update`'s arguments in
 their order, its scalars in the first two (``RobotModel`` builds it once per MuJoCo data)."""
 
-UPDATE_SCALARS = ("psi", "psid", "cos_psi", "sin_psi", "body_mass", "theta", "thetad")
-"""The entries of :func:`robot_update`'s ``scalars``, in order."""
+UPDATE_SCALARS = (
+    "psi",
+    "psid",
+    "cos_psi",
+    "sin_psi",
+    "body_mass",
+    "theta",
+    "thetad",
+    "x",
+    "xd",
+    "axle_x",
+    "axle_y",
+)
+"""The entries of :func:`robot_update`'s ``scalars``, in order (``x``, ``xd``: the first
+minimal coordinate and its rate; ``axle_x``, ``axle_y``: the base origin's world position)."""
 
 
 @njit(cache=True, nogil=True)

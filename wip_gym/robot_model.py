@@ -466,6 +466,10 @@ class RobotModel:
             self._body_mass,
             self._theta,
             self._thetad,
+            self._x,
+            self._xd,
+            self._axle_x,
+            self._axle_y,
         ) = self._scalars.tolist()
         self._forget_copies()
         # the base origin's linear Jacobian, kept for the tasks (site_in_axle_frame)
@@ -583,6 +587,26 @@ class RobotModel:
             heading = np.array((c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0)).reshape(3, 3)
             self._heading = _read_only(heading)
         return self._heading
+
+    def wipm_state(self) -> Array:
+        """The WIPM state of the robot (its ``lambda(q)`` part) at the last update, from the
+        update's scalars: planar ``[theta, thetad, x, xd]``, 3-D ``[x, psi, theta, xd, psid,
+        thetad, X0, Y0]`` (``X0, Y0`` the axle midpoint's world position). A new array."""
+        self._require()
+        if self.layout.planar:
+            return np.array([self._theta, self._thetad, self._x, self._xd])
+        return np.array(
+            [
+                self._x,
+                self._psi,
+                self._theta,
+                self._xd,
+                self._psid,
+                self._thetad,
+                self._axle_x,
+                self._axle_y,
+            ]
+        )
 
     @property
     def axle_position(self) -> Array:

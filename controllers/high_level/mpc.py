@@ -218,7 +218,13 @@ def pack_inputs(index: int, first: bool, state: np.ndarray, params: WIPMParams) 
     float64)."""
     values = [float(index), float(first), *np.asarray(state, dtype=np.float64).tolist()]
     for leaf, size in zip(params, _PARAM_SIZES, strict=True):
-        if size == 1 and np.ndim(leaf) == 0:
+        # the leaves params_from_robot makes first (NumPy float64 scalars are floats; a float64
+        # array's tolist is exact): np.ndim and np.asarray cost ~0.3 us a leaf
+        if size == 1 and isinstance(leaf, float):
+            values.append(float(leaf))
+        elif type(leaf) is np.ndarray and leaf.dtype == np.float64 and leaf.size == size:
+            values.extend(leaf.ravel().tolist())
+        elif size == 1 and np.ndim(leaf) == 0:
             values.append(float(leaf))
         else:
             flat = np.asarray(leaf, dtype=np.float64).ravel()

@@ -297,9 +297,7 @@ def refs_for(states: np.ndarray, params: WIPMParams) -> tuple[Array, WIPMParams]
 
 def wipm_state(robot: RobotModel) -> np.ndarray:
     """The WIPM state of the full robot (its ``lambda(q)`` part): planar
-    ``[theta, thetad, x, xd]``, 3-D ``[x, psi, theta, xd, psid, thetad, X0, Y0]``."""
-    q, nu = robot.q, robot.nu
-    if robot.layout.planar:
-        return np.array([robot.theta, robot.thetad, q[0], nu[0]])
-    axle = robot.axle_position
-    return np.array([q[0], q[1], robot.theta, nu[0], nu[1], robot.thetad, axle[0], axle[1]])
+    ``[theta, thetad, x, xd]``, 3-D ``[x, psi, theta, xd, psid, thetad, X0, Y0]``
+    (``RobotModel.wipm_state``: from the compiled update's scalars, one array of floats; every
+    control step records it)."""
+    return robot.wipm_state()
