@@ -33,6 +33,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import proxsuite
@@ -81,8 +82,9 @@ class QPSettings:
     one_call: bool = True
 
 
-@dataclass(frozen=True)
-class QPSolution:
+class QPSolution(NamedTuple):
+    """The task QP's answer at one step (a NamedTuple: one is made every control step)."""
+
     qdd: Array
     nu_dot: Array
     generalized: Array
