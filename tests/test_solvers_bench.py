@@ -219,3 +219,9 @@ def test_ddp_parts_ablations_leave_out_only_what_they_say(planar: bool) -> None:
     real = wipm.dynamics_derivatives()(z, w, params)
     stand_in = riccati.dynamics_derivatives(z, w, params)
     assert [a.shape for a in stand_in] == [a.shape for a in real]
+    # the stand-ins depend on the state and the input, so that XLA cannot fold the
+    # recursion's products away
+    moved = riccati.dynamics_derivatives(z + 0.1, w + 0.1, params)
+    assert all(not np.array_equal(a, b) for a, b in zip(stand_in, moved, strict=True))
+    with pytest.raises(ValueError, match="rate input"):
+        _ablated_solvers(planning_problem(planar, PlanConfig(), 1.0, False), MPCConfig().ddp)

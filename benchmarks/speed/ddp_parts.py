@@ -1,11 +1,13 @@
 """Where the MPC step's time goes: its pieces jitted alone, in units
 (``benchmarks.speed.yardstick``).
 
-    python -m benchmarks.speed.ddp_parts [--rounds 3]
+    python -m benchmarks.speed.ddp_parts [--rounds 3] [--index 400]
 
-On Krang's WIPM (``benchmarks.speed.ddp_bench``: the plan to (2, 0) planar, (2, 1) 3-D), the MPC's
-problem at plan index 400 from the plan's state plus 0.01 (``N = 100``), each piece timed as its
-own jitted call (median of 200 calls, then the median over ``--rounds`` interleaved rounds):
+On Krang's WIPM (``benchmarks.speed.ddp_bench``: the plan to (2, 0) planar, (2, 1) 3-D), the
+MPC's problem at plan index ``--index`` from the plan's state plus 0.01 (``N = 100``; at 400
+the 3-D plan's acceleration penalty is inactive along the window, the planar plan's active; at
+100 both are active), each piece timed as its own jitted call (median of 200 calls, then the
+median over ``--rounds`` interleaved rounds):
 
 * ``empty_call``: a jitted call with the solver's inputs that reads one entry: the floor;
 * ``rollout``: one ``lax.scan`` of the dynamics over the horizon;
@@ -26,8 +28,9 @@ planar / 3-D: empty_call 1.1 / 0.7 to 1.2, rollout 3.0 / 4.1 to 6.3, cost 3.8 to
 3.7, backward 10.6 to 11.1 / 12.3 to 14.0, backward_quadratic 4.5 to 4.7 / 10.7 to 11.2,
 backward_riccati 2.6 to 2.7 / 6.0, solve_2 20.0 to 21.8 / 32.1 to 37.4 units. So in the 3-D
 backward pass about half is the Riccati recursion and the loop (about 1 us per step: the
-floor of this code in XLA:CPU), most of the rest the dynamics' Jacobians; the planar plan is in
-its acceleration phase at index 400, where the penalty's Hessian is half of the pass. With
+floor of this code in XLA:CPU), most of the rest the dynamics' Jacobians; in the planar one
+more than half is the penalty's activity test (an evaluation of the model that XLA does not
+share with the Jacobian's), inactive along that window. With
 XLA's small-loop option (``controllers.optimizer.jax_setup``) a loop step costs little beyond
 its arithmetic (the option off doubles ``cost``). Separate top-level loops of one call cost
 more than the same loops nested in one (four rollouts as four loops: 130 us, nested in one
@@ -58,7 +61,9 @@ PIECES = (
 )
 
 
-def _problem_calls(problem: str, params: Any, theta0: float) -> dict[str, Callable[[], Any]]:
+def _problem_calls(
+    problem: str, params: Any, theta0: float, index: int = 400
+) -> dict[str, Callable[[], Any]]:
     """The pieces of :data:`PIECES` of one problem as argument-free calls."""
     import jax  # noqa: PLC0415
     import jax.numpy as jnp  # noqa: PLC0415
@@ -74,7 +79,9 @@ def _problem_calls(problem: str, params: Any, theta0: float) -> dict[str, Callab
         initial_state(problem, theta0), params, np.array(GOALS[problem]), planar=planar
     )
     wipm = mpc_problem(planar, MPCConfig(), plan.a_max, plan.theta_max)
-    horizon, index = MPCConfig().steps, 400
+    horizon = MPCConfig().steps
+    if not 0 <= index < len(plan.states):
+        raise ValueError(f"index {index} is outside the plan's {len(plan.states)} states")
     refs = jax.tree.map(jnp.asarray, refs_for(plan.window(index, horizon + 1), params))
     x0 = jnp.asarray(plan.states[index] + 0.01)  # off the plan: every iteration has work
     U = jnp.asarray(plan.control_window(index, horizon))
@@ -109,7 +116,10 @@ def _problem_calls(problem: str, params: Any, theta0: float) -> dict[str, Callab
 
 def _ablated_solvers(wipm: Any, config: Any) -> tuple[Any, Any]:
     """Solvers of ``wipm`` whose backward pass leaves out work (``backward_quadratic``,
-    ``backward_riccati``: the module docstring); their results are not the problem's."""
+    ``backward_riccati``: the module docstring); their results are not the problem's. For the
+    MPC's problems (no rate input)."""
+    if wipm.rate_input:
+        raise ValueError("the ablated solvers are written for problems without the rate input")
     import jax.numpy as jnp  # noqa: PLC0415
 
     from controllers.optimizer.ddp import make_ddp_solver  # noqa: PLC0415
@@ -142,7 +152,7 @@ def _ablated_solvers(wipm: Any, config: Any) -> tuple[Any, Any]:
     return quadratic, riccati
 
 
-def measure(rounds: int = 3) -> dict[str, dict[str, float]]:
+def measure(rounds: int = 3, index: int = 400) -> dict[str, dict[str, float]]:
     """``{planar|3d: {piece: units}}`` and each problem's ``unit_us``."""
     from benchmarks.speed.ddp_bench import krang_params  # noqa: PLC0415
 
@@ -150,7 +160,7 @@ def measure(rounds: int = 3) -> dict[str, dict[str, float]]:
     reference = ReferenceStep()
     out: dict[str, dict[str, float]] = {}
     for problem in ("planar", "3d"):
-        calls = _problem_calls(problem, params, theta0)
+        calls = _problem_calls(problem, params, theta0, index)
         samples: dict[str, list[float]] = {name: [] for name in PIECES}
         units: list[float] = []
         for _ in range(rounds):
@@ -169,8 +179,9 @@ def main() -> None:
     jax_setup.configure()  # the solvers' JAX settings, before JAX starts
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--index", type=int, default=400, help="the plan index of the window")
     args = parser.parse_args()
-    for problem, pieces in measure(args.rounds).items():
+    for problem, pieces in measure(args.rounds, args.index).items():
         unit = pieces.pop("unit_us")
         print(
             f"{problem} (unit {unit:.1f} us): "
