@@ -286,6 +286,8 @@ class HierarchicalController(PolicyBase):
             tasks.append(self.spin_task)
         self.orientation_tasks: list[FrameOrientationTask] = []
         self._orientation_reset: list[Array] = []
+        # the waiter's tray target, made once per MPC solution (_set_references)
+        self._tray_target: tuple[object, Array] | None = None
         for site in self._sites:
             position, rotation, _, _ = site_in_axle_frame(robot, site)
             position_task = FramePositionTask(
@@ -370,8 +372,13 @@ class HierarchicalController(PolicyBase):
             self.spin_task.psid_d = ref.psid
             self.spin_task.psidd_d = ref.psidd
         if self.config.tray_mode == "specific_force" and self.orientation_tasks:
-            tilt = tilt_toward(self._predicted_acceleration(robot), self.config.max_tray_tilt_deg)
-            self.orientation_tasks[0].target = tilt @ self._orientation_reset[0]
+            # the tilt depends on the MPC solution only: made when a new one is in use
+            solution = self.high_level.last_solution
+            if self._tray_target is None or self._tray_target[0] is not solution:
+                acceleration = self._predicted_acceleration(robot)
+                tilt = tilt_toward(acceleration, self.config.max_tray_tilt_deg)
+                self._tray_target = (solution, tilt @ self._orientation_reset[0])
+            self.orientation_tasks[0].target = self._tray_target[1].copy()
         self._ref = ref
 
     def _predicted_acceleration(self, robot: RobotModel) -> Array:

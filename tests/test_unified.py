@@ -95,3 +95,37 @@ def test_krang_waiter_reaches_the_goal_and_comes_less_close_to_slipping(krang_ru
     assert waiter["goal_reached"] and waiter["final_goal_error_m"] < 0.05
     assert waiter["cup_kept"]
     assert waiter["max_cup_friction_use"] < krang_run(goal, "level")["max_cup_friction_use"]
+
+
+def test_the_waiters_tray_target_made_once_per_mpc_solution_is_the_per_step_one() -> None:
+    """The waiter's tray target depends on the MPC solution in use only: made once per solution,
+    the closed loop's actions are those of making it every step, to the bit."""
+    import gymnasium as gym
+
+    from controllers.registry import make_policy
+
+    actions: dict[bool, list[np.ndarray]] = {}
+    made: dict[bool, int] = {}
+    for every_step in (False, True):
+        env = gym.make("wip_gym/PlanarTray-v0")
+        observation, info = env.reset(seed=2)
+        policy = make_policy("unified-waiter", env)
+        policy.reset(observation, info)
+        predicted = policy._predicted_acceleration
+        made[every_step] = 0
+
+        def counted(robot: object, predicted: object = predicted, key: bool = every_step) -> object:
+            made[key] += 1
+            return predicted(robot)  # type: ignore[operator]
+
+        policy._predicted_acceleration = counted
+        actions[every_step] = []
+        for _ in range(60):
+            if every_step:
+                policy._tray_target = None  # forget it: made again at this step
+            action = policy(observation)
+            actions[every_step].append(action)
+            observation, *_ = env.step(action)
+        env.close()
+    np.testing.assert_array_equal(np.array(actions[False]), np.array(actions[True]))
+    assert made == {False: 6, True: 60}  # one MPC solution per 10 ms: 6 in 60 steps of 1 ms
