@@ -197,3 +197,42 @@ def test_the_mpc_refuses_a_state_of_another_length_than_its_plan() -> None:
     mpc = ModelPredictiveController(plan)
     with pytest.raises(ValueError, match="MPC state must have shape"):
         mpc.step(0, np.zeros(8), params)
+
+
+def test_decoupled_mpc_command_equals_the_wipm_functions() -> None:
+    """``decoupled-mpc``'s one jitted call per step (``lambda(q)`` packed by ``param_values``)
+    gives the wheels' torques and the base's accelerations of ``inverse_dynamics`` and
+    ``spatial_dynamics`` (planar: ``planar_inverse_dynamics``, ``planar_dynamics``) called with
+    the parameters as they are, to round-off (XLA compiles the two forms apart)."""
+    from controllers.baselines.decoupled_mpc import _planar_command_jit, _spatial_command_jit
+    from controllers.high_level.mpc import param_values
+    from controllers.simplified.wipm import (
+        inverse_dynamics,
+        planar_dynamics,
+        planar_inverse_dynamics,
+        spatial_dynamics,
+    )
+
+    rng = np.random.default_rng(8)
+    params = WIPMParams(
+        *np.abs(rng.normal(1.0, 0.2, size=3)),
+        np.diag(rng.uniform(0.5, 2.0, size=3)) + 0.01 * rng.normal(size=(3, 3)),
+        *np.abs(rng.normal(1.0, 0.2, size=7)),
+    )
+    packed = np.array(param_values(params))
+    for _ in range(20):
+        state, u = rng.normal(scale=0.3, size=8), rng.normal(size=2)
+        tau_left, tau_right = inverse_dynamics(state, u, params)
+        sdot = spatial_dynamics(state, u, params)
+        expected = np.array([tau_left, tau_right, sdot[3], sdot[4]])
+        got = np.asarray(_spatial_command_jit(state, u, packed))
+        np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-12)
+        planar_state, thdd = rng.normal(scale=0.3, size=4), float(rng.normal())
+        expected = np.array(
+            [
+                planar_inverse_dynamics(planar_state, thdd, params),
+                planar_dynamics(planar_state, thdd, params)[3],
+            ]
+        )
+        got = np.asarray(_planar_command_jit(planar_state, thdd, packed))
+        np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-12)

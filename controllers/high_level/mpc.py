@@ -212,11 +212,11 @@ _PARAM_SIZES = (1, 1, 1, 9, 1, 1, 1, 1, 1, 1, 1)
 _N_PARAMS = sum(_PARAM_SIZES)
 
 
-def pack_inputs(index: int, first: bool, state: np.ndarray, params: WIPMParams) -> np.ndarray:
-    """The MPC step's host inputs as one float64 vector ``[index, first, state, params]``
-    (:func:`unpack_inputs` is its inverse inside the compiled step; the index is exact in
-    float64)."""
-    values = [float(index), float(first), *np.asarray(state, dtype=np.float64).tolist()]
+def param_values(params: WIPMParams) -> list[float]:
+    """``lambda(q)``'s leaves as ``_N_PARAMS`` floats in :data:`_PARAM_SIZES`' order
+    (``inertia_body`` row-major); :func:`params_from_vector` is its inverse in traced code.
+    ``ValueError`` for a leaf of another size."""
+    values: list[float] = []
     for leaf, size in zip(params, _PARAM_SIZES, strict=True):
         # the leaves params_from_robot makes first (NumPy float64 scalars are floats; a float64
         # array's tolist is exact): np.ndim and np.asarray cost ~0.3 us a leaf
@@ -231,9 +231,26 @@ def pack_inputs(index: int, first: bool, state: np.ndarray, params: WIPMParams) 
             if flat.size != size:
                 raise ValueError(f"a WIPM parameter of {flat.size} entries: expected {size}")
             values.extend(flat.tolist())
+    return values
+
+
+def params_from_vector(vector: jax.Array | np.ndarray) -> WIPMParams:
+    """The :class:`WIPMParams` of :func:`param_values`' floats (a vector of ``_N_PARAMS``)."""
+    leaves, at = [], 0
+    for size in _PARAM_SIZES:
+        leaves.append(vector[at] if size == 1 else vector[at : at + size].reshape(3, 3))
+        at += size
+    return WIPMParams(*leaves)
+
+
+def pack_inputs(index: int, first: bool, state: np.ndarray, params: WIPMParams) -> np.ndarray:
+    """The MPC step's host inputs as one float64 vector ``[index, first, state, params]``
+    (:func:`unpack_inputs` is its inverse inside the compiled step; the index is exact in
+    float64)."""
+    values = [float(index), float(first), *np.asarray(state, dtype=np.float64).tolist()]
     # one array from Python floats: a slice assignment per leaf cost ~1.5 us each (16 us in
     # all in a tight loop, 60 us per MPC tick in the closed loop)
-    return np.array(values)
+    return np.array(values + param_values(params))
 
 
 def unpack_inputs(
@@ -247,17 +264,13 @@ def unpack_inputs(
             f"packed MPC inputs of shape {host.shape} for a plan of {n} states: expected "
             f"({_HEAD + n + _N_PARAMS},)"
         )
-    leaves, at = [], _HEAD + n
-    for size in _PARAM_SIZES:
-        leaves.append(host[at] if size == 1 else host[at : at + size].reshape(3, 3))
-        at += size
     index = host[0].astype(jnp.int32)
     first = host[1] != 0.0
     return (
         index,
         first,
         host[_HEAD : _HEAD + n],
-        WIPMParams(*leaves),
+        params_from_vector(host[_HEAD + n :]),
         warm,
         plan_states,
         plan_controls,
