@@ -236,3 +236,30 @@ def test_decoupled_mpc_command_equals_the_wipm_functions() -> None:
         )
         got = np.asarray(_planar_command_jit(planar_state, thdd, packed))
         np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-12)
+
+
+def test_plan_sample_is_np_interp_of_each_state() -> None:
+    """``Plan.sample`` (``np.interp``'s arithmetic for all quantities at once) gives the floats
+    of ``np.interp`` per quantity: at random times, at the grid's times and just after them,
+    before the start (the first state) and at and after the end (the goal state); NaN refused."""
+    env, robot, params, state = robot_state("wip_gym/Krang-v0")
+    plan = plan_to_goal(state, params, np.array([0.6, 0.2]), planar=False)
+    times = plan.times
+    rng = np.random.default_rng(5)
+    queries = [
+        *rng.uniform(times[0], times[-1], size=300),
+        *times[::37],
+        *(times[:-1:41] + 1e-12),
+        -0.5,
+        float(times[-1]),
+        times[-1] + 1.0,
+    ]
+    for t in queries:
+        if t >= times[-1]:
+            expected = plan.goal_state
+        else:
+            expected = np.array([np.interp(t, times, column) for column in plan.states.T])
+        got = np.array(list(plan.sample(float(t)).values()))
+        np.testing.assert_array_equal(got, expected, err_msg=f"t = {t!r}")
+    with pytest.raises(ValueError, match="NaN"):
+        plan.sample(float("nan"))
