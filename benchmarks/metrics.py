@@ -90,6 +90,12 @@ class EpisodeMetrics:
         self.has_ee = "ee_error" in reset_info
         self._low = None if action_low is None else np.asarray(action_low, dtype=float)
         self._high = None if action_high is None else np.asarray(action_high, dtype=float)
+        # the bands within LIMIT_RTOL of each bound, made once (update tests every step's action)
+        self._near_high: NDArray[np.float64] | None = None
+        self._near_low: NDArray[np.float64] | None = None
+        if self._low is not None and self._high is not None:
+            tolerance = LIMIT_RTOL * np.maximum(1.0, np.abs(self._high - self._low))
+            self._near_high, self._near_low = self._high - tolerance, self._low + tolerance
         self._distance: list[float] = []
         self._speed: list[float] = []
         self._fallen = False
@@ -152,10 +158,9 @@ class EpisodeMetrics:
             kept = kept and bool(info.get("cup_on_plate", True))
             self._kept.append(kept)
             self._tray_kept.append(bool(info.get("tray_on_hand", True)))
-        if action is not None and self._low is not None and self._high is not None:
+        if action is not None and self._near_high is not None and self._near_low is not None:
             a = np.asarray(action, dtype=float)
-            tolerance = LIMIT_RTOL * np.maximum(1.0, np.abs(self._high - self._low))
-            at_limit = (a >= self._high - tolerance) | (a <= self._low + tolerance)
+            at_limit = (a >= self._near_high) | (a <= self._near_low)
             self._at_limit += int(bool(at_limit.any()))
         if control_time_s is not None:
             self._control_times.append(float(control_time_s))
