@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import gymnasium as gym
 import jax
 import jax.numpy as jnp
@@ -199,6 +201,30 @@ def test_the_mpc_refuses_a_state_of_another_length_than_its_plan() -> None:
         mpc.step(0, np.zeros(8), params)
 
 
+def test_decoupled_mpc_packs_the_parameters_of_each_mpc_step() -> None:
+    """``decoupled-mpc`` packs ``lambda(q)`` once per MPC step: at every control step its packed
+    vector is that of the high level's current parameters (new at every MPC step)."""
+    import gymnasium as gym
+
+    from controllers.high_level.mpc import param_values
+    from controllers.registry import make_policy
+
+    env = gym.make("wip_gym/Krang-v0")
+    observation, info = env.reset(seed=1)
+    policy = make_policy("decoupled-mpc", env)
+    policy.reset(observation, info)
+    previous, packings = None, 0
+    for _ in range(25):
+        action = policy(observation)
+        packed = policy._packed_params()
+        packings += packed is not previous
+        previous = packed
+        np.testing.assert_array_equal(packed, param_values(policy.high_level.params))
+        observation, *_ = env.step(action)
+    env.close()
+    assert packings == 3  # MPC steps at 0, 10 and 20 ms
+
+
 def test_decoupled_mpc_command_equals_the_wipm_functions() -> None:
     """``decoupled-mpc``'s one jitted call per step (``lambda(q)`` packed by ``param_values``)
     gives the wheels' torques and the base's accelerations of ``inverse_dynamics`` and
@@ -263,3 +289,13 @@ def test_plan_sample_is_np_interp_of_each_state() -> None:
         np.testing.assert_array_equal(got, expected, err_msg=f"t = {t!r}")
     with pytest.raises(ValueError, match="NaN"):
         plan.sample(float("nan"))
+    # the plan's arrays are read-only: the rows sample keeps cannot go stale
+    with pytest.raises(ValueError, match="read-only"):
+        plan.states[0, 0] = 1.0
+    # a plan with a non-finite state is read through np.interp itself (its NaN cases)
+    states = plan.states.copy()
+    states[5, 2] = np.nan
+    broken = dataclasses.replace(plan, states=states)
+    for t in (times[4], times[5], 0.5 * (times[4] + times[5]), times[6]):
+        expected = np.array([np.interp(t, times, column) for column in states.T])
+        np.testing.assert_array_equal(np.array(list(broken.sample(float(t)).values())), expected)

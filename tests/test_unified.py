@@ -97,19 +97,32 @@ def test_krang_waiter_reaches_the_goal_and_comes_less_close_to_slipping(krang_ru
     assert waiter["max_cup_friction_use"] < krang_run(goal, "level")["max_cup_friction_use"]
 
 
-def test_the_waiters_tray_target_made_once_per_mpc_solution_is_the_per_step_one() -> None:
+@pytest.mark.parametrize(
+    ("env_id", "delay", "solutions"),
+    [("wip_gym/PlanarTray-v0", 0, 6), ("wip_gym/KrangTray-v0", 4, 6)],
+)
+def test_the_waiters_tray_target_made_once_per_mpc_solution_is_the_per_step_one(
+    env_id: str, delay: int, solutions: int
+) -> None:
     """The waiter's tray target depends on the MPC solution in use only: made once per solution,
-    the closed loop's actions are those of making it every step, to the bit."""
+    the closed loop's actions are those of making it every step, to the bit (planar, and 3-D
+    with the MPC beside the loop, whose solutions come into use mid-period)."""
+    import dataclasses
+
     import gymnasium as gym
 
-    from controllers.registry import make_policy
+    from controllers.registry import default_config, make_policy
 
+    config = default_config("unified-waiter")
+    config = dataclasses.replace(
+        config, high_level=dataclasses.replace(config.high_level, mpc_delay_steps=delay)
+    )
     actions: dict[bool, list[np.ndarray]] = {}
     made: dict[bool, int] = {}
     for every_step in (False, True):
-        env = gym.make("wip_gym/PlanarTray-v0")
+        env = gym.make(env_id)
         observation, info = env.reset(seed=2)
-        policy = make_policy("unified-waiter", env)
+        policy = make_policy("unified-waiter", env, config)
         policy.reset(observation, info)
         predicted = policy._predicted_acceleration
         made[every_step] = 0
@@ -127,5 +140,6 @@ def test_the_waiters_tray_target_made_once_per_mpc_solution_is_the_per_step_one(
             actions[every_step].append(action)
             observation, *_ = env.step(action)
         env.close()
+        policy.high_level.close()
     np.testing.assert_array_equal(np.array(actions[False]), np.array(actions[True]))
-    assert made == {False: 6, True: 60}  # one MPC solution per 10 ms: 6 in 60 steps of 1 ms
+    assert made == {False: solutions, True: 60}  # one MPC solution per 10 ms, 60 steps of 1 ms

@@ -169,8 +169,8 @@ class DecoupledMPCController(PolicyBase):
         return applied
 
     def _packed_params(self) -> Array:
-        """``lambda(q)`` of the MPC step in use as one vector (``param_values``), made once per
-        MPC step."""
+        """``HighLevel.params`` (``lambda(q)`` of the latest MPC solve started, as before) as one
+        vector (``param_values``), made again when they change: once per MPC step."""
         params = self.high_level.params
         if self._packed is None or self._packed[0] is not params:
             self._packed = (params, np.array(param_values(params)))

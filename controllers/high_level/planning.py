@@ -189,9 +189,14 @@ class Plan:
         return out
 
     @functools.cached_property
-    def _state_rows(self) -> np.ndarray:
+    def _state_rows(self) -> np.ndarray | None:
         """The states by quantity, each row contiguous (:meth:`sample` reads them every control
-        step; ``np.interp`` of a column of ``states`` copied it first)."""
+        step; ``np.interp`` of a column of ``states`` copied it first); None for a plan with a
+        non-finite state, which :meth:`sample` reads through ``np.interp`` itself (whose
+        special cases for NaN and inf the shortcut does not repeat). ``plan_to_goal`` makes a
+        plan's arrays read-only, so the rows cannot go stale."""
+        if not np.isfinite(self.states).all():
+            return None
         return np.ascontiguousarray(self.states.T)
 
     def sample(self, t: float) -> dict[str, float]:
@@ -202,13 +207,15 @@ class Plan:
         times = self.times
         if t != t:
             raise ValueError("plan time t is NaN")
+        rows = self._state_rows
         if t >= times[-1]:
             state = self.goal_state
+        elif rows is None:
+            state = np.array([np.interp(t, times, column) for column in self.states.T])
         elif t < times[0]:
             state = self.states[0]
         else:
             j = int(np.searchsorted(times, t, side="right")) - 1
-            rows = self._state_rows
             low, high = rows[:, j], rows[:, j + 1]
             state = (high - low) / (times[j + 1] - times[j]) * (t - times[j]) + low
         names = PLANAR_STATE if self.planar else SPATIAL_STATE
@@ -341,6 +348,8 @@ def plan_to_goal(
         violations.append(f"arrives at {arrival} s, after {deadline:.1f} s")
     if not np.all(np.isfinite(Z)):
         violations.append("non-finite plan")
+    for array in (times, states, controls, goal):
+        array.flags.writeable = False  # a Plan is frozen (Plan.sample keeps its states' rows)
     return Plan(
         times=times,
         states=states,
