@@ -32,6 +32,7 @@ from benchmarks.speed.yardstick import (
     REFERENCE_ENV,
     ReferenceStep,
     burst_due,
+    interleaved_median_us,
     reference_step_us,
     times_between_bursts,
 )
@@ -213,6 +214,25 @@ def test_a_burst_of_the_unit_is_warm_samples() -> None:
     np.testing.assert_array_equal(reference.data.qvel, stepped.qvel)
     with pytest.raises(ValueError, match=">= 1"):
         reference.burst(0)
+
+
+def test_interleaved_medians_call_each_function_in_turn() -> None:
+    """Every function is called once untimed, then once per round, in turn; a function that
+    sleeps longer has the longer median."""
+    order: list[str] = []
+
+    def slow() -> None:
+        order.append("slow")
+        time.sleep(2e-3)
+
+    def fast() -> None:
+        order.append("fast")
+
+    medians = interleaved_median_us({"slow": slow, "fast": fast}, calls=3)
+    assert order == ["slow", "fast"] * 4
+    assert medians["slow"] >= 2000.0 > medians["fast"]
+    with pytest.raises(ValueError, match="calls must be >= 1"):
+        interleaved_median_us({"fast": fast}, calls=0)
 
 
 def test_a_burst_is_due_every_so_many_steps_and_after_the_last() -> None:

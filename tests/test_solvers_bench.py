@@ -225,3 +225,50 @@ def test_ddp_parts_ablations_leave_out_only_what_they_say(planar: bool) -> None:
     assert all(not np.array_equal(a, b) for a, b in zip(stand_in, moved, strict=True))
     with pytest.raises(ValueError, match="rate input"):
         _ablated_solvers(planning_problem(planar, PlanConfig(), 1.0, False), MPCConfig().ddp)
+
+
+@pytest.mark.parametrize("planar", [True, False])
+def test_riccati_floor_compiled_recursion_is_the_ddps(planar: bool) -> None:
+    """``benchmarks.speed.riccati_floor``: the compiled recursion gives the DDP's backward pass
+    (``DDPSolver._backward`` with the problem's own derivatives) on the same trajectory, and so
+    does ``_backward`` over the stored derivatives; a ``Q_uu + mu I`` that is not positive
+    definite fails both."""
+    import jax.numpy as jnp
+
+    from benchmarks.speed.riccati_floor import (
+        as_result,
+        compiled_recursion,
+        problem_inputs,
+        run_compiled,
+        stored_backward,
+    )
+    from controllers.optimizer.ddp import rollout
+
+    params, _ = krang_params()
+    wipm = mpc_problem(planar, MPCConfig(), a_max=0.5, theta_max=0.1)
+    solver = ddp_solver_for(wipm, MPCConfig().ddp)
+    rng = np.random.default_rng(5)
+    steps, n, m = 30, wipm.n_state, wipm.n_control
+    U = jnp.asarray(rng.normal(scale=2.0, size=(steps, m)))
+    X = rollout(wipm.dynamics(), jnp.asarray(rng.normal(scale=0.05, size=n)), U, params)
+    refs = refs_for(rng.normal(scale=0.1, size=(steps + 1, n)), params)
+    inputs = problem_inputs(solver, X, U, params, refs)
+    mu = 1e-3
+    truth = as_result(solver._backward(X, U, params, refs, jnp.asarray(mu)))
+    assert truth.ok
+    for result in (run_compiled(inputs, mu), as_result(stored_backward(inputs).call(mu))):
+        assert result.ok
+        scale = np.abs(truth.K).max()
+        np.testing.assert_allclose(result.K, truth.K, rtol=0, atol=1e-10 * scale)
+        np.testing.assert_allclose(result.k, truth.k, rtol=0, atol=1e-10 * np.abs(truth.k).max())
+        for mine, theirs in [
+            (result.dv1, truth.dv1),
+            (result.dv2, truth.dv2),
+            (result.grad_norm, truth.grad_norm),
+        ]:
+            assert mine == pytest.approx(theirs, rel=1e-10)
+    # mu far below -Q_uu's spectrum: the first step's factor fails
+    assert not run_compiled(inputs, -1e9).ok
+    assert not as_result(stored_backward(inputs).call(-1e9)).ok
+    with pytest.raises(ValueError, match="1 <= m <= n"):
+        compiled_recursion(2, 3)

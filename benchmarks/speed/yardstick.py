@@ -121,3 +121,22 @@ def median_call_us(function: Callable[[], object], calls: int = 200) -> float:
         function()
         times[i] = time.perf_counter() - start
     return float(np.median(times) * 1e6)
+
+
+def interleaved_median_us(
+    functions: dict[str, Callable[[], object]], calls: int = 200
+) -> dict[str, float]:
+    """The median wall time (us) of each of ``functions`` over ``calls`` rounds that call every
+    one in turn (after one untimed call of each): on a machine whose speed drifts within
+    seconds, each sees the same drift, which ``median_call_us`` one after the other does not."""
+    if calls < 1:
+        raise ValueError(f"calls must be >= 1, got {calls}")
+    for function in functions.values():
+        function()
+    times = {name: np.empty(calls) for name in functions}
+    for i in range(calls):
+        for name, function in functions.items():
+            start = time.perf_counter()
+            function()
+            times[name][i] = time.perf_counter() - start
+    return {name: float(np.median(t) * 1e6) for name, t in times.items()}
