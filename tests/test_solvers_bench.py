@@ -267,8 +267,16 @@ def test_riccati_floor_compiled_recursion_is_the_ddps(planar: bool) -> None:
             (result.grad_norm, truth.grad_norm),
         ]:
             assert mine == pytest.approx(theirs, rel=1e-10)
-    # mu far below -Q_uu's spectrum: the first step's factor fails
-    assert not run_compiled(inputs, -1e9).ok
-    assert not as_result(stored_backward(inputs).call(-1e9)).ok
-    with pytest.raises(ValueError, match="1 <= m <= n"):
-        compiled_recursion(2, 3)
+    # Q_uu not positive definite at one step (the last, which the recursion meets first): the
+    # pass fails; a NaN in one gradient term makes the gradient norm NaN in both
+    broken = inputs._replace(luu=inputs.luu.copy())
+    broken.luu[-1] = -1e6 * np.eye(m)
+    nan_grad = inputs._replace(lu=inputs.lu.copy())
+    nan_grad.lu[steps // 2, 0] = np.nan
+    for case in (broken, nan_grad):
+        compiled, xla = run_compiled(case, mu), as_result(stored_backward(case).call(mu))
+        assert not compiled.ok and not xla.ok
+    assert np.isnan(run_compiled(nan_grad, mu).grad_norm)
+    assert np.isnan(as_result(stored_backward(nan_grad).call(mu)).grad_norm)
+    with pytest.raises(ValueError, match="m >= 1"):
+        compiled_recursion(2, 0)

@@ -26,7 +26,10 @@ A piece's cost minus ``empty_call`` over the horizon is its cost per step of the
 Measured (2 shared cores, 2026-11-27, two runs of ``--rounds 5``; units of 12.2 to 18.8 us),
 planar / 3-D: empty_call 1.1 / 0.7 to 1.2, rollout 3.0 / 4.1 to 6.3, cost 3.8 to 5.2 / 2.7 to
 3.7, backward 10.6 to 11.1 / 12.3 to 14.0, backward_quadratic 4.5 to 4.7 / 10.7 to 11.2,
-backward_riccati 2.6 to 2.7 / 6.0, solve_2 20.0 to 21.8 / 32.1 to 37.4 units. So in the 3-D
+backward_riccati 2.6 to 2.7 / 6.0, solve_2 20.0 to 21.8 / 32.1 to 37.4 units (the backward
+passes then returned their gains alone, and XLA dropped the adjoint and the expected change;
+now they return the whole pass: backward 11.8 / 15.2, backward_riccati 3.9 / 9.0 in one run,
+docs/performance.md §16). So in the 3-D
 backward pass about half is the Riccati recursion and the loop (about 1 us per step: the
 floor of this code in XLA:CPU), most of the rest the dynamics' Jacobians; in the planar one
 more than half is the penalty's activity test (an evaluation of the model that XLA does not
@@ -99,10 +102,12 @@ def _problem_calls(
         "empty_call": jax.jit(lambda X, U, p, r: X[0]),
         "rollout": jax.jit(lambda X, U, p, r: rollout(dynamics, X[0], U, p)),
         "cost": jax.jit(lambda X, U, p, r: trajectory_cost(running, terminal, X, U, r)),
-        "backward": jax.jit(lambda X, U, p, r: solvers[2]._backward(X, U, p, r, mu).K),
-        "backward_quadratic": jax.jit(lambda X, U, p, r: quadratic._backward(X, U, p, r, mu).K),
-        "backward_riccati": jax.jit(lambda X, U, p, r: riccati._backward(X, U, p, r, mu).K),
+        "backward": jax.jit(lambda X, U, p, r: solvers[2]._backward(X, U, p, r, mu)),
+        "backward_quadratic": jax.jit(lambda X, U, p, r: quadratic._backward(X, U, p, r, mu)),
+        "backward_riccati": jax.jit(lambda X, U, p, r: riccati._backward(X, U, p, r, mu)),
     }
+    # the backward passes return the whole pass (gains, expected change, gradient norm, ok):
+    # returning the gains alone let XLA drop the adjoint and the expected change as dead code
     calls: dict[str, Callable[[], Any]] = {
         name: (lambda f=f: jax.block_until_ready(f(X, U, params, refs)))
         for name, f in jitted.items()
