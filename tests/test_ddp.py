@@ -153,6 +153,31 @@ def test_cost_gradient_and_hessian_match_finite_differences() -> None:
     np.testing.assert_allclose(float(res.cost), J(u), rtol=1e-13)
 
 
+def test_without_the_gradient_norm_the_solve_is_the_same() -> None:
+    """``gradient_norm=False`` skips the adjoint recursion: ``grad_norm`` is NaN, and the
+    trajectory, gains, costs and iteration count are those of the solve with it, to the bit
+    (the stopping test on the predicted decrease is untouched)."""
+    x0, horizon = np.array([0.4, -0.3, 0.2, 0.1]), 40
+    refs = np.tile(WIP_GOAL, (horizon + 1, 1))
+    U0 = np.zeros((horizon, 1))
+    results = {
+        flag: make_ddp_solver(
+            wip_dynamics,
+            wip_running,
+            wip_terminal,
+            DDPConfig(max_iterations=20, tolerance=1e-9, gradient_norm=flag),
+        )(x0, U0, WIP_PARAMS, refs)
+        for flag in (True, False)
+    }
+    with_norm, without = results[True], results[False]
+    assert np.isfinite(float(with_norm.grad_norm)) and np.isnan(float(without.grad_norm))
+    assert int(with_norm.iterations) > 1
+    for name in ("X", "U", "K", "k", "cost_history", "mu_history", "iterations", "converged"):
+        np.testing.assert_array_equal(getattr(without, name), getattr(with_norm, name))
+    with pytest.raises(ValueError, match="needs gradient_norm"):
+        DDPConfig(grad_tolerance=1e-6, gradient_norm=False)
+
+
 # ------------------------------------------------------------------------- 2. LQ = Riccati
 def _lq_problem(horizon: int):
     rng = np.random.default_rng(horizon)

@@ -18,6 +18,7 @@ plan, and between their plans. On a shared machine only such interleaved figures
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import subprocess
 import sys
 import time
@@ -168,7 +169,10 @@ def main() -> None:
     U0 = np.zeros((config.steps, m))
     goal = goal_state("3d", state, np.asarray(GOALS["3d"]))
     refs = refs_for(np.tile(goal, (config.steps + 1, 1)), params)
-    base_ddp = base["controllers.optimizer.ddp"].DDPConfig(**config.ddp.__dict__)
+    # the settings the revision knows (a setting added since runs at the revision's behaviour)
+    base_config = base["controllers.optimizer.ddp"].DDPConfig
+    known = {f.name for f in dataclasses.fields(base_config)}
+    base_ddp = base_config(**{k: v for k, v in config.ddp.__dict__.items() if k in known})
     solvers = {
         "base": solver_for["base"](problems["base"], base_ddp),
         "new": solver_for["new"](problems["new"], config.ddp),

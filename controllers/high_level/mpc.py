@@ -40,7 +40,8 @@ class MPCConfig:
         q_terminal: terminal weights on positions and theta (authors 1e5) and speeds (1e4).
         q_terminal_speed: see above.
         ddp: solver settings except the iteration budget (iLQR, no tolerance stop, no backward
-            pass after the last line search: the MPC uses the controls, not the gains).
+            pass after the last line search: the MPC uses the controls, not the gains; no
+            gradient norm: nothing reads it).
     """
 
     horizon_s: float = 1.0
@@ -56,7 +57,11 @@ class MPCConfig:
     q_terminal_speed: float = 1e4
     ddp: DDPConfig = field(
         default_factory=lambda: DDPConfig(
-            max_iterations=2, tolerance=0.0, second_order=False, final_backward=False
+            max_iterations=2,
+            tolerance=0.0,
+            second_order=False,
+            final_backward=False,
+            gradient_norm=False,
         )
     )
 

@@ -62,7 +62,8 @@ class PlanConfig:
             acceleration flips sign within ~0.1 s mid-drive.
         r_rate_spin: weight on ``tau_0``'s rate (3-D; the authors' 0.01: ``tau_0`` is in N m).
         q_terminal: terminal weight on every tracked state (authors 1e4).
-        ddp: solver settings (authors: 50 iterations, iLQR).
+        ddp: solver settings (authors: 50 iterations, iLQR; no gradient norm: the plan stops on
+            the predicted decrease).
     """
 
     horizon_s: float = 20.0
@@ -81,7 +82,9 @@ class PlanConfig:
     r_rate_spin: float = 0.01
     q_terminal: float = 1e4
     ddp: DDPConfig = field(
-        default_factory=lambda: DDPConfig(max_iterations=100, tolerance=1e-9, second_order=False)
+        default_factory=lambda: DDPConfig(
+            max_iterations=100, tolerance=1e-9, second_order=False, gradient_norm=False
+        )
     )
 
     def __post_init__(self) -> None:
