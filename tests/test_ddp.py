@@ -5,6 +5,8 @@ warm start, compiled-function reuse, regularisation of an indefinite Q_uu and in
 
 from __future__ import annotations
 
+from typing import Any
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -153,7 +155,19 @@ def test_cost_gradient_and_hessian_match_finite_differences() -> None:
     np.testing.assert_allclose(float(res.cost), J(u), rtol=1e-13)
 
 
-def test_without_the_gradient_norm_the_solve_is_the_same() -> None:
+@pytest.mark.parametrize(
+    "settings",
+    [
+        {"max_iterations": 20, "tolerance": 1e-9},  # DDP, stops on the predicted decrease
+        {  # the MPC's settings: iLQR, a budget of 2, no final backward pass
+            "max_iterations": 2,
+            "tolerance": 0.0,
+            "second_order": False,
+            "final_backward": False,
+        },
+    ],
+)
+def test_without_the_gradient_norm_the_solve_is_the_same(settings: dict[str, Any]) -> None:
     """``gradient_norm=False`` skips the adjoint recursion: ``grad_norm`` is NaN, and the
     trajectory, gains, costs and iteration count are those of the solve with it, to the bit
     (the stopping test on the predicted decrease is untouched)."""
@@ -162,10 +176,7 @@ def test_without_the_gradient_norm_the_solve_is_the_same() -> None:
     U0 = np.zeros((horizon, 1))
     results = {
         flag: make_ddp_solver(
-            wip_dynamics,
-            wip_running,
-            wip_terminal,
-            DDPConfig(max_iterations=20, tolerance=1e-9, gradient_norm=flag),
+            wip_dynamics, wip_running, wip_terminal, DDPConfig(**settings, gradient_norm=flag)
         )(x0, U0, WIP_PARAMS, refs)
         for flag in (True, False)
     }

@@ -227,12 +227,15 @@ def test_ddp_parts_ablations_leave_out_only_what_they_say(planar: bool) -> None:
         _ablated_solvers(planning_problem(planar, PlanConfig(), 1.0, False), MPCConfig().ddp)
 
 
-@pytest.mark.parametrize("planar", [True, False])
-def test_riccati_floor_compiled_recursion_is_the_ddps(planar: bool) -> None:
+@pytest.mark.parametrize(("planar", "gradient"), [(True, False), (False, False), (False, True)])
+def test_riccati_floor_compiled_recursion_is_the_ddps(planar: bool, gradient: bool) -> None:
     """``benchmarks.speed.riccati_floor``: the compiled recursion gives the DDP's backward pass
-    (``DDPSolver._backward`` with the problem's own derivatives) on the same trajectory, and so
-    does ``_backward`` over the stored derivatives; a ``Q_uu + mu I`` that is not positive
-    definite fails both."""
+    (``DDPSolver._backward`` with the problem's own derivatives, with and without the gradient
+    norm's adjoint recursion) on the same trajectory, and so does ``_backward`` over the stored
+    derivatives; a ``Q_uu + mu I`` that is not positive definite at one step fails both, and a
+    NaN gradient term makes the gradient norm NaN in both."""
+    import dataclasses
+
     import jax.numpy as jnp
 
     from benchmarks.speed.riccati_floor import (
@@ -246,7 +249,7 @@ def test_riccati_floor_compiled_recursion_is_the_ddps(planar: bool) -> None:
 
     params, _ = krang_params()
     wipm = mpc_problem(planar, MPCConfig(), a_max=0.5, theta_max=0.1)
-    solver = ddp_solver_for(wipm, MPCConfig().ddp)
+    solver = ddp_solver_for(wipm, dataclasses.replace(MPCConfig().ddp, gradient_norm=gradient))
     rng = np.random.default_rng(5)
     steps, n, m = 30, wipm.n_state, wipm.n_control
     U = jnp.asarray(rng.normal(scale=2.0, size=(steps, m)))
@@ -256,27 +259,32 @@ def test_riccati_floor_compiled_recursion_is_the_ddps(planar: bool) -> None:
     mu = 1e-3
     truth = as_result(solver._backward(X, U, params, refs, jnp.asarray(mu)))
     assert truth.ok
-    for result in (run_compiled(inputs, mu), as_result(stored_backward(inputs).call(mu))):
+    assert np.isfinite(truth.grad_norm) == gradient
+    for result in (
+        run_compiled(inputs, mu, gradient),
+        as_result(stored_backward(inputs, gradient).call(mu)),
+    ):
         assert result.ok
         scale = np.abs(truth.K).max()
         np.testing.assert_allclose(result.K, truth.K, rtol=0, atol=1e-10 * scale)
         np.testing.assert_allclose(result.k, truth.k, rtol=0, atol=1e-10 * np.abs(truth.k).max())
-        for mine, theirs in [
-            (result.dv1, truth.dv1),
-            (result.dv2, truth.dv2),
-            (result.grad_norm, truth.grad_norm),
-        ]:
-            assert mine == pytest.approx(theirs, rel=1e-10)
+        assert result.dv1 == pytest.approx(truth.dv1, rel=1e-10)
+        assert result.dv2 == pytest.approx(truth.dv2, rel=1e-10)
+        if gradient:
+            assert result.grad_norm == pytest.approx(truth.grad_norm, rel=1e-10)
+        else:
+            assert np.isnan(result.grad_norm)
     # Q_uu not positive definite at one step (the last, which the recursion meets first): the
-    # pass fails; a NaN in one gradient term makes the gradient norm NaN in both
+    # pass fails; with the gradient norm, a NaN in one gradient term makes it NaN in both
     broken = inputs._replace(luu=inputs.luu.copy())
     broken.luu[-1] = -1e6 * np.eye(m)
     nan_grad = inputs._replace(lu=inputs.lu.copy())
     nan_grad.lu[steps // 2, 0] = np.nan
     for case in (broken, nan_grad):
-        compiled, xla = run_compiled(case, mu), as_result(stored_backward(case).call(mu))
+        compiled = run_compiled(case, mu, gradient)
+        xla = as_result(stored_backward(case, gradient).call(mu))
         assert not compiled.ok and not xla.ok
-    assert np.isnan(run_compiled(nan_grad, mu).grad_norm)
-    assert np.isnan(as_result(stored_backward(nan_grad).call(mu)).grad_norm)
+        if case is nan_grad:
+            assert np.isnan(compiled.grad_norm) and np.isnan(xla.grad_norm)
     with pytest.raises(ValueError, match="m >= 1"):
         compiled_recursion(2, 0)

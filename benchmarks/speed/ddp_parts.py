@@ -28,9 +28,9 @@ planar / 3-D: empty_call 1.1 / 0.7 to 1.2, rollout 3.0 / 4.1 to 6.3, cost 3.8 to
 3.7, backward 10.6 to 11.1 / 12.3 to 14.0, backward_quadratic 4.5 to 4.7 / 10.7 to 11.2,
 backward_riccati 2.6 to 2.7 / 6.0, solve_2 20.0 to 21.8 / 32.1 to 37.4 units (the backward
 passes then returned their gains alone, and XLA dropped the adjoint and the expected change;
-now they return the whole pass: backward 11.8 / 15.2, backward_riccati 3.9 / 9.0 in one run,
-docs/performance.md §16). So in the 3-D
-backward pass about half is the Riccati recursion and the loop (about 1 us per step: the
+now they return the whole pass, and the MPC's settings leave out the gradient norm's adjoint:
+backward 11.0 / 16.3, backward_riccati 5.9 / 8.4 in one run, docs/performance.md §16). So in
+the 3-D backward pass about half is the Riccati recursion and the loop (about 1 us per step: the
 floor of this code in XLA:CPU), most of the rest the dynamics' Jacobians; in the planar one
 more than half is the penalty's activity test (an evaluation of the model that XLA does not
 share with the Jacobian's), inactive along that window. With

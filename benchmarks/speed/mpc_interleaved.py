@@ -172,6 +172,9 @@ def main() -> None:
     # the settings the revision knows (a setting added since runs at the revision's behaviour)
     base_config = base["controllers.optimizer.ddp"].DDPConfig
     known = {f.name for f in dataclasses.fields(base_config)}
+    dropped = sorted(set(config.ddp.__dict__) - known)
+    if dropped:
+        print(f"3d plan: {args.base} has no DDPConfig setting {dropped}: it runs without them")
     base_ddp = base_config(**{k: v for k, v in config.ddp.__dict__.items() if k in known})
     solvers = {
         "base": solver_for["base"](problems["base"], base_ddp),

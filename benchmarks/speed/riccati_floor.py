@@ -3,10 +3,11 @@ loops: would a backward pass outside XLA reach the MPC's speed target?
 
     python -m benchmarks.speed.riccati_floor [--rounds 5] [--index 400]
 
-Both sides run the recursion (2)-(5) of ``controllers.optimizer.ddp`` (iLQR, as the MPC runs
-it: the Q-terms from ``F = [f_x f_u]``, ``Q_uu + mu I`` solved by its Cholesky factor, the
-improved value update, the adjoint for the gradient) over stage derivatives *stored* in arrays,
-so that neither computes a derivative and the same floats go in:
+Both sides run the recursion (2)-(5) of ``controllers.optimizer.ddp`` as the MPC and the plan
+run it (iLQR: the Q-terms from ``F = [f_x f_u]``, ``Q_uu + mu I`` solved by its Cholesky factor,
+the improved value update, the expected change; no adjoint recursion, since
+``DDPConfig.gradient_norm`` is False there) over stage derivatives *stored* in arrays, so that
+neither computes a derivative and the same floats go in:
 
 * ``compiled``: :func:`compiled_recursion`, the same arithmetic as loops in numba with the
   state and control sizes fixed when it compiles (so that LLVM unrolls and vectorises the small
@@ -72,11 +73,14 @@ class RecursionResult(NamedTuple):
 
 
 @functools.cache
-def compiled_recursion(n: int, m: int) -> Callable[..., tuple[float, float, bool, float]]:
+def compiled_recursion(
+    n: int, m: int, gradient: bool = False
+) -> Callable[..., tuple[float, float, bool, float]]:
     """The recursion (2)-(5) for ``n`` states and ``m`` controls, compiled (numba) with the
     sizes as constants: ``recursion(fx, fu, lx, lu, lxx, lux, luu, vx, vxx, mu, K, k)`` fills
     ``K`` (N, m, n) and ``k`` (N, m) and returns ``(dv1, dv2, ok, grad_norm)`` as
-    ``DDPSolver._backward`` does."""
+    ``DDPSolver._backward`` does with ``DDPConfig.gradient_norm = gradient`` (False, as the MPC
+    and the plan run it: no adjoint recursion, ``grad_norm`` NaN)."""
     if n < 1 or m < 1:
         raise ValueError(f"need n >= 1 and m >= 1, got n={n}, m={m}")
     p = n + m
@@ -177,20 +181,21 @@ def compiled_recursion(n: int, m: int) -> Callable[..., tuple[float, float, bool
                     for b in range(m):
                         s += quu[a, b] * K[t, b, j]
                     W[a, j] = s
-            # the gradient dJ/du and the adjoint, before V_x is overwritten (they read lam)
-            for a in range(m):
-                s = lu[t, a]
-                for i in range(n):
-                    s += fu[t, i, a] * lam[i]
-                # jnp.maximum's NaN semantics: a NaN gradient makes the norm NaN, and stays
-                if not abs(s) <= gmax and gmax == gmax:
-                    gmax = abs(s)
-            for j in range(n):
-                s = lx[t, j]
-                for i in range(n):
-                    s += fx[t, i, j] * lam[i]
-                lam_new[j] = s
-            lam[:] = lam_new
+            if gradient:
+                # the gradient dJ/du and the adjoint (they read lam, the next step's adjoint)
+                for a in range(m):
+                    s = lu[t, a]
+                    for i in range(n):
+                        s += fu[t, i, a] * lam[i]
+                    # jnp.maximum's NaN semantics: a NaN gradient makes the norm NaN, and stays
+                    if not abs(s) <= gmax and gmax == gmax:
+                        gmax = abs(s)
+                for j in range(n):
+                    s = lx[t, j]
+                    for i in range(n):
+                        s += fx[t, i, j] * lam[i]
+                    lam_new[j] = s
+                lam[:] = lam_new
             # (4): V_x, V_xx with Q_ux = lux + Q[n:, :n], the upper triangle mirrored
             for i in range(n):
                 s = lx[t, i] + q[i]
@@ -210,16 +215,16 @@ def compiled_recursion(n: int, m: int) -> Callable[..., tuple[float, float, bool
                     vxx[i, j] = s
                     vxx[j, i] = s
         ok = ok and np.isfinite(dv1) and np.isfinite(dv2)
-        return dv1, dv2, ok, gmax
+        return dv1, dv2, ok, (gmax if gradient else np.nan)
 
     return recursion
 
 
-def run_compiled(inputs: StageInputs, mu: float) -> RecursionResult:
+def run_compiled(inputs: StageInputs, mu: float, gradient: bool = False) -> RecursionResult:
     """:func:`compiled_recursion` on ``inputs``, its outputs allocated here."""
     steps, n, m = inputs.fu.shape
     K, k = np.empty((steps, m, n)), np.empty((steps, m))
-    dv1, dv2, ok, gmax = compiled_recursion(n, m)(*inputs, float(mu), K, k)
+    dv1, dv2, ok, gmax = compiled_recursion(n, m, gradient)(*inputs, float(mu), K, k)
     return RecursionResult(K, k, float(dv1), float(dv2), bool(ok), float(gmax))
 
 
@@ -243,8 +248,9 @@ def as_result(bp: Any) -> RecursionResult:
     )
 
 
-def stored_backward(inputs: StageInputs) -> StoredBackward:
-    """``DDPSolver._backward`` on ``inputs``, jitted (:class:`StoredBackward`)."""
+def stored_backward(inputs: StageInputs, gradient: bool = False) -> StoredBackward:
+    """``DDPSolver._backward`` on ``inputs``, jitted (:class:`StoredBackward`), with
+    ``DDPConfig.gradient_norm = gradient``."""
     import jax  # noqa: PLC0415
     import jax.numpy as jnp  # noqa: PLC0415
 
@@ -282,7 +288,8 @@ def stored_backward(inputs: StageInputs) -> StoredBackward:
     def unused(*_: Any) -> Any:
         raise AssertionError("the stored recursion evaluates no dynamics or running cost")
 
-    solver = StoredDerivatives(unused, unused, terminal, DDPConfig(second_order=False))
+    config = DDPConfig(second_order=False, gradient_norm=gradient)
+    solver = StoredDerivatives(unused, unused, terminal, config)
     X = jnp.zeros((steps + 1, n))
     U = jnp.zeros((steps, m))
     refs_j = jax.tree.map(jnp.asarray, refs)

@@ -176,13 +176,12 @@ class DDPConfig:
             ``tolerance * |J| + abs_tolerance``. Default 1e-8 (the authors have no tolerance;
             1e-8 is their unused box-QP "min relative improvement").
         abs_tolerance: Absolute part of that test, for costs whose optimum is near 0.
-        gradient_norm: True (default): the backward pass also runs the adjoint recursion for
-            the exact gradient, ``DDPResult.grad_norm``. False: skipped, ``grad_norm`` is NaN
-            (the MPC's and the plan's setting: they stop on other tests; measured, the 3-D plan
-            6 to 8 % faster, the planar MPC step 5 to 8 %, the 3-D one within the noise, results
-            the same to the bit, docs/performance.md §16). Needs ``grad_tolerance = 0``.
         grad_tolerance: Also stop when ``max |dJ/dU| <= grad_tolerance`` (exact gradient of the
             total cost from the adjoint recursion). 0 disables it.
+        gradient_norm: True (default): the backward pass also runs the adjoint recursion for
+            the exact gradient, ``DDPResult.grad_norm``. False: skipped, ``grad_norm`` is NaN,
+            every other result the same (the MPC's and the plan's setting: they stop on other
+            tests; the time it saves: docs/performance.md §16). Needs ``grad_tolerance = 0``.
         second_order: True: DDP with the ``V_x . f_xx, f_ux, f_uu`` terms; False: iLQR (the
             authors' choice).
         mu_init: Initial ``Q_uu`` regularisation. Authors (46): 1.0. 13b had none (0).
@@ -222,7 +221,10 @@ class DDPConfig:
         if self.tolerance < 0 or self.abs_tolerance < 0 or self.grad_tolerance < 0:
             raise ValueError("tolerance, abs_tolerance and grad_tolerance must be >= 0")
         if self.grad_tolerance > 0 and not self.gradient_norm:
-            raise ValueError("grad_tolerance > 0 stops on the gradient: it needs gradient_norm")
+            raise ValueError(
+                "grad_tolerance > 0 stops on the gradient: it needs gradient_norm=True "
+                "(with --set, set gradient_norm first)"
+            )
         if self.mu_factor <= 1.0:
             raise ValueError(f"mu_factor must be > 1, got {self.mu_factor}")
         if not 0.0 <= self.mu_min <= self.mu_max or self.mu_init < 0:
