@@ -288,3 +288,42 @@ def test_riccati_floor_compiled_recursion_is_the_ddps(planar: bool, gradient: bo
             assert np.isnan(compiled.grad_norm) and np.isnan(xla.grad_norm)
     with pytest.raises(ValueError, match="m >= 1"):
         compiled_recursion(2, 0)
+
+
+@pytest.mark.parametrize("planar", [True, False])
+def test_stage_codegen_equals_jax_on_both_sides_of_the_penalty(planar: bool) -> None:
+    """``benchmarks.speed.stage_codegen``: the scalar code generated from the jaxpr of the
+    MPC problem's stage (dynamics, its Jacobians, the running cost's derivatives) gives JAX's
+    values on random states, where the acceleration penalty is inactive and where it is active
+    (its ``cond``'s two branches); a primitive it has no form for is refused by name."""
+    import jax
+    import jax.numpy as jnp
+
+    from benchmarks.speed.stage_codegen import scalar_function, stage_function, stage_rows
+
+    params, _ = krang_params()
+    wipm = mpc_problem(planar, MPCConfig(), a_max=0.5, theta_max=0.1)
+    stage, inputs, outputs = stage_function(wipm, params)
+    n, m = wipm.n_state, wipm.n_control
+    dynamics = wipm.dynamics()
+    jacobians, derivatives = wipm.dynamics_derivatives(), wipm.running_derivatives()
+    rng = np.random.default_rng(11)
+    active = []
+    for scale in (0.01, 30.0) * 4:  # small and large torques: the penalty off and on
+        x = rng.normal(scale=0.1, size=n)
+        u = rng.normal(scale=scale, size=m)
+        s_ref = rng.normal(scale=0.1, size=n)
+        z = stage_rows(x[None], u[None], s_ref[None], params)[0]
+        assert z.shape == (inputs,)
+        out = np.empty(outputs)
+        stage(z, out)
+        xj, uj, sj = jnp.asarray(x), jnp.asarray(u), jnp.asarray(s_ref)
+        truth = jax.tree.leaves(
+            (dynamics(xj, uj, params), jacobians(xj, uj, params), derivatives(xj, uj, (sj, params)))
+        )
+        expected = np.concatenate([np.ravel(np.asarray(a)) for a in truth])
+        np.testing.assert_allclose(out, expected, rtol=1e-12, atol=1e-12 * np.abs(expected).max())
+        active.append(bool(wipm.penalty(xj, uj, params)[1]))
+    assert any(active) and not all(active)
+    with pytest.raises(NotImplementedError, match="dot_general"):
+        scalar_function(lambda a, b: a @ b, jnp.ones((2, 2)), jnp.ones(2))

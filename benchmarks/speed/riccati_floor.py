@@ -319,39 +319,64 @@ def problem_inputs(solver: Any, X: Any, U: Any, params: Any, refs: Any) -> Stage
     return StageInputs(fx, fu, lx, lu, lxx, lux, luu, vx, vxx)
 
 
+class MPCWindow(NamedTuple):
+    """The MPC's problem at one plan index: the WIPM problem, its plan, the trajectory of the
+    plan's controls from the plan's state plus 0.01, Krang's ``lambda(q)`` and the references."""
+
+    wipm: Any
+    plan: Any
+    start: np.ndarray
+    X: Any
+    U: Any
+    params: Any
+    refs: Any
+
+
+def mpc_window(problem: str, index: int) -> MPCWindow:
+    """``benchmarks.speed.ddp_parts``' MPC workload: Krang's WIPM, the plan to its goal, the
+    window of ``N`` steps at plan ``index`` from the plan's state plus 0.01."""
+    import jax  # noqa: PLC0415
+    import jax.numpy as jnp  # noqa: PLC0415
+
+    from benchmarks.speed.ddp_bench import GOALS, initial_state, krang_params  # noqa: PLC0415
+    from controllers.high_level.mpc import MPCConfig, mpc_problem  # noqa: PLC0415
+    from controllers.high_level.planning import plan_to_goal  # noqa: PLC0415
+    from controllers.optimizer.ddp import rollout  # noqa: PLC0415
+    from controllers.simplified.wipm_problem import refs_for  # noqa: PLC0415
+
+    params, theta0 = krang_params()
+    planar = problem == "planar"
+    start = initial_state(problem, theta0)
+    plan = plan_to_goal(start, params, np.array(GOALS[problem]), planar=planar)
+    config = MPCConfig()
+    wipm = mpc_problem(planar, config, plan.a_max, plan.theta_max)
+    horizon = config.steps
+    if not 0 <= index < len(plan.states):
+        raise ValueError(f"index {index} is outside the plan's {len(plan.states)} states")
+    refs = jax.tree.map(jnp.asarray, refs_for(plan.window(index, horizon + 1), params))
+    x0 = jnp.asarray(plan.states[index] + 0.01)
+    U = jnp.asarray(plan.control_window(index, horizon))
+    X = rollout(wipm.dynamics(), x0, U, params)
+    return MPCWindow(wipm, plan, start, X, U, params, refs)
+
+
 def _cases(index: int) -> dict[str, StageInputs]:
     """The MPC's problems at plan ``index`` (planar and 3-D) and the 3-D plan's at its
     solution."""
     import jax  # noqa: PLC0415
     import jax.numpy as jnp  # noqa: PLC0415
 
-    from benchmarks.speed.ddp_bench import GOALS, initial_state, krang_params  # noqa: PLC0415
-    from controllers.high_level.mpc import MPCConfig, mpc_problem  # noqa: PLC0415
-    from controllers.high_level.planning import (  # noqa: PLC0415
-        PlanConfig,
-        plan_to_goal,
-        planning_problem,
-    )
-    from controllers.optimizer.ddp import rollout  # noqa: PLC0415
+    from benchmarks.speed.ddp_bench import GOALS  # noqa: PLC0415
+    from controllers.high_level.mpc import MPCConfig  # noqa: PLC0415
+    from controllers.high_level.planning import PlanConfig, planning_problem  # noqa: PLC0415
     from controllers.simplified.wipm_problem import ddp_solver_for, refs_for  # noqa: PLC0415
 
-    params, theta0 = krang_params()
     cases: dict[str, StageInputs] = {}
     for problem in ("planar", "3d"):
         planar = problem == "planar"
-        start = initial_state(problem, theta0)
-        plan = plan_to_goal(start, params, np.array(GOALS[problem]), planar=planar)
-        config = MPCConfig()
-        wipm = mpc_problem(planar, config, plan.a_max, plan.theta_max)
-        horizon = config.steps
-        if not 0 <= index < len(plan.states):
-            raise ValueError(f"index {index} is outside the plan's {len(plan.states)} states")
-        refs = jax.tree.map(jnp.asarray, refs_for(plan.window(index, horizon + 1), params))
-        x0 = jnp.asarray(plan.states[index] + 0.01)
-        U = jnp.asarray(plan.control_window(index, horizon))
-        X = rollout(wipm.dynamics(), x0, U, params)
+        wipm, plan, start, X, U, params, refs = mpc_window(problem, index)
         cases[f"mpc {problem}"] = problem_inputs(
-            ddp_solver_for(wipm, config.ddp), X, U, params, refs
+            ddp_solver_for(wipm, MPCConfig().ddp), X, U, params, refs
         )
         if not planar:
             # the plan's problem (the rate input: the control joins the state) at its solution,

@@ -1,0 +1,381 @@
+"""The DDP's stage functions (dynamics, Jacobians, cost derivatives) as straight-line scalar
+code compiled by numba, generated from their jaxprs: how fast would a compiled DDP's per-step
+work be, with JAX's autodiff still the source of every derivative?
+
+    python -m benchmarks.speed.stage_codegen [--rounds 5]
+
+``scalar_function(fun, *example_args)`` traces ``fun`` to a jaxpr (``jax.make_jaxpr``) and
+writes it out element by element: every array of the jaxpr (small, fixed shapes) becomes one
+Python variable per entry, every element-wise primitive one statement per entry, and the
+structural primitives (slices, reshapes, concatenations, broadcasts, transposes) only rename
+entries. ``jit`` and ``custom_jvp_call`` are inlined; ``cond`` becomes ``if``/``else``. The
+result reads its inputs from one flat float vector and writes its outputs into another, and
+numba compiles it. It covers the primitives the WIPM's problems use and refuses any other
+(:data:`ELEMENTWISE`, :data:`STRUCTURAL`).
+
+The benchmark times, over the MPC's horizon (N = 100) at plan index 400, the per-step work of
+a backward pass outside the recursion: the dynamics, its Jacobians (the problem's own
+``dynamics_derivatives``: autodiff along the inputs it reads) and the running cost's
+derivatives (``running_derivatives``), one generated call per step in a compiled loop, against
+the same work in XLA as ``ddp_parts`` measures it (``backward`` minus ``backward_riccati``,
+both net of nothing: their difference is the derivatives and the penalty's activity test).
+A test holds the generated functions to JAX's on random inputs
+(tests/test_solvers_bench.py).
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numba
+import numpy as np
+
+#: element-wise primitives: name -> a format of the operands' entries
+ELEMENTWISE: dict[str, Callable[..., str]] = {
+    "add": lambda a, b: f"{a} + {b}",
+    "add_any": lambda a, b: f"{a} + {b}",
+    "sub": lambda a, b: f"{a} - {b}",
+    "mul": lambda a, b: f"{a} * {b}",
+    "div": lambda a, b: f"{a} / {b}",
+    "neg": lambda a: f"-{a}",
+    "max": lambda a, b: f"max({a}, {b})",
+    "min": lambda a, b: f"min({a}, {b})",
+    "sin": lambda a: f"math.sin({a})",
+    "cos": lambda a: f"math.cos({a})",
+    "sqrt": lambda a: f"math.sqrt({a})",
+    "exp": lambda a: f"math.exp({a})",
+    "log": lambda a: f"math.log({a})",
+    "tanh": lambda a: f"math.tanh({a})",
+    "abs": lambda a: f"abs({a})",
+    "gt": lambda a, b: f"{a} > {b}",
+    "ge": lambda a, b: f"{a} >= {b}",
+    "lt": lambda a, b: f"{a} < {b}",
+    "le": lambda a, b: f"{a} <= {b}",
+    "eq": lambda a, b: f"{a} == {b}",
+    "ne": lambda a, b: f"{a} != {b}",
+    "or": lambda a, b: f"{a} or {b}",
+    "and": lambda a, b: f"{a} and {b}",
+    "not": lambda a: f"not {a}",
+    "select_n": lambda p, *cases: _select(p, cases),
+}
+#: primitives that only move entries (handled in ``_Writer._structural``)
+STRUCTURAL = (
+    "slice",
+    "squeeze",
+    "reshape",
+    "transpose",
+    "concatenate",
+    "broadcast_in_dim",
+    "stack",
+    "unstack",
+    "pad",
+    "copy",
+    "copy_p",
+)
+
+
+def _select(predicate: str, cases: Sequence[str]) -> str:
+    if len(cases) != 2:
+        raise NotImplementedError("select_n with more than two cases")
+    return f"({cases[1]} if {predicate} else {cases[0]})"
+
+
+def _literal(value: Any) -> str:
+    value = np.asarray(value)
+    if value.dtype == np.bool_:
+        return "True" if bool(value) else "False"
+    if np.issubdtype(value.dtype, np.integer):
+        return str(int(value))
+    return repr(float(value))
+
+
+class _Writer:
+    """Writes a jaxpr's equations as scalar statements; arrays are object arrays of names."""
+
+    def __init__(self) -> None:
+        self.lines: list[str] = []
+        self.names = itertools.count()
+
+    def fresh(self) -> str:
+        return f"t{next(self.names)}"
+
+    def emit(self, indent: str, name: str, expression: str) -> None:
+        self.lines.append(f"{indent}{name} = {expression}")
+
+    def run(self, jaxpr: Any, consts: Sequence[Any], args: Sequence[np.ndarray], indent: str):  # noqa: ANN201
+        """The jaxpr's outputs (object arrays of names or literals) for ``args``."""
+        env: dict[Any, np.ndarray] = {}
+
+        def read(v: Any) -> np.ndarray:
+            if hasattr(v, "val"):  # a Literal
+                return np.full(np.shape(v.val), _literal(v.val), dtype=object)
+            return env[v]
+
+        for var, const in zip(jaxpr.constvars, consts, strict=True):
+            arr = np.asarray(const)
+            env[var] = np.array([_literal(c) for c in arr.ravel()], dtype=object).reshape(arr.shape)
+        for var, arg in zip(jaxpr.invars, args, strict=True):
+            env[var] = arg
+        for eqn in jaxpr.eqns:
+            ins = [read(v) for v in eqn.invars]
+            outs = self.equation(eqn, ins, indent)
+            for var, out in zip(eqn.outvars, outs, strict=True):
+                entries = np.empty((), dtype=object) if np.ndim(out) == 0 else out
+                if np.ndim(out) == 0:
+                    entries[()] = out[()] if isinstance(out, np.ndarray) else out
+                env[var] = entries
+        return [read(v) for v in jaxpr.outvars]
+
+    def equation(self, eqn: Any, ins: list[np.ndarray], indent: str) -> list[np.ndarray]:
+        name, params = eqn.primitive.name, eqn.params
+        if name in ELEMENTWISE:
+            shape = eqn.outvars[0].aval.shape
+            operands = [np.broadcast_to(a, shape) for a in ins]
+            out = np.empty(shape, dtype=object)
+            for index in np.ndindex(*shape):
+                target = self.fresh()
+                self.emit(indent, target, ELEMENTWISE[name](*(a[index] for a in operands)))
+                out[index] = target
+            return [out]
+        if name == "integer_pow":
+            return [self._map(ins[0], lambda a: f"{a} ** {params['y']}", indent)]
+        if name == "convert_element_type":
+            dtype = np.dtype(params["new_dtype"])
+            if dtype == np.bool_:
+                cast = "bool"
+            elif np.issubdtype(dtype, np.integer):
+                cast = "int"
+            else:
+                cast = "float"
+            return [self._map(ins[0], lambda a: f"{cast}({a})", indent)]
+        if name in ("jit", "pjit"):
+            closed = params["jaxpr"]
+            return self.run(closed.jaxpr, closed.consts, ins, indent)
+        if name == "custom_jvp_call":
+            closed = params["call_jaxpr"]
+            return self.run(closed.jaxpr, closed.consts, ins, indent)
+        if name == "cond":
+            return self._cond(eqn, ins, indent)
+        if name in STRUCTURAL:
+            return self._structural(name, params, ins, eqn)
+        raise NotImplementedError(f"no scalar form for the primitive {name!r}")
+
+    def _map(self, a: np.ndarray, form: Callable[[str], str], indent: str) -> np.ndarray:
+        out = np.empty(a.shape, dtype=object)
+        for index in np.ndindex(*a.shape):
+            target = self.fresh()
+            self.emit(indent, target, form(a[index]))
+            out[index] = target
+        return out
+
+    def _cond(self, eqn: Any, ins: list[np.ndarray], indent: str) -> list[np.ndarray]:
+        branches = eqn.params["branches"]
+        index, operands = ins[0], ins[1:]
+        outs = [np.empty(v.aval.shape, dtype=object) for v in eqn.outvars]
+        for out in outs:
+            for i in np.ndindex(*out.shape):
+                out[i] = self.fresh()
+        for k, branch in enumerate(branches):
+            head = "if" if k == 0 else ("elif" if k < len(branches) - 1 else "else")
+            self.lines.append(
+                f"{indent}{head} {index[()]} == {k}:" if head != "else" else f"{indent}else:"
+            )
+            results = self.run(branch.jaxpr, branch.consts, operands, indent + "    ")
+            for out, result in zip(outs, results, strict=True):
+                for i in np.ndindex(*out.shape):
+                    self.emit(indent + "    ", out[i], result[i])
+        return outs
+
+    def _structural(
+        self, name: str, params: dict[str, Any], ins: list[np.ndarray], eqn: Any
+    ) -> list[np.ndarray]:
+        a = ins[0]
+        if name in ("copy", "copy_p"):
+            return [a]
+        if name == "slice":
+            strides = params["strides"] or (1,) * a.ndim
+            index = tuple(
+                slice(s, e, st)
+                for s, e, st in zip(
+                    params["start_indices"], params["limit_indices"], strides, strict=True
+                )
+            )
+            return [a[index]]
+        if name == "squeeze":
+            return [np.squeeze(a, axis=tuple(params["dimensions"]))]
+        if name == "reshape":
+            return [a.reshape(params["new_sizes"])]
+        if name == "transpose":
+            return [a.transpose(params["permutation"])]
+        if name == "concatenate":
+            return [np.concatenate(ins, axis=params["dimension"])]
+        if name == "stack":
+            return [np.stack(ins, axis=params["axis"])]
+        if name == "unstack":
+            return [np.take(a, i, axis=params["axis"]) for i in range(a.shape[params["axis"]])]
+        if name == "broadcast_in_dim":
+            shape = params["shape"]
+            expanded = [1] * len(shape)
+            for source, target in enumerate(params["broadcast_dimensions"]):
+                expanded[target] = a.shape[source]
+            return [np.broadcast_to(a.reshape(expanded), shape).copy()]
+        if name == "pad":
+            value = ins[1][()]
+            config = params["padding_config"]
+            if any(interior != 0 for _, _, interior in config):
+                raise NotImplementedError("pad with interior padding")
+            if any(lo < 0 or hi < 0 for lo, hi, _ in config):
+                raise NotImplementedError("pad with negative padding")
+            out = np.full(eqn.outvars[0].aval.shape, value, dtype=object)
+            out[tuple(slice(lo, lo + n) for (lo, _, _), n in zip(config, a.shape, strict=True))] = a
+            return [out]
+        raise NotImplementedError(name)
+
+
+def scalar_source(
+    fun: Callable[..., Any], *example_args: Any, name: str = "stage"
+) -> tuple[str, int, int]:
+    """``(source, inputs, outputs)``: the Python source of ``name(z, out)``, which computes
+    ``fun`` on the float leaves of its arguments read in order from ``z`` and writes the leaves
+    of its result in order into ``out``; and the two lengths."""
+    import jax  # noqa: PLC0415
+
+    closed = jax.make_jaxpr(fun)(*example_args)
+    writer = _Writer()
+    args: list[np.ndarray] = []
+    offset = 0
+    for var in closed.jaxpr.invars:
+        shape = var.aval.shape
+        arr = np.empty(shape, dtype=object)
+        for index in np.ndindex(*shape):
+            target = writer.fresh()
+            writer.emit("    ", target, f"z[{offset}]")
+            arr[index] = target
+            offset += 1
+        args.append(arr)
+    outs = writer.run(closed.jaxpr, closed.consts, args, "    ")
+    k = 0
+    for out in outs:
+        for index in np.ndindex(*out.shape):
+            writer.lines.append(f"    out[{k}] = {out[index]}")
+            k += 1
+    source = "\n".join([f"def {name}(z, out):", *writer.lines, "    return None", ""])
+    return source, offset, k
+
+
+def scalar_function(
+    fun: Callable[..., Any], *example_args: Any
+) -> tuple[Callable[..., None], int, int]:
+    """``scalar_source`` compiled by numba: ``(function(z, out), inputs, outputs)``."""
+    import math  # noqa: PLC0415
+
+    source, inputs, outputs = scalar_source(fun, *example_args)
+    namespace: dict[str, Any] = {"math": math}
+    exec(compile(source, "<stage_codegen>", "exec"), namespace)  # noqa: S102
+    return numba.njit(cache=False)(namespace["stage"]), inputs, outputs
+
+
+def stage_function(wipm: Any, params: Any) -> tuple[Callable[..., None], int, int]:
+    """The per-step work of ``wipm``'s backward pass outside the recursion, generated: from
+    ``z = [x, u, s_ref, leaves of params]``, ``out = [f(x, u), f_x, f_u, l_x, l_u, l_xx, l_ux,
+    l_uu]`` (the problem's own ``dynamics_derivatives`` and ``running_derivatives``)."""
+    import jax.numpy as jnp  # noqa: PLC0415
+
+    dynamics = wipm.dynamics()
+    jacobians = wipm.dynamics_derivatives()
+    cost_derivatives = wipm.running_derivatives()
+
+    def stage(x: Any, u: Any, s_ref: Any, p: Any) -> Any:
+        return dynamics(x, u, p), jacobians(x, u, p), cost_derivatives(x, u, (s_ref, p))
+
+    n, m = wipm.n_state, wipm.n_control
+    return scalar_function(stage, jnp.zeros(n), jnp.zeros(m), jnp.zeros(n), params)
+
+
+def stage_rows(X: Any, U: Any, s_ref: Any, params: Any) -> np.ndarray:
+    """One row of :func:`stage_function`'s input per step ``k < N``."""
+    import jax  # noqa: PLC0415
+
+    leaves = np.concatenate([np.ravel(np.asarray(a, dtype=float)) for a in jax.tree.leaves(params)])
+    X, U, s_ref = (np.asarray(a, dtype=float) for a in (X, U, s_ref))
+    steps = U.shape[0]
+    return np.hstack([X[:steps], U, s_ref[:steps], np.tile(leaves, (steps, 1))])
+
+
+def horizon_loop(stage: Callable[..., None]) -> Callable[[np.ndarray, np.ndarray], None]:
+    """A compiled loop calling ``stage`` on every row: ``loop(Z, OUT)``."""
+
+    @numba.njit(cache=False)
+    def loop(Z: np.ndarray, OUT: np.ndarray) -> None:
+        for k in range(Z.shape[0]):
+            stage(Z[k], OUT[k])
+
+    return loop
+
+
+def measure(rounds: int = 5, index: int = 400) -> dict[str, dict[str, float]]:
+    """Per MPC problem, us per pass over the horizon: ``generated`` (the compiled loop of the
+    generated stage function) and ``xla`` (``ddp_parts``' ``backward`` minus
+    ``backward_riccati``: the same derivatives inside XLA's backward scan), and ``unit_us``."""
+    from benchmarks.speed.ddp_bench import krang_params  # noqa: PLC0415
+    from benchmarks.speed.ddp_parts import _problem_calls  # noqa: PLC0415
+    from benchmarks.speed.riccati_floor import mpc_window  # noqa: PLC0415
+    from benchmarks.speed.yardstick import ReferenceStep, interleaved_median_us  # noqa: PLC0415
+
+    params, theta0 = krang_params()
+    reference = ReferenceStep()
+    out: dict[str, dict[str, float]] = {}
+    for problem in ("planar", "3d"):
+        window = mpc_window(problem, index)
+        stage, _, outputs = stage_function(window.wipm, window.params)
+        Z = stage_rows(window.X, window.U, window.refs[0], window.params)
+        OUT = np.empty((Z.shape[0], outputs))
+        loop = horizon_loop(stage)
+        calls = _problem_calls(problem, params, theta0, index)
+        functions = {
+            "generated": lambda: loop(Z, OUT),  # noqa: B023
+            "backward": calls["backward"],
+            "riccati": calls["backward_riccati"],
+        }
+        samples: dict[str, list[float]] = {key: [] for key in functions}
+        units: list[float] = []
+        for _ in range(rounds):
+            for key, us in interleaved_median_us(functions).items():
+                samples[key].append(us)
+            units.append(float(np.median(reference.burst(50)) * 1e6))
+        med = {key: float(np.median(v)) for key, v in samples.items()}
+        out[problem] = {
+            "steps": float(Z.shape[0]),
+            "generated": med["generated"],
+            "xla": med["backward"] - med["riccati"],
+            "unit_us": float(np.median(units)),
+        }
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    from controllers.optimizer import jax_setup  # noqa: PLC0415
+
+    jax_setup.configure()
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rounds", type=int, default=5)
+    parser.add_argument("--index", type=int, default=400, help="the MPC window's plan index")
+    args = parser.parse_args(argv)
+    if args.rounds < 1:
+        parser.error("--rounds must be >= 1")
+    print("a backward pass's derivatives over the MPC's horizon, per pass (per step):")
+    for problem, f in measure(args.rounds, args.index).items():
+        steps = f["steps"]
+        print(
+            f"  {problem:6s} N={int(steps)}  generated {f['generated']:6.1f} us "
+            f"({1e3 * f['generated'] / steps:4.0f} ns)  xla {f['xla']:6.1f} us "
+            f"({1e3 * f['xla'] / steps:4.0f} ns)  (unit {f['unit_us']:.1f} us)"
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
