@@ -172,13 +172,16 @@ def test_mpc_step_is_traced_once(reference: dict[str, np.ndarray]) -> None:
     state = ddp_recorded.initial_state("planar", float(reference["theta0"]))
     plan = plan_to_goal(state, params, np.array([2.0, 0.0]), planar=True)
     mpc = ModelPredictiveController(plan)
+    # the compiled step is shared by every MPC of this problem and horizon: count the traces
+    # made here (another test may have traced it for a plan of another length already)
+    before = mpc.compiled.trace_count
     rng = np.random.default_rng(0)
     for index in range(0, 2400, 60):  # past the plan's end too
         mpc.step(index, plan.states[min(index, 2000)] + 0.01 * rng.normal(size=4), params)
     again = ModelPredictiveController(plan)  # a new controller on the same problem and horizon
     again.step(5, plan.states[5], params)
     assert mpc.compiled is again.compiled
-    assert mpc.compiled.trace_count == 1
+    assert mpc.compiled.trace_count - before <= 1
     assert mpc.solves == 40 and mpc.rejected == 0
 
 

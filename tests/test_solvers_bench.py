@@ -325,5 +325,47 @@ def test_stage_codegen_equals_jax_on_both_sides_of_the_penalty(planar: bool) -> 
         np.testing.assert_allclose(out, expected, rtol=1e-12, atol=1e-12 * np.abs(expected).max())
         active.append(bool(wipm.penalty(xj, uj, params)[1]))
     assert any(active) and not all(active)
-    with pytest.raises(NotImplementedError, match="dot_general"):
-        scalar_function(lambda a, b: a @ b, jnp.ones((2, 2)), jnp.ones(2))
+    # a product and a sum (dot_general, reduce_sum) written out, and a primitive refused
+    product, _, _ = scalar_function(
+        lambda a, b: (a @ b, jnp.sum(a, axis=0)), jnp.ones((2, 3)), jnp.ones(3)
+    )
+    a, b = rng.normal(size=(2, 3)), rng.normal(size=3)
+    result = np.empty(5)
+    product(np.concatenate([a.ravel(), b]), result)
+    np.testing.assert_allclose(result, np.concatenate([a @ b, a.sum(axis=0)]), rtol=1e-14)
+    with pytest.raises(NotImplementedError, match="'sort'"):
+        scalar_function(jnp.sort, jnp.ones(3))
+
+
+@pytest.mark.parametrize(("planar", "index"), [(True, 100), (False, 400)])
+def test_compiled_ddp_peer_solves_as_the_mpc_does(planar: bool, index: int) -> None:
+    """``benchmarks.speed.compiled_ddp``: the compiled peer (numba, derivatives generated from
+    JAX's jaxprs, the recursion from ``riccati_step``) gives the MPC step's predicted states and
+    controls on its window (planar where the penalty is active, 3-D where it is not), to
+    round-off; it refuses settings other than the MPC's."""
+    import dataclasses
+
+    from benchmarks.speed.compiled_ddp import compiled_mpc_solver
+    from benchmarks.speed.riccati_floor import mpc_window
+    from controllers.high_level.mpc import ModelPredictiveController, pack_inputs
+
+    window = mpc_window("planar" if planar else "3d", index)
+    mpc = ModelPredictiveController(window.plan)
+    peer = compiled_mpc_solver(mpc.problem, mpc.solver.config, window.params)
+    x0 = np.asarray(window.X[0])
+    ours = mpc.solve(pack_inputs(index, True, x0, window.params))
+    theirs = peer(x0, np.asarray(window.U), np.asarray(window.refs[0]))
+    assert ours.accepted and theirs.iterations == 2
+    scale = np.abs(ours.predicted_controls).max()
+    np.testing.assert_allclose(theirs.U, ours.predicted_controls, rtol=0, atol=1e-10 * scale)
+    np.testing.assert_allclose(
+        theirs.X, ours.predicted_states, rtol=0, atol=1e-10 * np.abs(ours.predicted_states).max()
+    )
+    assert theirs.cost == pytest.approx(ours.cost, rel=1e-12)
+    # the warm start changed: the solve did work
+    assert np.abs(theirs.U - np.asarray(window.U)).max() > 1e-6 * scale
+    for change in ({"second_order": True}, {"gradient_norm": True}):
+        with pytest.raises(ValueError, match="MPC's settings"):
+            compiled_mpc_solver(
+                mpc.problem, dataclasses.replace(mpc.solver.config, **change), window.params
+            )

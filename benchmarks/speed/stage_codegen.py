@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import itertools
+import math
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -59,7 +60,16 @@ ELEMENTWISE: dict[str, Callable[..., str]] = {
     "or": lambda a, b: f"{a} or {b}",
     "and": lambda a, b: f"{a} and {b}",
     "not": lambda a: f"not {a}",
+    "is_finite": lambda a: f"math.isfinite({a})",
     "select_n": lambda p, *cases: _select(p, cases),
+}
+#: reductions over axes (``reduce_sum`` as a sum of the entries, in order)
+REDUCTIONS = {
+    "reduce_sum": "",
+    "reduce_max": "max",
+    "reduce_min": "min",
+    "reduce_and": "all",
+    "reduce_or": "any",
 }
 #: primitives that only move entries (handled in ``_Writer._structural``)
 STRUCTURAL = (
@@ -72,6 +82,7 @@ STRUCTURAL = (
     "stack",
     "unstack",
     "pad",
+    "split",
     "copy",
     "copy_p",
 )
@@ -89,15 +100,26 @@ def _literal(value: Any) -> str:
         return "True" if bool(value) else "False"
     if np.issubdtype(value.dtype, np.integer):
         return str(int(value))
-    return repr(float(value))
+    v = float(value)
+    if math.isnan(v):
+        return "math.nan"
+    if math.isinf(v):
+        return "math.inf" if v > 0 else "-math.inf"
+    return repr(v)
+
+
+def _is_literal(entry: str) -> bool:
+    """Whether a generated entry is a literal (``_literal``'s output), not a variable."""
+    return not entry.startswith("t")
 
 
 class _Writer:
     """Writes a jaxpr's equations as scalar statements; arrays are object arrays of names."""
 
-    def __init__(self) -> None:
+    def __init__(self, fold: bool = False) -> None:
         self.lines: list[str] = []
         self.names = itertools.count()
+        self.fold = fold
 
     def fresh(self) -> str:
         return f"t{next(self.names)}"
@@ -136,21 +158,33 @@ class _Writer:
             operands = [np.broadcast_to(a, shape) for a in ins]
             out = np.empty(shape, dtype=object)
             for index in np.ndindex(*shape):
+                entries = [a[index] for a in operands]
+                folded = self._fold(name, entries) if self.fold else None
+                if folded is not None:
+                    out[index] = folded
+                    continue
                 target = self.fresh()
-                self.emit(indent, target, ELEMENTWISE[name](*(a[index] for a in operands)))
+                self.emit(indent, target, ELEMENTWISE[name](*entries))
                 out[index] = target
             return [out]
         if name == "integer_pow":
             return [self._map(ins[0], lambda a: f"{a} ** {params['y']}", indent)]
         if name == "convert_element_type":
             dtype = np.dtype(params["new_dtype"])
+            source = np.dtype(eqn.invars[0].aval.dtype)
             if dtype == np.bool_:
-                cast = "bool"
+                form = "bool({})"
+            elif source == np.bool_:  # numba has no float(bool) or int(bool)
+                form = (
+                    "(1 if {} else 0)"
+                    if np.issubdtype(dtype, np.integer)
+                    else "(1.0 if {} else 0.0)"
+                )
             elif np.issubdtype(dtype, np.integer):
-                cast = "int"
+                form = "int({})"
             else:
-                cast = "float"
-            return [self._map(ins[0], lambda a: f"{cast}({a})", indent)]
+                form = "float({})"
+            return [self._map(ins[0], form.format, indent)]
         if name in ("jit", "pjit"):
             closed = params["jaxpr"]
             return self.run(closed.jaxpr, closed.consts, ins, indent)
@@ -161,7 +195,82 @@ class _Writer:
             return self._cond(eqn, ins, indent)
         if name in STRUCTURAL:
             return self._structural(name, params, ins, eqn)
+        if name == "iota":
+            shape, dimension = tuple(params["shape"]), params["dimension"]
+            values = np.indices(shape)[dimension] if shape else np.zeros(())
+            cast = int if np.issubdtype(np.dtype(params["dtype"]), np.integer) else float
+            literal = np.vectorize(lambda v: _literal(cast(v)), otypes=[object])
+            return [literal(values)]
+        if name in REDUCTIONS:
+            return [self._reduce(name, ins[0], tuple(params["axes"]), indent)]
+        if name == "dot_general":
+            return [self._dot(ins[0], ins[1], params["dimension_numbers"], indent)]
         raise NotImplementedError(f"no scalar form for the primitive {name!r}")
+
+    def _sum_of(self, terms: list[str], indent: str) -> str:
+        target = self.fresh()
+        self.emit(indent, target, " + ".join(terms) if terms else "0.0")
+        return target
+
+    def _reduce(self, name: str, a: np.ndarray, axes: tuple[int, ...], indent: str) -> np.ndarray:
+        kept = [d for d in range(a.ndim) if d not in axes]
+        moved = a.transpose(kept + list(axes))
+        shape = moved.shape[: len(kept)]
+        out = np.empty(shape, dtype=object)
+        for index in np.ndindex(*shape):
+            entries = list(moved[index].ravel())
+            if name == "reduce_sum":
+                out[index] = self._sum_of(entries, indent)
+            elif name in ("reduce_and", "reduce_or"):
+                joiner = " and " if name == "reduce_and" else " or "
+                target = self.fresh()
+                self.emit(indent, target, f"({joiner.join(entries)})")
+                out[index] = target
+            else:
+                target = self.fresh()
+                self.emit(indent, target, f"{REDUCTIONS[name]}({', '.join(entries)})")
+                out[index] = target
+        return out
+
+    def _dot(self, a: np.ndarray, b: np.ndarray, numbers: Any, indent: str) -> np.ndarray:
+        (a_contract, b_contract), (a_batch, b_batch) = numbers
+        a_free = [d for d in range(a.ndim) if d not in a_contract and d not in a_batch]
+        b_free = [d for d in range(b.ndim) if d not in b_contract and d not in b_batch]
+        a_t = a.transpose(list(a_batch) + a_free + list(a_contract))
+        b_t = b.transpose(list(b_batch) + b_free + list(b_contract))
+        nb, na, nbf = len(a_batch), len(a_free), len(b_free)
+        shape = a_t.shape[: nb + na] + b_t.shape[nb : nb + nbf]
+        out = np.empty(shape, dtype=object)
+        for index in np.ndindex(*shape):
+            batch, i, j = index[:nb], index[nb : nb + na], index[nb + na :]
+            left = a_t[batch + i].ravel()
+            right = b_t[batch + j].ravel()
+            terms = [f"{x} * {y}" for x, y in zip(left, right, strict=True)]
+            out[index] = self._sum_of(terms, indent)
+        return out
+
+    def _fold(self, name: str, entries: list[str]) -> str | None:
+        """The entry's value at generation time, or an operand it equals, if the literals
+        among ``entries`` decide it (``fold``: for finite values, ``0 * x = 0``); else None."""
+        if all(_is_literal(e) for e in entries):
+            return _literal(eval(ELEMENTWISE[name](*entries), {"math": math}))  # noqa: S307
+        zero = [_is_literal(e) and float(eval(e, {"math": math})) == 0.0 for e in entries]  # noqa: S307
+        one = [_is_literal(e) and float(eval(e, {"math": math})) == 1.0 for e in entries]  # noqa: S307
+        if name == "mul" and any(zero):
+            return "0.0"
+        if name == "mul" and one[0]:
+            return entries[1]
+        if name == "mul" and one[1]:
+            return entries[0]
+        if name in ("add", "add_any") and zero[0]:
+            return entries[1]
+        if name in ("add", "add_any", "sub") and zero[1]:
+            return entries[0]
+        if name == "div" and zero[0]:
+            return "0.0"
+        if name == "select_n" and _is_literal(entries[0]):
+            return entries[2] if eval(entries[0]) else entries[1]  # noqa: S307
+        return None
 
     def _map(self, a: np.ndarray, form: Callable[[str], str], indent: str) -> np.ndarray:
         out = np.empty(a.shape, dtype=object)
@@ -216,6 +325,9 @@ class _Writer:
             return [np.stack(ins, axis=params["axis"])]
         if name == "unstack":
             return [np.take(a, i, axis=params["axis"]) for i in range(a.shape[params["axis"]])]
+        if name == "split":
+            axis, cuts = params["axis"], np.cumsum(params["sizes"])[:-1]
+            return list(np.split(a, cuts, axis=axis))
         if name == "broadcast_in_dim":
             shape = params["shape"]
             expanded = [1] * len(shape)
@@ -236,15 +348,17 @@ class _Writer:
 
 
 def scalar_source(
-    fun: Callable[..., Any], *example_args: Any, name: str = "stage"
+    fun: Callable[..., Any], *example_args: Any, name: str = "stage", fold: bool = False
 ) -> tuple[str, int, int]:
     """``(source, inputs, outputs)``: the Python source of ``name(z, out)``, which computes
     ``fun`` on the float leaves of its arguments read in order from ``z`` and writes the leaves
-    of its result in order into ``out``; and the two lengths."""
+    of its result in order into ``out``; and the two lengths. ``fold``: fold what the literals
+    decide (constants, ``0 * x``, ``x + 0``, ``1 * x``, selects on a constant): the same values
+    where every input is finite (``0 * inf`` is folded to 0, not NaN)."""
     import jax  # noqa: PLC0415
 
     closed = jax.make_jaxpr(fun)(*example_args)
-    writer = _Writer()
+    writer = _Writer(fold)
     args: list[np.ndarray] = []
     offset = 0
     for var in closed.jaxpr.invars:
@@ -267,12 +381,10 @@ def scalar_source(
 
 
 def scalar_function(
-    fun: Callable[..., Any], *example_args: Any
+    fun: Callable[..., Any], *example_args: Any, fold: bool = False
 ) -> tuple[Callable[..., None], int, int]:
     """``scalar_source`` compiled by numba: ``(function(z, out), inputs, outputs)``."""
-    import math  # noqa: PLC0415
-
-    source, inputs, outputs = scalar_source(fun, *example_args)
+    source, inputs, outputs = scalar_source(fun, *example_args, fold=fold)
     namespace: dict[str, Any] = {"math": math}
     exec(compile(source, "<stage_codegen>", "exec"), namespace)  # noqa: S102
     return numba.njit(cache=False)(namespace["stage"]), inputs, outputs

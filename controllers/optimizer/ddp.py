@@ -139,6 +139,7 @@ __all__ = [
     "DDPSolver",
     "ddp_solve",
     "make_ddp_solver",
+    "riccati_step",
     "rollout",
     "trajectory_cost",
 ]
@@ -359,6 +360,46 @@ def _cholesky_solve(A: Array, B: Array) -> tuple[Array, Array]:
     return solution, ok & jnp.all(jnp.isfinite(solution))
 
 
+def riccati_step(
+    derivatives: tuple[Array, ...], vx: Array, vxx: Array, mu: Array, second_order: bool
+) -> tuple[Array, Array, Array, Array, Array, Array, Array]:
+    """One step of the backward pass's recursion (2)-(5): from the stage derivatives
+    ``(l_x, l_u, l_xx, l_ux, l_uu, f_x, f_u[, f_xx, f_ux, f_uu])`` and the next step's value
+    expansion ``V'_x``, ``V'_xx``, the value expansion here, the gains ``K``, ``k``, this step's
+    terms of ``dV`` (5) and whether ``Q_uu + mu I`` was positive definite. A pure function: the
+    backward scan runs it, and ``benchmarks.speed.compiled_ddp`` compiles it outside XLA."""
+    lx, lu, lxx, lux, luu, fx, fu = derivatives[:7]
+    m = lu.shape[0]
+    # (2) from F = [f_x f_u]: F^T V_x and F^T V_xx F in two products instead of five (each
+    # entry the same sum in the same order as five products made it; XLA may fuse it
+    # otherwise: the 3-D plan is bit-equal, planar within 3e-14; the recursion 11 % faster)
+    n = fx.shape[0]
+    F = jnp.concatenate([fx, fu], axis=1)
+    q_lin = _tmv(F, vx)
+    quad = _tmm(F, _mm(vxx, F))  # [[f_x' V f_x, f_x' V f_u], [f_u' V f_x, f_u' V f_u]]
+    qx = lx + q_lin[:n]
+    qu = lu + q_lin[n:]
+    qxx = lxx + quad[:n, :n]
+    qux = lux + quad[n:, :n]
+    quu = luu + quad[n:, n:]
+    if second_order:
+        fxx, fux, fuu = derivatives[7:]
+        qxx = qxx + _contract(vx, fxx)
+        qux = qux + _contract(vx, fux)
+        quu = quu + _contract(vx, fuu)
+    qxx = 0.5 * (qxx + qxx.T)
+    quu = 0.5 * (quu + quu.T)
+    eye = jnp.eye(m, dtype=quu.dtype)
+    sol, ok = _cholesky_solve(quu + mu * eye, jnp.concatenate([qu[:, None], qux], 1))
+    k, K = -sol[:, 0], -sol[:, 1:]
+    quu_k = _mv(quu, k)
+    vx_new = qx + _tmv(K, quu_k) + _tmv(K, qu) + _tmv(qux, k)
+    cross = _tmm(K, qux)  # K' Q_ux; Q_ux' K is its transpose (the same products)
+    vxx_new = qxx + _tmm(K, _mm(quu, K)) + cross + cross.T
+    vxx_new = 0.5 * (vxx_new + vxx_new.T)
+    return vx_new, vxx_new, K, k, jnp.sum(k * qu), 0.5 * jnp.sum(k * quu_k), ok
+
+
 class _Backward(NamedTuple):
     K: Array
     k: Array
@@ -489,8 +530,6 @@ class DDPSolver:
     def _backward(self, X: Array, U: Array, params: PyTree, refs: PyTree, mu: Array) -> _Backward:
         """Backward pass (2)-(5) along ``(X, U)``, the derivatives of each step computed inside
         the scan (one compiled loop, no (N, n, n) arrays of derivatives in memory)."""
-        m = U.shape[1]
-        eye = jnp.eye(m, dtype=U.dtype)
         second = self.config.second_order
         gradient = self.config.gradient_norm
 
@@ -498,33 +537,9 @@ class DDPSolver:
             vx, vxx, lam, dv1, dv2, ok, gmax = carry
             derivatives = self._stage_derivatives(*z, params)
             lx, lu, lxx, lux, luu, fx, fu = derivatives[:7]
-            # (2) from F = [f_x f_u]: F^T V_x and F^T V_xx F in two products instead of five
-            # (each entry the same sum in the same order as five products made it; XLA may
-            # fuse it otherwise: the 3-D plan is bit-equal, planar within 3e-14; the Riccati
-            # recursion alone 11 % faster)
-            n = fx.shape[0]
-            F = jnp.concatenate([fx, fu], axis=1)
-            q_lin = _tmv(F, vx)
-            quad = _tmm(F, _mm(vxx, F))  # [[f_x' V f_x, f_x' V f_u], [f_u' V f_x, f_u' V f_u]]
-            qx = lx + q_lin[:n]
-            qu = lu + q_lin[n:]
-            qxx = lxx + quad[:n, :n]
-            qux = lux + quad[n:, :n]
-            quu = luu + quad[n:, n:]
-            if second:
-                fxx, fux, fuu = derivatives[7:]
-                qxx = qxx + _contract(vx, fxx)
-                qux = qux + _contract(vx, fux)
-                quu = quu + _contract(vx, fuu)
-            qxx = 0.5 * (qxx + qxx.T)
-            quu = 0.5 * (quu + quu.T)
-            sol, step_ok = _cholesky_solve(quu + mu * eye, jnp.concatenate([qu[:, None], qux], 1))
-            k, K = -sol[:, 0], -sol[:, 1:]
-            quu_k = _mv(quu, k)
-            vx_new = qx + _tmv(K, quu_k) + _tmv(K, qu) + _tmv(qux, k)
-            cross = _tmm(K, qux)  # K' Q_ux; Q_ux' K is its transpose (the same products)
-            vxx_new = qxx + _tmm(K, _mm(quu, K)) + cross + cross.T
-            vxx_new = 0.5 * (vxx_new + vxx_new.T)
+            vx_new, vxx_new, K, k, dv1_k, dv2_k, step_ok = riccati_step(
+                derivatives, vx, vxx, mu, second
+            )
             if gradient:
                 grad_u = lu + _tmv(fu, lam)
                 lam_new = lx + _tmv(fx, lam)
@@ -535,8 +550,8 @@ class DDPSolver:
                 vx_new,
                 vxx_new,
                 lam_new,
-                dv1 + jnp.sum(k * qu),
-                dv2 + 0.5 * jnp.sum(k * quu_k),
+                dv1 + dv1_k,
+                dv2 + dv2_k,
                 ok & step_ok,
                 gmax,
             )
