@@ -369,3 +369,68 @@ def test_compiled_ddp_peer_solves_as_the_mpc_does(planar: bool, index: int) -> N
             compiled_mpc_solver(
                 mpc.problem, dataclasses.replace(mpc.solver.config, **change), window.params
             )
+
+
+@pytest.mark.parametrize("fold", [False, True])
+def test_stage_codegen_small_functions_equal_jax(fold: bool) -> None:
+    """The generated code on small functions that reach its corners: a negative folded
+    literal to a power, NaN through maximum, where, cond both ways, a batched product, a
+    division by zero (inf, not an exception), with and without folding."""
+    import jax
+    import jax.numpy as jnp
+
+    from benchmarks.speed.stage_codegen import scalar_function
+
+    def corners(x: jax.Array, b: jax.Array) -> tuple[jax.Array, ...]:
+        return (
+            (x * 0.0 - 1.0) ** 2 + x,
+            jnp.maximum(x, jnp.nan),
+            jnp.minimum(x, 0.5),
+            jnp.where(x > 0, x, -2.0 * x),
+            jax.lax.cond(x[0] > 0, lambda: x * 2.0, lambda: x - 1.0),
+            jnp.einsum("bij,bjk->bik", b, b),
+            1.0 / (x - x[0]),
+            x**-2,
+        )
+
+    function, inputs, outputs = scalar_function(
+        corners, jnp.ones(3), jnp.ones((2, 2, 2)), fold=fold
+    )
+    rng = np.random.default_rng(2)
+    for sign in (1.0, -1.0):  # the cond's two branches
+        x = sign * np.abs(rng.normal(size=3)) + 0.1 * sign
+        b = rng.normal(size=(2, 2, 2))
+        out = np.empty(outputs)
+        function(np.concatenate([x, b.ravel()]), out)
+        truth = np.concatenate(
+            [np.ravel(np.asarray(a)) for a in corners(jnp.asarray(x), jnp.asarray(b))]
+        )
+        assert inputs == 11
+        np.testing.assert_allclose(out, truth, rtol=1e-14, atol=1e-14, equal_nan=True)
+        assert np.isinf(out[-6]) and np.isnan(out[3])  # 1 / 0 and maximum(x, nan)
+
+
+def test_compiled_ddp_peer_follows_the_regularisation_schedule() -> None:
+    """With one step size and a strict acceptance ratio, line searches fail and mu is raised
+    (the JAX solver's mu history shows it): the peer's iterations, states and controls still
+    equal the JAX solver's."""
+    import dataclasses
+
+    from benchmarks.speed.compiled_ddp import compiled_mpc_solver
+    from benchmarks.speed.riccati_floor import mpc_window
+    from controllers.high_level.mpc import ModelPredictiveController
+
+    window = mpc_window("planar", 100)
+    mpc = ModelPredictiveController(window.plan)
+    config = dataclasses.replace(
+        mpc.solver.config, max_iterations=6, alphas=(1.0,), line_search_c=0.9
+    )
+    solver = ddp_solver_for(mpc.problem, config)
+    ours = solver.jitted(window.X[0], window.U, window.params, window.refs)
+    mu = np.asarray(ours.mu_history)
+    assert (np.diff(mu) > 0).any()  # a failed line search raised mu
+    peer = compiled_mpc_solver(mpc.problem, config, window.params)
+    theirs = peer(np.asarray(window.X[0]), np.asarray(window.U), np.asarray(window.refs[0]))
+    assert theirs.iterations == int(ours.iterations)
+    np.testing.assert_allclose(theirs.U, np.asarray(ours.U), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(theirs.X, np.asarray(ours.X), rtol=0, atol=1e-9)

@@ -50,9 +50,9 @@ def _flat_params(params: Any) -> np.ndarray:
 
 
 def compiled_mpc_solver(wipm: Any, config: Any, params: Any) -> Callable[..., CompiledSolve]:
-    """``solve(x0, U_init, s_ref) -> CompiledSolve`` for ``wipm``'s problem with ``config``
-    (``s_ref``: the (N+1, n) reference states; ``params``: ``lambda(q)``, fixed here as the
-    generated code's input layout is)."""
+    """``solve(x0, U_init, s_ref[, params]) -> CompiledSolve`` for ``wipm``'s problem with
+    ``config`` (``s_ref``: the (N+1, n) reference states; ``params``: ``lambda(q)``, whose
+    pytree fixes the generated code's input layout; a solve may pass its own of that layout)."""
     import jax  # noqa: PLC0415
     import jax.numpy as jnp  # noqa: PLC0415
 
@@ -108,7 +108,7 @@ def compiled_mpc_solver(wipm: Any, config: Any, params: Any) -> Callable[..., Co
     o_K, o_k = n + n * n, n + n * n + m * n
     o_dv = o_k + m
 
-    @numba.njit(cache=False)
+    @numba.njit(cache=False, error_model="numpy")
     def trajectory(x0, U, X_ref, K, k, alpha, S, P, X_out, U_out, z, out):  # noqa: ANN001, ANN202, PLR0913
         """Rollout (6) from ``x0`` (``K`` None-like when ``alpha`` < 0: open loop on ``U``);
         returns the cost (1)."""
@@ -139,7 +139,7 @@ def compiled_mpc_solver(wipm: Any, config: Any, params: Any) -> Callable[..., Co
         final(zf, fo)
         return total + fo[0]
 
-    @numba.njit(cache=False)
+    @numba.njit(cache=False, error_model="numpy")
     def backward(X, U, S, P, mu, K, k, z, out):  # noqa: ANN001, ANN202, PLR0913
         """The backward pass (2)-(5): (dv1, dv2, ok), the gains into ``K``, ``k``."""
         steps = U.shape[0]
@@ -171,18 +171,18 @@ def compiled_mpc_solver(wipm: Any, config: Any, params: Any) -> Callable[..., Co
         ok = ok and np.isfinite(dv1) and np.isfinite(dv2)
         return dv1, dv2, ok
 
-    @numba.njit(cache=False)
+    @numba.njit(cache=False, error_model="numpy")
     def increase(mu, dmu):  # noqa: ANN001, ANN202
         dmu = max(dmu * factor, factor)
         return max(mu * dmu, mu_min), dmu
 
-    @numba.njit(cache=False)
+    @numba.njit(cache=False, error_model="numpy")
     def decrease(mu, dmu):  # noqa: ANN001, ANN202
         dmu = min(dmu / factor, 1.0 / factor)
         mu = mu * dmu
         return (0.0 if mu < mu_min else mu), dmu
 
-    @numba.njit(cache=False)
+    @numba.njit(cache=False, error_model="numpy")
     def regularised(X, U, S, P, mu, dmu, K, k, z, out):  # noqa: ANN001, ANN202, PLR0913
         """Backward passes with mu increased until one succeeds (8); (dv1, dv2, ok, mu, dmu)."""
         while True:
@@ -194,7 +194,7 @@ def compiled_mpc_solver(wipm: Any, config: Any, params: Any) -> Callable[..., Co
                 return dv1, dv2, False, mu, dmu
             mu, dmu = mu2, dmu2
 
-    @numba.njit(cache=False)
+    @numba.njit(cache=False, error_model="numpy")
     def solve(x0, U_init, S, P):  # noqa: ANN001, ANN202
         steps = U_init.shape[0]
         X = np.empty((steps + 1, n))
@@ -239,12 +239,14 @@ def compiled_mpc_solver(wipm: Any, config: Any, params: Any) -> Callable[..., Co
             done = (ok and -(dv1 + dv2) <= tolerance * abs(cost) + abs_tolerance) or not ok
         return X, U, cost, iterations
 
-    def call(x0: Any, U_init: Any, s_ref: Any) -> CompiledSolve:
+    def call(x0: Any, U_init: Any, s_ref: Any, params: Any = None) -> CompiledSolve:
+        """A solve; ``params``: this step's ``lambda(q)`` (the one given to the builder if
+        None)."""
         X, U, cost, iterations = solve(
             np.asarray(x0, dtype=float),
             np.asarray(U_init, dtype=float),
             np.ascontiguousarray(s_ref, dtype=float),
-            p_flat,
+            p_flat if params is None else _flat_params(params),
         )
         return CompiledSolve(X, U, float(cost), int(iterations))
 

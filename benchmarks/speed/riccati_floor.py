@@ -85,7 +85,7 @@ def compiled_recursion(
         raise ValueError(f"need n >= 1 and m >= 1, got n={n}, m={m}")
     p = n + m
 
-    @numba.njit(fastmath=_FASTMATH, cache=False)
+    @numba.njit(fastmath=_FASTMATH, cache=False, error_model="numpy")
     def recursion(fx, fu, lx, lu, lxx, lux, luu, vx_end, vxx_end, mu, K, k):  # noqa: ANN001, ANN202, PLR0913
         steps = fx.shape[0]
         vx = vx_end.copy()

@@ -28,6 +28,7 @@ from __future__ import annotations
 import argparse
 import itertools
 import math
+import re
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -42,8 +43,8 @@ ELEMENTWISE: dict[str, Callable[..., str]] = {
     "mul": lambda a, b: f"{a} * {b}",
     "div": lambda a, b: f"{a} / {b}",
     "neg": lambda a: f"-{a}",
-    "max": lambda a, b: f"max({a}, {b})",
-    "min": lambda a, b: f"min({a}, {b})",
+    "max": lambda a, b: f"nan_max({a}, {b})",
+    "min": lambda a, b: f"nan_min({a}, {b})",
     "sin": lambda a: f"math.sin({a})",
     "cos": lambda a: f"math.cos({a})",
     "sqrt": lambda a: f"math.sqrt({a})",
@@ -88,6 +89,18 @@ STRUCTURAL = (
 )
 
 
+@numba.njit(cache=True)
+def nan_max(a: float, b: float) -> float:
+    """``jnp.maximum``'s NaN semantics (Python's ``max`` drops a NaN second argument)."""
+    return a if (a > b or a != a) else b
+
+
+@numba.njit(cache=True)
+def nan_min(a: float, b: float) -> float:
+    """``jnp.minimum``'s NaN semantics."""
+    return a if (a < b or a != a) else b
+
+
 def _select(predicate: str, cases: Sequence[str]) -> str:
     if len(cases) != 2:
         raise NotImplementedError("select_n with more than two cases")
@@ -99,18 +112,27 @@ def _literal(value: Any) -> str:
     if value.dtype == np.bool_:
         return "True" if bool(value) else "False"
     if np.issubdtype(value.dtype, np.integer):
-        return str(int(value))
+        return str(int(value)) if int(value) >= 0 else f"({int(value)})"
     v = float(value)
     if math.isnan(v):
         return "math.nan"
     if math.isinf(v):
-        return "math.inf" if v > 0 else "-math.inf"
-    return repr(v)
+        return "math.inf" if v > 0 else "(-math.inf)"
+    # a negative literal in parentheses: "-1.0 ** 2" would read as -(1.0 ** 2)
+    return repr(v) if v >= 0 or math.copysign(1.0, v) > 0 else f"({v!r})"
+
+
+_VARIABLE = re.compile(r"^t\d+$")
 
 
 def _is_literal(entry: str) -> bool:
     """Whether a generated entry is a literal (``_literal``'s output), not a variable."""
-    return not entry.startswith("t")
+    return _VARIABLE.match(entry) is None
+
+
+def _value(entry: str) -> Any:
+    """A literal entry's value."""
+    return eval(entry, {"math": math})  # noqa: S307
 
 
 class _Writer:
@@ -154,6 +176,13 @@ class _Writer:
     def equation(self, eqn: Any, ins: list[np.ndarray], indent: str) -> list[np.ndarray]:
         name, params = eqn.primitive.name, eqn.params
         if name in ELEMENTWISE:
+            dtypes = {np.dtype(v.aval.dtype) for v in eqn.invars}
+            if name in ("and", "or", "not") and dtypes != {np.dtype(bool)}:
+                raise NotImplementedError(f"{name} of non-boolean operands (bitwise in JAX)")
+            if name == "div" and not np.issubdtype(
+                np.dtype(eqn.outvars[0].aval.dtype), np.floating
+            ):
+                raise NotImplementedError("integer division")
             shape = eqn.outvars[0].aval.shape
             operands = [np.broadcast_to(a, shape) for a in ins]
             out = np.empty(shape, dtype=object)
@@ -168,7 +197,7 @@ class _Writer:
                 out[index] = target
             return [out]
         if name == "integer_pow":
-            return [self._map(ins[0], lambda a: f"{a} ** {params['y']}", indent)]
+            return [self._map(ins[0], lambda a: f"({a}) ** {params['y']}", indent)]
         if name == "convert_element_type":
             dtype = np.dtype(params["new_dtype"])
             source = np.dtype(eqn.invars[0].aval.dtype)
@@ -217,6 +246,8 @@ class _Writer:
         moved = a.transpose(kept + list(axes))
         shape = moved.shape[: len(kept)]
         out = np.empty(shape, dtype=object)
+        if any(a.shape[d] == 0 for d in axes):
+            raise NotImplementedError(f"{name} over an empty axis")
         for index in np.ndindex(*shape):
             entries = list(moved[index].ravel())
             if name == "reduce_sum":
@@ -253,9 +284,10 @@ class _Writer:
         """The entry's value at generation time, or an operand it equals, if the literals
         among ``entries`` decide it (``fold``: for finite values, ``0 * x = 0``); else None."""
         if all(_is_literal(e) for e in entries):
-            return _literal(eval(ELEMENTWISE[name](*entries), {"math": math}))  # noqa: S307
-        zero = [_is_literal(e) and float(eval(e, {"math": math})) == 0.0 for e in entries]  # noqa: S307
-        one = [_is_literal(e) and float(eval(e, {"math": math})) == 1.0 for e in entries]  # noqa: S307
+            helpers = {"math": math, "nan_max": nan_max.py_func, "nan_min": nan_min.py_func}
+            return _literal(eval(ELEMENTWISE[name](*entries), helpers))  # noqa: S307
+        zero = [_is_literal(e) and float(_value(e)) == 0.0 for e in entries]
+        one = [_is_literal(e) and float(_value(e)) == 1.0 for e in entries]
         if name == "mul" and any(zero):
             return "0.0"
         if name == "mul" and one[0]:
@@ -266,10 +298,8 @@ class _Writer:
             return entries[1]
         if name in ("add", "add_any", "sub") and zero[1]:
             return entries[0]
-        if name == "div" and zero[0]:
-            return "0.0"
         if name == "select_n" and _is_literal(entries[0]):
-            return entries[2] if eval(entries[0]) else entries[1]  # noqa: S307
+            return entries[2] if _value(entries[0]) else entries[1]
         return None
 
     def _map(self, a: np.ndarray, form: Callable[[str], str], indent: str) -> np.ndarray:
@@ -316,6 +346,8 @@ class _Writer:
         if name == "squeeze":
             return [np.squeeze(a, axis=tuple(params["dimensions"]))]
         if name == "reshape":
+            if params.get("dimensions") is not None:
+                raise NotImplementedError("reshape with dimensions")
             return [a.reshape(params["new_sizes"])]
         if name == "transpose":
             return [a.transpose(params["permutation"])]
@@ -354,7 +386,8 @@ def scalar_source(
     ``fun`` on the float leaves of its arguments read in order from ``z`` and writes the leaves
     of its result in order into ``out``; and the two lengths. ``fold``: fold what the literals
     decide (constants, ``0 * x``, ``x + 0``, ``1 * x``, selects on a constant): the same values
-    where every input is finite (``0 * inf`` is folded to 0, not NaN)."""
+    where every intermediate value is finite (``0 * inf`` and ``0 * nan`` fold to 0, where JAX
+    gives NaN)."""
     import jax  # noqa: PLC0415
 
     closed = jax.make_jaxpr(fun)(*example_args)
@@ -385,9 +418,10 @@ def scalar_function(
 ) -> tuple[Callable[..., None], int, int]:
     """``scalar_source`` compiled by numba: ``(function(z, out), inputs, outputs)``."""
     source, inputs, outputs = scalar_source(fun, *example_args, fold=fold)
-    namespace: dict[str, Any] = {"math": math}
+    namespace: dict[str, Any] = {"math": math, "nan_max": nan_max, "nan_min": nan_min}
     exec(compile(source, "<stage_codegen>", "exec"), namespace)  # noqa: S102
-    return numba.njit(cache=False)(namespace["stage"]), inputs, outputs
+    # numpy's error model: a division by zero gives inf or NaN, as in JAX, not an exception
+    return numba.njit(cache=False, error_model="numpy")(namespace["stage"]), inputs, outputs
 
 
 def stage_function(wipm: Any, params: Any) -> tuple[Callable[..., None], int, int]:
@@ -420,7 +454,7 @@ def stage_rows(X: Any, U: Any, s_ref: Any, params: Any) -> np.ndarray:
 def horizon_loop(stage: Callable[..., None]) -> Callable[[np.ndarray, np.ndarray], None]:
     """A compiled loop calling ``stage`` on every row: ``loop(Z, OUT)``."""
 
-    @numba.njit(cache=False)
+    @numba.njit(cache=False, error_model="numpy")
     def loop(Z: np.ndarray, OUT: np.ndarray) -> None:
         for k in range(Z.shape[0]):
             stage(Z[k], OUT[k])
