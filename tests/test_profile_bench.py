@@ -33,6 +33,7 @@ from benchmarks.speed.yardstick import (
     ReferenceStep,
     burst_due,
     interleaved_median_us,
+    interleaved_rounds,
     reference_step_us,
     times_between_bursts,
 )
@@ -233,6 +234,26 @@ def test_interleaved_medians_call_each_function_in_turn() -> None:
     assert medians["slow"] >= 2000.0 > medians["fast"]
     with pytest.raises(ValueError, match="calls must be >= 1"):
         interleaved_median_us({"fast": fast}, calls=0)
+
+
+def test_interleaved_rounds_take_the_median_of_each_rounds_medians() -> None:
+    """Each round calls the functions in turn and then bursts the unit; the result is each
+    function's median over the rounds' medians and the unit's, in us."""
+    calls = {"a": 0, "b": 0}
+
+    def counted(name: str) -> Callable[[], None]:
+        def call() -> None:
+            calls[name] += 1
+
+        return call
+
+    reference = ReferenceStep()
+    medians, unit = interleaved_rounds({"a": counted("a"), "b": counted("b")}, 3, reference, 5)
+    assert calls == {"a": 3 * 6, "b": 3 * 6}  # an untimed call and 5 timed ones per round
+    assert set(medians) == {"a", "b"} and all(0 < v < 1e4 for v in medians.values())
+    assert 0 < unit < 1e4
+    with pytest.raises(ValueError, match="rounds must be >= 1"):
+        interleaved_rounds({"a": counted("a")}, 0, reference)
 
 
 def test_a_burst_is_due_every_so_many_steps_and_after_the_last() -> None:

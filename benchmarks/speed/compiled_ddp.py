@@ -262,7 +262,7 @@ def measure(rounds: int = 5, indices: tuple[int, ...] = (100, 400)) -> dict[str,
     Python wrapper), medians in us interleaved call by call; the largest differences of their
     predicted controls and states; ``unit_us``."""
     from benchmarks.speed.riccati_floor import mpc_window  # noqa: PLC0415
-    from benchmarks.speed.yardstick import ReferenceStep, interleaved_median_us  # noqa: PLC0415
+    from benchmarks.speed.yardstick import ReferenceStep, interleaved_rounds  # noqa: PLC0415
     from controllers.high_level.mpc import ModelPredictiveController, pack_inputs  # noqa: PLC0415
 
     reference = ReferenceStep()
@@ -285,18 +285,13 @@ def measure(rounds: int = 5, indices: tuple[int, ...] = (100, 400)) -> dict[str,
                 "jax": lambda m=mpc, h=host: m.solve(h),
                 "compiled": lambda p=peer, a=x0, b=U, r=s_ref: p(a, b, r),
             }
-            samples: dict[str, list[float]] = {key: [] for key in functions}
-            units: list[float] = []
-            for _ in range(rounds):
-                for key, us in interleaved_median_us(functions).items():
-                    samples[key].append(us)
-                units.append(float(np.median(reference.burst(50)) * 1e6))
+            med, unit = interleaved_rounds(functions, rounds, reference)
             out[f"{problem} {index}"] = {
-                "jax_us": float(np.median(samples["jax"])),
-                "compiled_us": float(np.median(samples["compiled"])),
+                "jax_us": med["jax"],
+                "compiled_us": med["compiled"],
                 "max_dU": float(np.max(np.abs(theirs.U - ours.predicted_controls))),
                 "max_dX": float(np.max(np.abs(theirs.X - ours.predicted_states))),
-                "unit_us": float(np.median(units)),
+                "unit_us": unit,
             }
     return out
 

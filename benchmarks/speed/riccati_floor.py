@@ -42,7 +42,7 @@ from typing import Any, NamedTuple
 import numba
 import numpy as np
 
-from benchmarks.speed.yardstick import ReferenceStep, interleaved_median_us
+from benchmarks.speed.yardstick import ReferenceStep, interleaved_rounds
 
 # reassociation and contraction (FMA) allowed; not ``nnan``/``ninf``: the recursion tests for them
 _FASTMATH = {"reassoc", "contract", "nsz", "arcp"}
@@ -431,18 +431,12 @@ def measure(rounds: int = 5, index: int = 400, mu: float = 1e-3) -> dict[str, di
         }
         if stand_in is not None:
             functions["stand_in"], functions["stand_in_floor"] = stand_in
-        samples: dict[str, list[float]] = {key: [] for key in functions}
-        units: list[float] = []
-        for _ in range(rounds):
-            for key, us in interleaved_median_us(functions).items():
-                samples[key].append(us)
-            units.append(float(np.median(reference.burst(50)) * 1e6))
-        med = {key: float(np.median(v)) for key, v in samples.items()}
+        med, unit = interleaved_rounds(functions, rounds, reference)
         out[name] = {
             "steps": float(steps),
             "compiled": med["compiled"] - med["compiled_floor"],
             "xla_stored": med["stored"] - med["stored_floor"],
-            "unit_us": float(np.median(units)),
+            "unit_us": unit,
         }
         if stand_in is not None:
             out[name]["xla_stand_in"] = med["stand_in"] - med["stand_in_floor"]

@@ -469,7 +469,7 @@ def measure(rounds: int = 5, index: int = 400) -> dict[str, dict[str, float]]:
     from benchmarks.speed.ddp_bench import krang_params  # noqa: PLC0415
     from benchmarks.speed.ddp_parts import _problem_calls  # noqa: PLC0415
     from benchmarks.speed.riccati_floor import mpc_window  # noqa: PLC0415
-    from benchmarks.speed.yardstick import ReferenceStep, interleaved_median_us  # noqa: PLC0415
+    from benchmarks.speed.yardstick import ReferenceStep, interleaved_rounds  # noqa: PLC0415
 
     params, theta0 = krang_params()
     reference = ReferenceStep()
@@ -486,18 +486,12 @@ def measure(rounds: int = 5, index: int = 400) -> dict[str, dict[str, float]]:
             "backward": calls["backward"],
             "riccati": calls["backward_riccati"],
         }
-        samples: dict[str, list[float]] = {key: [] for key in functions}
-        units: list[float] = []
-        for _ in range(rounds):
-            for key, us in interleaved_median_us(functions).items():
-                samples[key].append(us)
-            units.append(float(np.median(reference.burst(50)) * 1e6))
-        med = {key: float(np.median(v)) for key, v in samples.items()}
+        med, unit = interleaved_rounds(functions, rounds, reference)
         out[problem] = {
             "steps": float(Z.shape[0]),
             "generated": med["generated"],
             "xla": med["backward"] - med["riccati"],
-            "unit_us": float(np.median(units)),
+            "unit_us": unit,
         }
     return out
 

@@ -140,3 +140,22 @@ def interleaved_median_us(
             function()
             times[name][i] = time.perf_counter() - start
     return {name: float(np.median(t) * 1e6) for name, t in times.items()}
+
+
+def interleaved_rounds(
+    functions: dict[str, Callable[[], object]],
+    rounds: int,
+    reference: ReferenceStep,
+    calls: int = 200,
+) -> tuple[dict[str, float], float]:
+    """``rounds`` runs of :func:`interleaved_median_us`, each followed by a warm burst of the
+    unit: the median over the rounds of each function's median (us), and of the unit's (us)."""
+    if rounds < 1:
+        raise ValueError(f"rounds must be >= 1, got {rounds}")
+    samples: dict[str, list[float]] = {name: [] for name in functions}
+    units: list[float] = []
+    for _ in range(rounds):
+        for name, us in interleaved_median_us(functions, calls).items():
+            samples[name].append(us)
+        units.append(float(np.median(reference.burst(50)) * 1e6))
+    return {name: float(np.median(v)) for name, v in samples.items()}, float(np.median(units))
