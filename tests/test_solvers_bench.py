@@ -346,7 +346,7 @@ def test_compiled_ddp_peer_solves_as_the_mpc_does(planar: bool, index: int) -> N
     import dataclasses
 
     from benchmarks.speed.compiled_ddp import compiled_mpc_solver
-    from benchmarks.speed.riccati_floor import mpc_window
+    from benchmarks.speed.ddp_parts import mpc_window
     from controllers.high_level.mpc import ModelPredictiveController, pack_inputs
 
     window = mpc_window("planar" if planar else "3d", index)
@@ -417,7 +417,7 @@ def test_compiled_ddp_peer_follows_the_regularisation_schedule() -> None:
     import dataclasses
 
     from benchmarks.speed.compiled_ddp import compiled_mpc_solver
-    from benchmarks.speed.riccati_floor import mpc_window
+    from benchmarks.speed.ddp_parts import mpc_window
     from controllers.high_level.mpc import ModelPredictiveController
 
     window = mpc_window("planar", 100)

@@ -45,7 +45,7 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Callable
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -64,33 +64,63 @@ PIECES = (
 )
 
 
-def _problem_calls(
-    problem: str, params: Any, theta0: float, index: int = 400
-) -> dict[str, Callable[[], Any]]:
-    """The pieces of :data:`PIECES` of one problem as argument-free calls."""
+class MPCWindow(NamedTuple):
+    """The MPC's problem at one plan index: the WIPM problem, its plan, the plan's start, the
+    trajectory of the plan's controls from the plan's state there plus 0.01, Krang's
+    ``lambda(q)`` and the per-step references."""
+
+    wipm: Any
+    plan: Any
+    start: np.ndarray
+    X: Any
+    U: Any
+    params: Any
+    refs: Any
+
+
+def mpc_window(problem: str, index: int = 400) -> MPCWindow:
+    """The MPC workload of this module (and of ``riccati_floor``, ``stage_codegen``,
+    ``compiled_ddp``): Krang's WIPM, the plan to ``GOALS[problem]``, the window of ``N`` steps
+    at plan ``index`` from the plan's state plus 0.01 (off the plan: every iteration has
+    work)."""
     import jax  # noqa: PLC0415
     import jax.numpy as jnp  # noqa: PLC0415
 
-    from benchmarks.speed.ddp_bench import GOALS, initial_state  # noqa: PLC0415
+    from benchmarks.speed.ddp_bench import GOALS, initial_state, krang_params  # noqa: PLC0415
     from controllers.high_level.mpc import MPCConfig, mpc_problem  # noqa: PLC0415
     from controllers.high_level.planning import plan_to_goal  # noqa: PLC0415
-    from controllers.optimizer.ddp import DDPConfig, rollout, trajectory_cost  # noqa: PLC0415
-    from controllers.simplified.wipm_problem import ddp_solver_for, refs_for  # noqa: PLC0415
+    from controllers.optimizer.ddp import rollout  # noqa: PLC0415
+    from controllers.simplified.wipm_problem import refs_for  # noqa: PLC0415
 
+    params, theta0 = krang_params()
     planar = problem == "planar"
-    plan = plan_to_goal(
-        initial_state(problem, theta0), params, np.array(GOALS[problem]), planar=planar
-    )
-    wipm = mpc_problem(planar, MPCConfig(), plan.a_max, plan.theta_max)
-    horizon = MPCConfig().steps
+    start = initial_state(problem, theta0)
+    plan = plan_to_goal(start, params, np.array(GOALS[problem]), planar=planar)
+    config = MPCConfig()
+    wipm = mpc_problem(planar, config, plan.a_max, plan.theta_max)
+    horizon = config.steps
     if not 0 <= index < len(plan.states):
         raise ValueError(f"index {index} is outside the plan's {len(plan.states)} states")
     refs = jax.tree.map(jnp.asarray, refs_for(plan.window(index, horizon + 1), params))
-    x0 = jnp.asarray(plan.states[index] + 0.01)  # off the plan: every iteration has work
+    x0 = jnp.asarray(plan.states[index] + 0.01)
     U = jnp.asarray(plan.control_window(index, horizon))
+    X = rollout(wipm.dynamics(), x0, U, params)
+    return MPCWindow(wipm, plan, start, X, U, params, refs)
+
+
+def _problem_calls(window: MPCWindow) -> dict[str, Callable[[], Any]]:
+    """The pieces of :data:`PIECES` of one window's problem as argument-free calls."""
+    import jax  # noqa: PLC0415
+    import jax.numpy as jnp  # noqa: PLC0415
+
+    from controllers.high_level.mpc import MPCConfig  # noqa: PLC0415
+    from controllers.optimizer.ddp import DDPConfig, rollout, trajectory_cost  # noqa: PLC0415
+    from controllers.simplified.wipm_problem import ddp_solver_for  # noqa: PLC0415
+
+    wipm, X, U, params, refs = window.wipm, window.X, window.U, window.params, window.refs
+    x0 = X[0]
     dynamics = wipm.dynamics()
     running, terminal = wipm.costs()
-    X = rollout(dynamics, x0, U, params)
     base = MPCConfig().ddp
     solvers = {
         it: ddp_solver_for(wipm, DDPConfig(**{**base.__dict__, "max_iterations": it}))
@@ -159,13 +189,10 @@ def _ablated_solvers(wipm: Any, config: Any) -> tuple[Any, Any]:
 
 def measure(rounds: int = 3, index: int = 400) -> dict[str, dict[str, float]]:
     """``{planar|3d: {piece: units}}`` and each problem's ``unit_us``."""
-    from benchmarks.speed.ddp_bench import krang_params  # noqa: PLC0415
-
-    params, theta0 = krang_params()
     reference = ReferenceStep()
     out: dict[str, dict[str, float]] = {}
     for problem in ("planar", "3d"):
-        calls = _problem_calls(problem, params, theta0, index)
+        calls = _problem_calls(mpc_window(problem, index))
         samples: dict[str, list[float]] = {name: [] for name in PIECES}
         units: list[float] = []
         for _ in range(rounds):

@@ -42,6 +42,7 @@ from typing import Any, NamedTuple
 import numba
 import numpy as np
 
+from benchmarks.speed.ddp_parts import MPCWindow, _problem_calls, mpc_window
 from benchmarks.speed.yardstick import ReferenceStep, interleaved_rounds
 
 # reassociation and contraction (FMA) allowed; not ``nnan``/``ninf``: the recursion tests for them
@@ -319,78 +320,37 @@ def problem_inputs(solver: Any, X: Any, U: Any, params: Any, refs: Any) -> Stage
     return StageInputs(fx, fu, lx, lu, lxx, lux, luu, vx, vxx)
 
 
-class MPCWindow(NamedTuple):
-    """The MPC's problem at one plan index: the WIPM problem, its plan, the trajectory of the
-    plan's controls from the plan's state plus 0.01, Krang's ``lambda(q)`` and the references."""
-
-    wipm: Any
-    plan: Any
-    start: np.ndarray
-    X: Any
-    U: Any
-    params: Any
-    refs: Any
-
-
-def mpc_window(problem: str, index: int) -> MPCWindow:
-    """``benchmarks.speed.ddp_parts``' MPC workload: Krang's WIPM, the plan to its goal, the
-    window of ``N`` steps at plan ``index`` from the plan's state plus 0.01."""
+def _cases(index: int) -> dict[str, tuple[StageInputs, MPCWindow | None]]:
+    """The MPC's problems at plan ``index`` (planar and 3-D, with their windows) and the 3-D
+    plan's at its solution."""
     import jax  # noqa: PLC0415
     import jax.numpy as jnp  # noqa: PLC0415
 
-    from benchmarks.speed.ddp_bench import GOALS, initial_state, krang_params  # noqa: PLC0415
-    from controllers.high_level.mpc import MPCConfig, mpc_problem  # noqa: PLC0415
-    from controllers.high_level.planning import plan_to_goal  # noqa: PLC0415
-    from controllers.optimizer.ddp import rollout  # noqa: PLC0415
-    from controllers.simplified.wipm_problem import refs_for  # noqa: PLC0415
-
-    params, theta0 = krang_params()
-    planar = problem == "planar"
-    start = initial_state(problem, theta0)
-    plan = plan_to_goal(start, params, np.array(GOALS[problem]), planar=planar)
-    config = MPCConfig()
-    wipm = mpc_problem(planar, config, plan.a_max, plan.theta_max)
-    horizon = config.steps
-    if not 0 <= index < len(plan.states):
-        raise ValueError(f"index {index} is outside the plan's {len(plan.states)} states")
-    refs = jax.tree.map(jnp.asarray, refs_for(plan.window(index, horizon + 1), params))
-    x0 = jnp.asarray(plan.states[index] + 0.01)
-    U = jnp.asarray(plan.control_window(index, horizon))
-    X = rollout(wipm.dynamics(), x0, U, params)
-    return MPCWindow(wipm, plan, start, X, U, params, refs)
-
-
-def _cases(index: int) -> dict[str, StageInputs]:
-    """The MPC's problems at plan ``index`` (planar and 3-D) and the 3-D plan's at its
-    solution."""
-    import jax  # noqa: PLC0415
-    import jax.numpy as jnp  # noqa: PLC0415
-
-    from benchmarks.speed.ddp_bench import GOALS  # noqa: PLC0415
+    from benchmarks.speed.ddp_bench import GOALS, goal_state  # noqa: PLC0415
     from controllers.high_level.mpc import MPCConfig  # noqa: PLC0415
     from controllers.high_level.planning import PlanConfig, planning_problem  # noqa: PLC0415
     from controllers.simplified.wipm_problem import ddp_solver_for, refs_for  # noqa: PLC0415
 
-    cases: dict[str, StageInputs] = {}
+    cases: dict[str, tuple[StageInputs, MPCWindow | None]] = {}
     for problem in ("planar", "3d"):
-        planar = problem == "planar"
-        wipm, plan, start, X, U, params, refs = mpc_window(problem, index)
-        cases[f"mpc {problem}"] = problem_inputs(
-            ddp_solver_for(wipm, MPCConfig().ddp), X, U, params, refs
-        )
-        if not planar:
+        window = mpc_window(problem, index)
+        wipm, plan, start, X, U, params, refs = window
+        solver = ddp_solver_for(wipm, MPCConfig().ddp)
+        cases[f"mpc {problem}"] = (problem_inputs(solver, X, U, params, refs), window)
+        if problem == "3d":
             # the plan's problem (the rate input: the control joins the state) at its solution,
-            # the goal as plan_to_goal makes it for this start (heading free)
+            # from the plan's start to plan_to_goal's goal (heading free)
             plan_config = PlanConfig()
             steps, m = plan_config.steps, 2
             planner = ddp_solver_for(
                 planning_problem(False, plan_config, plan.a_max, False), plan_config.ddp
             )
-            goal = np.array([0.0, plan.goal_state[1], 0.0, 0.0, 0.0, 0.0, *GOALS[problem]])
+            goal = goal_state(problem, start, np.asarray(GOALS[problem]))
             plan_refs = jax.tree.map(jnp.asarray, refs_for(np.tile(goal, (steps + 1, 1)), params))
             z0 = np.concatenate([start, np.zeros(m)])
             solved = planner(z0, np.zeros((steps, m)), params, plan_refs)
-            cases["plan 3d"] = problem_inputs(planner, solved.X, solved.U, params, plan_refs)
+            plan_inputs = problem_inputs(planner, solved.X, solved.U, params, plan_refs)
+            cases["plan 3d"] = (plan_inputs, None)
     return cases
 
 
@@ -405,18 +365,14 @@ def measure(rounds: int = 5, index: int = 400, mu: float = 1e-3) -> dict[str, di
     compiled function of the same arguments), ``xla_stored`` (minus an empty jitted call of the
     same inputs) and, for the MPC's cases, ``xla_stand_in`` (``ddp_parts``' whole
     ``backward_riccati`` pass minus its ``empty_call``); and ``steps``, ``unit_us``."""
-    from benchmarks.speed.ddp_bench import krang_params  # noqa: PLC0415
-    from benchmarks.speed.ddp_parts import _problem_calls  # noqa: PLC0415
-
-    params, theta0 = krang_params()
     reference = ReferenceStep()
     out: dict[str, dict[str, float]] = {}
-    for name, inputs in _cases(index).items():
+    for name, (inputs, window) in _cases(index).items():
         steps, n, m = inputs.fu.shape
         stored = stored_backward(inputs)
         stand_in = None
-        if name.startswith("mpc"):
-            calls = _problem_calls(name.split()[1], params, theta0, index)
+        if window is not None:
+            calls = _problem_calls(window)
             stand_in = (calls["backward_riccati"], calls["empty_call"])
         recursion = compiled_recursion(n, m)
         K, k = np.empty((steps, m, n)), np.empty((steps, m))

@@ -466,12 +466,9 @@ def measure(rounds: int = 5, index: int = 400) -> dict[str, dict[str, float]]:
     """Per MPC problem, us per pass over the horizon: ``generated`` (the compiled loop of the
     generated stage function) and ``xla`` (``ddp_parts``' ``backward`` minus
     ``backward_riccati``: the same derivatives inside XLA's backward scan), and ``unit_us``."""
-    from benchmarks.speed.ddp_bench import krang_params  # noqa: PLC0415
-    from benchmarks.speed.ddp_parts import _problem_calls  # noqa: PLC0415
-    from benchmarks.speed.riccati_floor import mpc_window  # noqa: PLC0415
+    from benchmarks.speed.ddp_parts import _problem_calls, mpc_window  # noqa: PLC0415
     from benchmarks.speed.yardstick import ReferenceStep, interleaved_rounds  # noqa: PLC0415
 
-    params, theta0 = krang_params()
     reference = ReferenceStep()
     out: dict[str, dict[str, float]] = {}
     for problem in ("planar", "3d"):
@@ -480,7 +477,7 @@ def measure(rounds: int = 5, index: int = 400) -> dict[str, dict[str, float]]:
         Z = stage_rows(window.X, window.U, window.refs[0], window.params)
         OUT = np.empty((Z.shape[0], outputs))
         loop = horizon_loop(stage)
-        calls = _problem_calls(problem, params, theta0, index)
+        calls = _problem_calls(window)
         functions = {
             "generated": lambda: loop(Z, OUT),  # noqa: B023
             "backward": calls["backward"],
