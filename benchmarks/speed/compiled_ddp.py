@@ -109,9 +109,25 @@ def compiled_mpc_solver(wipm: Any, config: Any, params: Any) -> Callable[..., Co
     o_dv = o_k + m
 
     @numba.njit(cache=False, error_model="numpy")
+    def terminal_at(x_end, s_end, P):  # noqa: ANN001, ANN202
+        """The terminal cost, its gradient and Hessian at ``x_end``, in one vector."""
+        zf = np.empty(2 * n + P.shape[0])
+        zf[:n] = x_end
+        zf[n : 2 * n] = s_end
+        zf[2 * n :] = P
+        fo = np.empty(1 + n + n * n)
+        final(zf, fo)
+        return fo
+
+    @numba.njit(cache=False, error_model="numpy")
+    def stops(ok, dv1, dv2, cost):  # noqa: ANN001, ANN202
+        """Test (9) after a backward pass, or its failure."""
+        return not ok or -(dv1 + dv2) <= tolerance * abs(cost) + abs_tolerance
+
+    @numba.njit(cache=False, error_model="numpy")
     def trajectory(x0, U, X_ref, K, k, alpha, S, P, X_out, U_out, z, out):  # noqa: ANN001, ANN202, PLR0913
-        """Rollout (6) from ``x0`` (``K`` None-like when ``alpha`` < 0: open loop on ``U``);
-        returns the cost (1)."""
+        """Rollout (6) from ``x0`` (``alpha`` < 0: the controls ``U`` open loop, ``K`` and
+        ``k`` unread); returns the cost (1)."""
         steps = U.shape[0]
         X_out[0] = x0
         total = 0.0
@@ -131,27 +147,14 @@ def compiled_mpc_solver(wipm: Any, config: Any, params: Any) -> Callable[..., Co
             step(z, out)
             X_out[t + 1] = out[:n]
             total += out[n]
-        zf = np.empty(2 * n + P.shape[0])
-        zf[:n] = X_out[steps]
-        zf[n : 2 * n] = S[steps]
-        zf[2 * n :] = P
-        fo = np.empty(1 + n + n * n)
-        final(zf, fo)
-        return total + fo[0]
+        return total + terminal_at(X_out[steps], S[steps], P)[0]
 
     @numba.njit(cache=False, error_model="numpy")
     def backward(X, U, S, P, mu, K, k, z, out):  # noqa: ANN001, ANN202, PLR0913
         """The backward pass (2)-(5): (dv1, dv2, ok), the gains into ``K``, ``k``."""
         steps = U.shape[0]
-        size = P.shape[0]
-        zf = np.empty(2 * n + size)
-        zf[:n] = X[steps]
-        zf[n : 2 * n] = S[steps]
-        zf[2 * n :] = P
-        fo = np.empty(1 + n + n * n)
-        final(zf, fo)
-        base = 2 * n + m + size
-        z[base : base + n + n * n] = fo[1:]  # V_x, V_xx at the end
+        base = 2 * n + m + P.shape[0]
+        z[base : base + n + n * n] = terminal_at(X[steps], S[steps], P)[1:]  # V_x, V_xx at N
         z[base + n + n * n] = mu
         dv1, dv2, ok = 0.0, 0.0, True
         z[2 * n + m : base] = P
@@ -212,7 +215,7 @@ def compiled_mpc_solver(wipm: Any, config: Any, params: Any) -> Callable[..., Co
         mu, dmu = mu_init, 1.0
         dv1, dv2, ok, mu, dmu = regularised(X, U, S, P, mu, dmu, K, k, zb, ob)
         iterations = 0
-        done = (ok and -(dv1 + dv2) <= tolerance * abs(cost) + abs_tolerance) or not ok
+        done = stops(ok, dv1, dv2, cost)
         while not done and iterations < max_iterations:
             accepted = False
             for alpha in alphas:
@@ -236,7 +239,7 @@ def compiled_mpc_solver(wipm: Any, config: Any, params: Any) -> Callable[..., Co
             if stuck or last:
                 break
             dv1, dv2, ok, mu, dmu = regularised(X, U, S, P, mu, dmu, K, k, zb, ob)
-            done = (ok and -(dv1 + dv2) <= tolerance * abs(cost) + abs_tolerance) or not ok
+            done = stops(ok, dv1, dv2, cost)
         return X, U, cost, iterations
 
     def call(x0: Any, U_init: Any, s_ref: Any, params: Any = None) -> CompiledSolve:
@@ -256,12 +259,12 @@ def compiled_mpc_solver(wipm: Any, config: Any, params: Any) -> Callable[..., Co
 
 
 def measure(rounds: int = 5, indices: tuple[int, ...] = (100, 400)) -> dict[str, dict[str, float]]:
-    """Per MPC window (problem and plan index, ``riccati_floor.mpc_window``): the MPC's own step
+    """Per MPC window (problem and plan index, ``ddp_parts.mpc_window``): the MPC's own step
     (``ModelPredictiveController.solve``: one call of its compiled step, warm-started from the
     plan's controls there) against the compiled peer's solve of the same problem (each with its
     Python wrapper), medians in us interleaved call by call; the largest differences of their
     predicted controls and states; ``unit_us``."""
-    from benchmarks.speed.riccati_floor import mpc_window  # noqa: PLC0415
+    from benchmarks.speed.ddp_parts import mpc_window  # noqa: PLC0415
     from benchmarks.speed.yardstick import ReferenceStep, interleaved_rounds  # noqa: PLC0415
     from controllers.high_level.mpc import ModelPredictiveController, pack_inputs  # noqa: PLC0415
 

@@ -369,11 +369,10 @@ def riccati_step(
     terms of ``dV`` (5) and whether ``Q_uu + mu I`` was positive definite. A pure function: the
     backward scan runs it, and ``benchmarks.speed.compiled_ddp`` compiles it outside XLA."""
     lx, lu, lxx, lux, luu, fx, fu = derivatives[:7]
-    m = lu.shape[0]
+    n, m = fx.shape[0], lu.shape[0]
     # (2) from F = [f_x f_u]: F^T V_x and F^T V_xx F in two products instead of five (each
     # entry the same sum in the same order as five products made it; XLA may fuse it
     # otherwise: the 3-D plan is bit-equal, planar within 3e-14; the recursion 11 % faster)
-    n = fx.shape[0]
     F = jnp.concatenate([fx, fu], axis=1)
     q_lin = _tmv(F, vx)
     quad = _tmm(F, _mm(vxx, F))  # [[f_x' V f_x, f_x' V f_u], [f_u' V f_x, f_u' V f_u]]
