@@ -45,4 +45,5 @@ clean:
 # compiles again what `warm_caches` runs (the rest compiles on first use).
 clean-caches: $(STAMP)
 	find wip_gym controllers benchmarks -name '*.nbi' -delete -o -name '*.nbc' -delete
+	rm -rf $${WIP_GYM_NUMBA_CACHE:-$$HOME/.cache/wip-gym/numba}  # the MPC's generated modules
 	$(PY) -m benchmarks.warm_caches

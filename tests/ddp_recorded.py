@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from controllers.high_level.mpc import ModelPredictiveController
+from controllers.high_level.mpc import ModelPredictiveController, MPCConfig
 from controllers.high_level.planning import Plan, PlanConfig, plan_to_goal
 from controllers.simplified.wipm import WIPMParams
 
@@ -48,7 +48,9 @@ def params_from_arrays(data: dict[str, np.ndarray]) -> WIPMParams:
 
 
 def compute(params: WIPMParams, theta0: float) -> dict[str, np.ndarray]:
-    """Plan (N = 2000) and 20 warm-started MPC steps for both problems."""
+    """Plan (N = 2000) and 20 warm-started MPC steps for both problems; the MPC's keys with
+    the default backend (``{problem}_mpc_...``) and with the JAX reference
+    (``jax_{problem}_mpc_...``)."""
     out: dict[str, np.ndarray] = {}
     for problem, goal in GOALS.items():
         planar = problem == "planar"
@@ -63,18 +65,19 @@ def compute(params: WIPMParams, theta0: float) -> dict[str, np.ndarray]:
         out[f"{problem}_plan_controls"] = plan.controls
         out[f"{problem}_plan_cost"] = np.array(plan.cost)
         out[f"{problem}_plan_iterations"] = np.array(plan.iterations)
-        mpc = ModelPredictiveController(plan)
-        controls, predicted, costs, accepted = [], [], [], []
-        for i, state in enumerate(mpc_states(plan)):
-            step = mpc.step(10 + i, state, params)
-            controls.append(step.control)
-            predicted.append(step.predicted_states)
-            costs.append(step.cost)
-            accepted.append(step.accepted)
-        out[f"{problem}_mpc_controls"] = np.array(controls)
-        out[f"{problem}_mpc_predicted_states"] = np.array(predicted)
-        out[f"{problem}_mpc_costs"] = np.array(costs)
-        out[f"{problem}_mpc_accepted"] = np.array(accepted)
+        for prefix, config in (("", MPCConfig()), ("jax_", MPCConfig(backend="jax"))):
+            mpc = ModelPredictiveController(plan, config)
+            controls, predicted, costs, accepted = [], [], [], []
+            for i, state in enumerate(mpc_states(plan)):
+                step = mpc.step(10 + i, state, params)
+                controls.append(step.control)
+                predicted.append(step.predicted_states)
+                costs.append(step.cost)
+                accepted.append(step.accepted)
+            out[f"{prefix}{problem}_mpc_controls"] = np.array(controls)
+            out[f"{prefix}{problem}_mpc_predicted_states"] = np.array(predicted)
+            out[f"{prefix}{problem}_mpc_costs"] = np.array(costs)
+            out[f"{prefix}{problem}_mpc_accepted"] = np.array(accepted)
     return out
 
 
@@ -89,7 +92,14 @@ def main() -> None:
 
     jax_setup.configure()  # the solvers' JAX settings, before JAX starts
     params, theta0 = _krang()
-    data = compute(params, theta0) | params_to_arrays(params) | {"theta0": np.array(theta0)}
+    computed = compute(params, theta0)
+    # recorded from the JAX reference backend (its keys without the prefix)
+    recorded = {
+        key.removeprefix("jax_"): value
+        for key, value in computed.items()
+        if "_mpc_" not in key or key.startswith("jax_")
+    }
+    data = recorded | params_to_arrays(params) | {"theta0": np.array(theta0)}
     np.savez_compressed(PATH, **data)
     print(f"wrote {PATH}")
 

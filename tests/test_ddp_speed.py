@@ -40,12 +40,14 @@ def computed(reference: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
 def test_plan_and_mpc_equal_the_recorded_reference(
     problem: str, reference: dict[str, np.ndarray], computed: dict[str, np.ndarray]
 ) -> None:
-    # The summation order of the small matrix products changed (dot -> element-wise sums), so
-    # results agree to round-off, not bit for bit: 1e-9 relative to each array's scale.
-    keys = [k for k in computed if k.startswith(f"{problem}_")]
-    assert len(keys) == 8
+    """The plan and the MPC's steps (both backends: the default, numba, and the JAX reference
+    the recording was made with) against the recording. The summation order of the small
+    matrix products changed since it was made (dot -> element-wise sums), so results agree to
+    round-off, not bit for bit: 1e-9 relative to each array's scale."""
+    keys = [k for k in computed if k.startswith((f"{problem}_", f"jax_{problem}_"))]
+    assert len(keys) == 12
     for key in keys:
-        expected = reference[key].astype(float)
+        expected = reference[key.removeprefix("jax_")].astype(float)
         scale = max(float(np.max(np.abs(expected))), 1.0)
         np.testing.assert_allclose(
             np.asarray(computed[key], dtype=float),
@@ -171,14 +173,15 @@ def test_mpc_step_is_traced_once(reference: dict[str, np.ndarray]) -> None:
     params = ddp_recorded.params_from_arrays(reference)
     state = ddp_recorded.initial_state("planar", float(reference["theta0"]))
     plan = plan_to_goal(state, params, np.array([2.0, 0.0]), planar=True)
-    mpc = ModelPredictiveController(plan)
+    mpc = ModelPredictiveController(plan, MPCConfig(backend="jax"))
     # the compiled step is shared by every MPC of this problem and horizon: count the traces
     # made here (another test may have traced it for a plan of another length already)
     before = mpc.compiled.trace_count
     rng = np.random.default_rng(0)
     for index in range(0, 2400, 60):  # past the plan's end too
         mpc.step(index, plan.states[min(index, 2000)] + 0.01 * rng.normal(size=4), params)
-    again = ModelPredictiveController(plan)  # a new controller on the same problem and horizon
+    # a new controller on the same problem and horizon
+    again = ModelPredictiveController(plan, MPCConfig(backend="jax"))
     again.step(5, plan.states[5], params)
     assert mpc.compiled is again.compiled
     assert mpc.compiled.trace_count - before <= 1
@@ -241,7 +244,7 @@ def test_line_search_takes_the_same_step_however_many_alphas_it_tries_alone(
     def predictions(alone: int, alphas: tuple[float, ...] | None = None) -> np.ndarray:
         monkeypatch.setattr(ddp, "_ALPHAS_ALONE", alone)
         mpc_module.compiled_step.cache_clear()  # trace again with this count
-        config = MPCConfig()
+        config = MPCConfig(backend="jax")  # the JAX solver's line search
         if alphas is not None:
             config = dataclasses.replace(config, ddp=dataclasses.replace(config.ddp, alphas=alphas))
         controller = ModelPredictiveController(plan, config)

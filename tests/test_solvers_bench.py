@@ -299,7 +299,8 @@ def test_stage_codegen_equals_jax_on_both_sides_of_the_penalty(planar: bool) -> 
     import jax
     import jax.numpy as jnp
 
-    from benchmarks.speed.stage_codegen import scalar_function, stage_function, stage_rows
+    from benchmarks.speed.stage_codegen import stage_function, stage_rows
+    from controllers.optimizer.scalar_codegen import scalar_function
 
     params, _ = krang_params()
     wipm = mpc_problem(planar, MPCConfig(), a_max=0.5, theta_max=0.1)
@@ -337,100 +338,13 @@ def test_stage_codegen_equals_jax_on_both_sides_of_the_penalty(planar: bool) -> 
         scalar_function(jnp.sort, jnp.ones(3))
 
 
-@pytest.mark.parametrize(("planar", "index"), [(True, 100), (False, 400)])
-def test_compiled_ddp_peer_solves_as_the_mpc_does(planar: bool, index: int) -> None:
-    """``benchmarks.speed.compiled_ddp``: the compiled peer (numba, derivatives generated from
-    JAX's jaxprs, the recursion from ``riccati_step``) gives the MPC step's predicted states and
-    controls on its window (planar where the penalty is active, 3-D where it is not), to
-    round-off; it refuses settings other than the MPC's."""
-    import dataclasses
+@pytest.mark.parametrize("problem", ["planar", "3d"])
+def test_mpc_backends_benchmark_times_equal_solves(problem: str) -> None:
+    """``benchmarks.speed.mpc_backends``: both backends timed on the same window, their
+    predictions equal to round-off (what the table's last columns report)."""
+    from benchmarks.speed.mpc_backends import measure
 
-    from benchmarks.speed.compiled_ddp import compiled_mpc_solver
-    from benchmarks.speed.ddp_parts import mpc_window
-    from controllers.high_level.mpc import ModelPredictiveController, pack_inputs
-
-    window = mpc_window("planar" if planar else "3d", index)
-    mpc = ModelPredictiveController(window.plan)
-    peer = compiled_mpc_solver(mpc.problem, mpc.solver.config, window.params)
-    x0 = np.asarray(window.X[0])
-    ours = mpc.solve(pack_inputs(index, True, x0, window.params))
-    theirs = peer(x0, np.asarray(window.U), np.asarray(window.refs[0]))
-    assert ours.accepted and theirs.iterations == 2
-    scale = np.abs(ours.predicted_controls).max()
-    np.testing.assert_allclose(theirs.U, ours.predicted_controls, rtol=0, atol=1e-10 * scale)
-    np.testing.assert_allclose(
-        theirs.X, ours.predicted_states, rtol=0, atol=1e-10 * np.abs(ours.predicted_states).max()
-    )
-    assert theirs.cost == pytest.approx(ours.cost, rel=1e-12)
-    # the warm start changed: the solve did work
-    assert np.abs(theirs.U - np.asarray(window.U)).max() > 1e-6 * scale
-    for change in ({"second_order": True}, {"gradient_norm": True}):
-        with pytest.raises(ValueError, match="MPC's settings"):
-            compiled_mpc_solver(
-                mpc.problem, dataclasses.replace(mpc.solver.config, **change), window.params
-            )
-
-
-@pytest.mark.parametrize("fold", [False, True])
-def test_stage_codegen_small_functions_equal_jax(fold: bool) -> None:
-    """The generated code on small functions that reach its corners: a negative folded
-    literal to a power, NaN through maximum, where, cond both ways, a batched product, a
-    division by zero (inf, not an exception), with and without folding."""
-    import jax
-    import jax.numpy as jnp
-
-    from benchmarks.speed.stage_codegen import scalar_function
-
-    def corners(x: jax.Array, b: jax.Array) -> tuple[jax.Array, ...]:
-        return (
-            (x * 0.0 - 1.0) ** 2 + x,
-            jnp.maximum(x, jnp.nan),
-            jnp.minimum(x, 0.5),
-            jnp.where(x > 0, x, -2.0 * x),
-            jax.lax.cond(x[0] > 0, lambda: x * 2.0, lambda: x - 1.0),
-            jnp.einsum("bij,bjk->bik", b, b),
-            1.0 / (x - x[0]),
-            x**-2,
-        )
-
-    function, inputs, outputs = scalar_function(
-        corners, jnp.ones(3), jnp.ones((2, 2, 2)), fold=fold
-    )
-    rng = np.random.default_rng(2)
-    for sign in (1.0, -1.0):  # the cond's two branches
-        x = sign * np.abs(rng.normal(size=3)) + 0.1 * sign
-        b = rng.normal(size=(2, 2, 2))
-        out = np.empty(outputs)
-        function(np.concatenate([x, b.ravel()]), out)
-        truth = np.concatenate(
-            [np.ravel(np.asarray(a)) for a in corners(jnp.asarray(x), jnp.asarray(b))]
-        )
-        assert inputs == 11
-        np.testing.assert_allclose(out, truth, rtol=1e-14, atol=1e-14, equal_nan=True)
-        assert np.isinf(out[-6]) and np.isnan(out[3])  # 1 / 0 and maximum(x, nan)
-
-
-def test_compiled_ddp_peer_follows_the_regularisation_schedule() -> None:
-    """With one step size and a strict acceptance ratio, line searches fail and mu is raised
-    (the JAX solver's mu history shows it): the peer's iterations, states and controls still
-    equal the JAX solver's."""
-    import dataclasses
-
-    from benchmarks.speed.compiled_ddp import compiled_mpc_solver
-    from benchmarks.speed.ddp_parts import mpc_window
-    from controllers.high_level.mpc import ModelPredictiveController
-
-    window = mpc_window("planar", 100)
-    mpc = ModelPredictiveController(window.plan)
-    config = dataclasses.replace(
-        mpc.solver.config, max_iterations=6, alphas=(1.0,), line_search_c=0.9
-    )
-    solver = ddp_solver_for(mpc.problem, config)
-    ours = solver.jitted(window.X[0], window.U, window.params, window.refs)
-    mu = np.asarray(ours.mu_history)
-    assert (np.diff(mu) > 0).any()  # a failed line search raised mu
-    peer = compiled_mpc_solver(mpc.problem, config, window.params)
-    theirs = peer(np.asarray(window.X[0]), np.asarray(window.U), np.asarray(window.refs[0]))
-    assert theirs.iterations == int(ours.iterations)
-    np.testing.assert_allclose(theirs.U, np.asarray(ours.U), rtol=0, atol=1e-9)
-    np.testing.assert_allclose(theirs.X, np.asarray(ours.X), rtol=0, atol=1e-9)
+    ((name, row),) = measure(rounds=1, indices=(100,), problems=(problem,)).items()
+    assert name == f"{problem} 100"
+    assert row["jax_us"] > 0 and row["numba_us"] > 0 and row["unit_us"] > 0
+    assert row["max_dU"] < 1e-9 and row["max_dX"] < 1e-9

@@ -17,7 +17,7 @@ import jax
 import numpy as np
 
 from benchmarks.speed.ddp_bench import GOALS, krang_params
-from controllers.high_level.mpc import ModelPredictiveController, pack_inputs
+from controllers.high_level.mpc import ModelPredictiveController, MPCConfig, pack_inputs
 from controllers.high_level.planning import PlanConfig, plan_to_goal, planning_problem
 from controllers.simplified.wipm import WIPMParams
 from controllers.simplified.wipm_problem import ddp_solver_for, refs_for
@@ -52,10 +52,11 @@ def bench(problem: str, params: WIPMParams, theta0: float, reps: int, mpc_steps:
     plan_times = [_time(lambda: solver(z0, U0, params, refs)) for _ in range(reps)]
     iterations = int(solver(z0, U0, params, refs).iterations)
 
-    mpc = ModelPredictiveController(plan)
+    jax_mpc = MPCConfig(backend="jax")  # the JAX step (the numba backend: mpc_backends)
+    mpc = ModelPredictiveController(plan, jax_mpc)
     mpc.step(500, plan.states[500], params)  # compiles
     traces = mpc.compiled.trace_count  # the compiled step is shared process-wide
-    mpc = ModelPredictiveController(plan)
+    mpc = ModelPredictiveController(plan, jax_mpc)
     step_times = [
         _time(lambda i=i: mpc.step(i, plan.states[i], params).control) for i in range(mpc_steps)
     ]

@@ -8,19 +8,26 @@ state past the plan's end), warm-started from the previous solution shifted by o
 fixed budget of iterations (real-time MPC does not wait for convergence). Its result is used
 when it is finite and its cost did not rise above the warm start's; otherwise (a NaN or a
 divergence) the previous controls, shifted, are kept and the rejection is counted.
+
+Two backends run the same step (``MPCConfig.backend``): ``"jax"``, the DDP of
+``controllers.optimizer.ddp`` jitted by XLA, the reference; and ``"numba"``, the same algorithm
+with every derivative from the same JAX functions, written out as scalar code and compiled by
+numba (``controllers.optimizer.numba_ddp``), equal to it to round-off (tests/test_numba_ddp.py)
+and about twice as fast (docs/performance.md §18).
 """
 
 from __future__ import annotations
 
 import functools
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Literal
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from controllers.high_level.planning import Plan
+from controllers.optimizer import numba_ddp
 from controllers.optimizer.ddp import DDPConfig, rollout
 from controllers.simplified.wipm import WIPMParams
 from controllers.simplified.wipm_problem import Weights, WIPMProblem, ddp_solver_for
@@ -42,6 +49,9 @@ class MPCConfig:
         ddp: solver settings except the iteration budget (iLQR, no tolerance stop, no backward
             pass after the last line search: the MPC uses the controls, not the gains; no
             gradient norm: nothing reads it).
+        backend: ``"numba"`` (default: the same solve to round-off, about twice as fast;
+            docs/performance.md §18) or ``"jax"`` (the reference; it also runs the settings
+            the numba backend refuses: ``second_order``, ``gradient_norm``).
     """
 
     horizon_s: float = 1.0
@@ -64,6 +74,11 @@ class MPCConfig:
             gradient_norm=False,
         )
     )
+    backend: Literal["jax", "numba"] = "numba"
+
+    def __post_init__(self) -> None:
+        if self.backend not in ("jax", "numba"):
+            raise ValueError(f"MPC backend must be 'jax' or 'numba', got {self.backend!r}")
 
     @property
     def steps(self) -> int:
@@ -144,6 +159,12 @@ class _CompiledStep:
         self.horizon = horizon
         self.trace_count = 0
         self.jitted = jax.jit(self._one_trip)
+
+    def __call__(
+        self, host: np.ndarray, warm: Any, plan_states: Any, plan_controls: Any
+    ) -> tuple[Any, Any]:
+        """``(packed, next_warm)`` of one step (:meth:`_step`)."""
+        return self.jitted(host, warm, plan_states, plan_controls)
 
     def _one_trip(
         self, host: jax.Array, warm: jax.Array, plan_states: jax.Array, plan_controls: jax.Array
@@ -288,12 +309,44 @@ def compiled_step(problem: WIPMProblem, ddp: DDPConfig, horizon: int) -> _Compil
     return _CompiledStep(problem, ddp, horizon)
 
 
+class _NumbaStep:
+    """The MPC step of ``controllers.optimizer.numba_ddp`` for a problem and solver settings:
+    the same inputs and outputs as :class:`_CompiledStep` (any horizon; the warm start and the
+    plan as NumPy arrays). Its machine code serves every problem of the same structure (the
+    problem's numbers are inputs); it copies and pickles as the shared step of its problem."""
+
+    def __init__(self, problem: WIPMProblem, ddp: DDPConfig) -> None:
+        self.problem, self.ddp = problem, ddp
+        self.settings, self.alphas = numba_ddp.settings_vector(ddp)
+        self.constants = problem.constants()
+        layout = params_from_vector(np.zeros(_N_PARAMS))  # lambda(q)'s leaves, as packed
+        self.module = numba_ddp.generated_module(problem, layout)
+
+    def __call__(
+        self, host: np.ndarray, warm: np.ndarray, plan_states: np.ndarray, plan_controls: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        return self.module.mpc_step(  # type: ignore[no-any-return]
+            host, warm, plan_states, plan_controls, self.constants, self.settings, self.alphas
+        )
+
+    def __reduce__(self) -> tuple[Any, tuple[WIPMProblem, DDPConfig]]:
+        return numba_step, (self.problem, self.ddp)
+
+
+@functools.lru_cache(maxsize=16)
+def numba_step(problem: WIPMProblem, ddp: DDPConfig) -> _NumbaStep:
+    """The shared numba MPC step of a problem and solver settings."""
+    return _NumbaStep(problem, ddp)
+
+
 class ModelPredictiveController:
     """Receding-horizon DDP tracking a :class:`Plan` (see the module docstring).
 
-    The plan (padded past its end: the goal state, zero controls) is put on the device once;
-    each :meth:`step` is one call of the shared compiled step (:func:`compiled_step`) with its
-    host inputs packed in one vector (:func:`pack_inputs`) and one transfer of its packed result.
+    The plan (padded past its end: the goal state, zero controls) is put on the device once
+    (the JAX backend); each :meth:`step` is one call of the shared compiled step
+    (:func:`compiled_step`, or :func:`numba_step`) with its host inputs packed in one vector
+    (:func:`pack_inputs`) and one transfer of its packed result. ``solver`` is the JAX solver
+    of the same problem and settings, whichever the backend (the reference).
     ``step`` is :meth:`solve` of :meth:`inputs`: a solve beside the control loop makes its
     inputs on the control thread and solves in its own thread, one solve after the other.
     """
@@ -306,16 +359,22 @@ class ModelPredictiveController:
         self.problem = mpc_problem(plan.planar, self.config, plan.a_max, plan.theta_max)
         ddp = DDPConfig(**{**self.config.ddp.__dict__, "max_iterations": self.config.iterations})
         self.horizon = self.config.steps
-        self.compiled = compiled_step(self.problem, ddp, self.horizon)
-        self.solver = self.compiled.solver
+        self.solver = ddp_solver_for(self.problem, ddp)
+        self.compiled: _CompiledStep | _NumbaStep
         self.rejected = 0
         self.solves = 0
         H = self.horizon
         states = np.vstack([plan.states, np.tile(plan.goal_state, (H + 1, 1))])
         controls = np.vstack([plan.controls, np.zeros((H + 1, plan.controls.shape[1]))])
-        self._plan_states = jax.device_put(states)
-        self._plan_controls = jax.device_put(controls)
-        self._warm = jax.device_put(np.zeros((H, plan.controls.shape[1])))
+        warm = np.zeros((H, plan.controls.shape[1]))
+        if self.config.backend == "numba":
+            self.compiled = numba_step(self.problem, ddp)
+            self._plan_states, self._plan_controls, self._warm = states, controls, warm
+        else:
+            self.compiled = compiled_step(self.problem, ddp, self.horizon)
+            self._plan_states = jax.device_put(states)
+            self._plan_controls = jax.device_put(controls)
+            self._warm = jax.device_put(warm)
         self._first = True  # the first step warm-starts from the plan's controls
         n, m = states.shape[1], controls.shape[1]
         self._sizes = ((H + 1) * n, H * m)
@@ -342,9 +401,7 @@ class ModelPredictiveController:
 
     def solve(self, host: np.ndarray) -> MPCStep:
         """One MPC step from :meth:`inputs`' vector (made after the previous solve)."""
-        packed, self._warm = self.compiled.jitted(
-            host, self._warm, self._plan_states, self._plan_controls
-        )
+        packed, self._warm = self.compiled(host, self._warm, self._plan_states, self._plan_controls)
         self._first = False
         self.solves += 1
         out = np.asarray(packed)

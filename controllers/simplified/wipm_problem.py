@@ -63,6 +63,25 @@ class Weights:
     w_theta: float = 1e4
 
 
+def _weight_vector(values: tuple[float, ...] | tuple[Array, ...]) -> np.ndarray | Array:
+    """Diagonal weights as a vector: NumPy constants where they are numbers (the JAX solver's
+    case), a JAX array where they are traced (:meth:`WIPMProblem.with_constants`)."""
+    if all(isinstance(v, int | float | np.number) for v in values):
+        return np.asarray(values, dtype=float)
+    return jnp.stack([jnp.asarray(v, dtype=float) for v in values])
+
+
+def _concatenate(a: np.ndarray | Array, b: np.ndarray | Array) -> np.ndarray | Array:
+    both = isinstance(a, np.ndarray) and isinstance(b, np.ndarray)
+    return np.concatenate([a, b]) if both else jnp.concatenate([jnp.asarray(a), jnp.asarray(b)])
+
+
+def _diagonal(v: np.ndarray | Array) -> np.ndarray | Array:
+    """``diag(v)``; traced, as a product with the identity (no scatter: its zeros are literal,
+    and ``controllers.optimizer.scalar_codegen`` folds them)."""
+    return np.diag(v) if isinstance(v, np.ndarray) else jnp.eye(v.shape[0]) * v
+
+
 def _along_inputs(linear: Callable[[Array], Array], inputs: tuple[int, ...], size: int) -> Array:
     """A linear map of ``R^size`` (a JVP or an HVP from ``jax.linearize``) applied to the basis
     vectors of ``inputs`` only, its results the rows of a ``(size, out)`` array whose other rows
@@ -82,6 +101,43 @@ class WIPMProblem:
     dt: float
     weights: Weights
     rate_input: bool = True  # z = [s, u] with input du/dt; False: state s, input u
+
+    def constants(self) -> np.ndarray:
+        """The problem's numbers as one vector, in :meth:`with_constants`' layout:
+        ``[dt, q, r, r_rate, q_terminal, a_max, theta_max, margin, w_acceleration, w_theta]``."""
+        w = self.weights
+        return np.array(
+            [self.dt, *w.q, *w.r, *w.r_rate, *w.q_terminal]
+            + [w.a_max, w.theta_max, w.margin, w.w_acceleration, w.w_theta],
+            dtype=float,
+        )
+
+    def with_constants(self, vector: Array | np.ndarray) -> WIPMProblem:
+        """This problem with :meth:`constants` read from ``vector`` (traced, in
+        ``controllers.optimizer.numba_ddp``: the generated code takes the weights, bounds and
+        ``dt`` as inputs, so one compilation serves every problem of this structure).
+        ``ValueError`` for a vector of another length."""
+        w = self.weights
+        sizes = (1, len(w.q), len(w.r), len(w.r_rate), len(w.q_terminal), 5)
+        if vector.shape != (sum(sizes),):
+            raise ValueError(f"problem constants of shape {vector.shape}: expected ({sum(sizes)},)")
+        parts, at = [], 0
+        for size in sizes:
+            parts.append(tuple(vector[at + i] for i in range(size)))
+            at += size
+        (dt,), q, r, r_rate, q_terminal, (a_max, theta_max, margin, w_acc, w_theta) = parts
+        weights = Weights(
+            q=q,
+            r=r,
+            r_rate=r_rate,
+            q_terminal=q_terminal,
+            a_max=a_max,
+            theta_max=theta_max,
+            margin=margin,
+            w_acceleration=w_acc,
+            w_theta=w_theta,
+        )
+        return WIPMProblem(self.planar, dt, weights, self.rate_input)  # type: ignore[arg-type]
 
     @property
     def n_state(self) -> int:
@@ -196,10 +252,8 @@ class WIPMProblem:
         """``running(z, w, ref)`` and ``terminal(z, ref)`` with ``ref = (s_ref, params)``: the
         reference state and the WIPM parameters the acceleration penalty needs."""
         wts, n, dt = self.weights, self.n_state, self.dt
-        q = np.asarray(wts.q, dtype=float)
-        r = np.asarray(wts.r, dtype=float)
-        r_rate = np.asarray(wts.r_rate, dtype=float)
-        q_terminal = np.asarray(wts.q_terminal, dtype=float)
+        q, r = _weight_vector(wts.q), _weight_vector(wts.r)
+        r_rate, q_terminal = _weight_vector(wts.r_rate), _weight_vector(wts.q_terminal)
 
         def running(z: Array, w: Array, ref: tuple[Array, WIPMParams]) -> Array:
             s_ref, params = ref
@@ -229,15 +283,14 @@ class WIPMProblem:
         1.0 us per active step; the same rows as ``jax.hessian``'s to round-off. The penalty is
         active at ~40 % of the MPC's steps along a plan's acceleration phase."""
         wts, n, m, dt = self.weights, self.n_state, self.n_control, self.dt
-        q, r = np.asarray(wts.q, dtype=float), np.asarray(wts.r, dtype=float)
-        r_rate = np.asarray(wts.r_rate, dtype=float)
+        q, r, r_rate = _weight_vector(wts.q), _weight_vector(wts.r), _weight_vector(wts.r_rate)
         if self.rate_input:
-            x_diag, u_diag = np.concatenate([q, r]), r_rate  # z = [s, u], input w
+            x_diag, u_diag = _concatenate(q, r), r_rate  # z = [s, u], input w
         else:
             x_diag, u_diag = q, r
-        lxx = np.diag(2.0 * dt * x_diag)
-        luu = np.diag(2.0 * dt * u_diag)
-        nx, nu = x_diag.size, u_diag.size
+        lxx = _diagonal(2.0 * dt * x_diag)
+        luu = _diagonal(2.0 * dt * u_diag)
+        nx, nu = x_diag.shape[0], u_diag.shape[0]
         zero_penalty = (np.zeros(n + m), np.zeros((n + m, n + m)))
 
         inputs = self.penalty_inputs

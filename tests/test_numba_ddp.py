@@ -1,0 +1,208 @@
+"""The MPC's numba backend (``controllers.optimizer.numba_ddp``) against the JAX reference:
+the same steps to round-off along a plan and past its end, with the penalty active and not,
+with other weights and bounds through the same machine code, through failed line searches
+and raised mu, and through a rejected solution; its refusals; its module on disk."""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import hashlib
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from controllers.high_level.mpc import (
+    _N_PARAMS,
+    ModelPredictiveController,
+    MPCConfig,
+    MPCStep,
+    numba_step,
+    pack_inputs,
+    params_from_vector,
+)
+from controllers.high_level.planning import Plan, PlanConfig, plan_to_goal
+from controllers.optimizer import numba_ddp
+from controllers.simplified.wipm import WIPMParams
+from controllers.simplified.wipm_problem import ddp_solver_for, refs_for
+from tests import ddp_recorded
+
+
+@pytest.fixture(scope="module")
+def params() -> WIPMParams:
+    return ddp_recorded.params_from_arrays(dict(np.load(ddp_recorded.PATH)))
+
+
+@pytest.fixture(scope="module")
+def plans(params: WIPMParams) -> dict[str, Plan]:
+    theta0 = float(np.load(ddp_recorded.PATH)["theta0"])
+    return {
+        problem: plan_to_goal(
+            ddp_recorded.initial_state(problem, theta0),
+            params,
+            np.array(goal),
+            planar=problem == "planar",
+            config=PlanConfig(),
+        )
+        for problem, goal in ddp_recorded.GOALS.items()
+    }
+
+
+def _assert_same_step(ours: MPCStep, reference: MPCStep, what: str) -> None:
+    """Equal to round-off: 1e-10 of each array's scale, the cost to 1e-12 relative."""
+    assert ours.accepted == reference.accepted, what
+    for a, b in (
+        (ours.predicted_controls, reference.predicted_controls),
+        (ours.predicted_states, reference.predicted_states),
+    ):
+        scale = max(float(np.abs(b).max()), 1.0)
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-10 * scale, err_msg=what)
+    assert ours.cost == pytest.approx(reference.cost, rel=1e-12), what
+
+
+@pytest.mark.parametrize("problem", ["planar", "3d"])
+def test_numba_steps_equal_the_jax_steps_along_a_plan_and_past_its_end(
+    problem: str, plans: dict[str, Plan], params: WIPMParams
+) -> None:
+    """Warm-started MPC steps from disturbed plan states, each backend carrying its own warm
+    start, from the plan's start to past its end (the window padded with the goal): the same
+    predictions, costs and acceptances. The penalty is active in some windows and not in
+    others (checked), and the solves did work (their controls left the warm start)."""
+    plan = plans[problem]
+    numba_mpc = ModelPredictiveController(plan, MPCConfig())
+    jax_mpc = ModelPredictiveController(plan, MPCConfig(backend="jax"))
+    assert numba_mpc.config.backend == "numba"
+    rng = np.random.default_rng(3)
+    penalty, moved = [], []
+    last = len(plan.states) - 1
+    for index in [*range(0, 400, 40), last - 20, last, last + 50]:
+        state = plan.states[min(index, last)] + 0.02 * rng.normal(size=plan.states.shape[1])
+        ours = numba_mpc.step(index, state, params)
+        reference = jax_mpc.step(index, state, params)
+        _assert_same_step(ours, reference, f"index {index}")
+        u = reference.predicted_controls
+        active = [
+            bool(numba_mpc.problem.penalty(x, u_k, params)[1])
+            for x, u_k in zip(reference.predicted_states, u, strict=False)
+        ]
+        penalty.append(sum(active) / len(active))
+        window = plan.control_window(min(index, last), numba_mpc.horizon)
+        moved.append(float(np.abs(u - window).max()))
+    assert 0 < np.mean(penalty) < 1  # the penalty's cond both ways
+    assert max(moved) > 1e-3
+    assert numba_mpc.solves == jax_mpc.solves and numba_mpc.rejected == jax_mpc.rejected == 0
+
+
+def test_other_weights_and_bounds_run_through_the_same_machine_code(
+    plans: dict[str, Plan], params: WIPMParams
+) -> None:
+    """The problem's numbers are inputs of the generated code: an MPC with other weights, dt
+    and bounds shares the module (no new compilation) and still solves as the JAX backend."""
+    plan = plans["planar"]
+    default = ModelPredictiveController(plan)
+    other = dataclasses.replace(MPCConfig(), q_theta=50.0, r_control=0.5, q_terminal=3e4)
+    tight = dataclasses.replace(plan, a_max=0.3, theta_max=0.05)
+    mpc = ModelPredictiveController(tight, other)
+    reference = ModelPredictiveController(tight, dataclasses.replace(other, backend="jax"))
+    assert mpc.compiled.module is default.compiled.module  # type: ignore[union-attr]
+    assert mpc.problem.weights != default.problem.weights
+    state = plan.states[60] + 0.01
+    _assert_same_step(mpc.step(60, state, params), reference.step(60, state, params), "other")
+    np.testing.assert_array_equal(mpc.compiled.constants, mpc.problem.constants())  # type: ignore[union-attr]
+    assert mpc.problem.with_constants(mpc.problem.constants()) == mpc.problem
+
+
+def test_the_regularisation_schedule_and_the_stopping_test_follow_the_jax_solver(
+    plans: dict[str, Plan], params: WIPMParams
+) -> None:
+    """With one step size and a strict acceptance ratio, line searches fail and mu rises (the
+    JAX solver's mu history shows it); with a tolerance the stopping test (9) ends the solve
+    early. The numba solve's iterations, states and controls are the JAX solver's."""
+    plan = plans["planar"]
+    mpc = ModelPredictiveController(plan)
+    module, problem = mpc.compiled.module, mpc.problem  # type: ignore[union-attr]
+    horizon = mpc.horizon
+    x0 = plan.states[100] + 0.01
+    U = plan.control_window(100, horizon)
+    S = np.ascontiguousarray(plan.window(100, horizon + 1))
+    refs = refs_for(S, params)
+    P = np.array(pack_inputs(0, False, x0, params)[2 + x0.size :])
+    base = mpc.solver.config
+    iterations = {}
+    for name, change in (
+        ("failed searches", {"max_iterations": 6, "alphas": (1.0,), "line_search_c": 0.9}),
+        ("tolerance", {"max_iterations": 50, "abs_tolerance": 100.0, "final_backward": True}),
+    ):
+        config = dataclasses.replace(base, **change)  # type: ignore[arg-type]
+        ours = ddp_solver_for(problem, config).jitted(x0, U, params, refs)
+        if name == "failed searches":
+            assert (np.diff(np.asarray(ours.mu_history)) > 0).any()  # a search failed: mu rose
+        settings, alphas = numba_ddp.settings_vector(config)
+        X_init = np.empty_like(S)
+        X, Un, cost, initial, iterations[name] = module.solve(
+            x0, U, S, P, problem.constants(), settings, alphas, X_init
+        )
+        assert iterations[name] == int(ours.iterations), name
+        np.testing.assert_allclose(Un, np.asarray(ours.U), rtol=0, atol=1e-9)
+        np.testing.assert_allclose(X, np.asarray(ours.X), rtol=0, atol=1e-9)
+        assert initial == pytest.approx(float(ours.cost_history[0]), rel=1e-12)
+        assert cost == pytest.approx(float(ours.cost), rel=1e-12)
+    assert 0 < iterations["tolerance"] < 50  # the stopping test ended it
+
+
+def test_a_rejected_solution_keeps_the_warm_start_as_the_jax_backend_does(
+    plans: dict[str, Plan], params: WIPMParams
+) -> None:
+    """``lambda(q)`` with an infinite mass makes every rollout NaN: both backends reject the
+    solution, keep the warm start rolled out open loop, and count the rejection."""
+    plan = plans["3d"]
+    broken = params._replace(body_mass=np.float64(math.inf))
+    outs = []
+    for backend in ("numba", "jax"):
+        mpc = ModelPredictiveController(plan, MPCConfig(backend=backend))
+        mpc.step(10, plan.states[10], params)  # a good step first: the warm start is its own
+        outs.append((mpc.step(11, plan.states[11], broken), mpc))
+    (ours, numba_mpc), (reference, jax_mpc) = outs
+    assert not ours.accepted and not reference.accepted
+    assert numba_mpc.rejected == jax_mpc.rejected == 1
+    np.testing.assert_allclose(
+        ours.predicted_controls, reference.predicted_controls, rtol=0, atol=1e-10
+    )
+    np.testing.assert_array_equal(
+        np.isnan(ours.predicted_states), np.isnan(reference.predicted_states)
+    )
+    assert np.isnan(ours.cost) and np.isnan(reference.cost)
+
+
+def test_refusals_copies_and_the_module_on_disk(plans: dict[str, Plan], params: WIPMParams) -> None:
+    """The settings the numba DDP does not run are refused by name, as is an unknown backend;
+    a copied or unpickled MPC shares the step and solves as the original; the module on disk
+    is the generated source, named by its hash, and its solves release the GIL."""
+    plan = plans["planar"]
+    for change in ({"second_order": True}, {"gradient_norm": True}):
+        ddp = dataclasses.replace(MPCConfig().ddp, **change)  # type: ignore[arg-type]
+        with pytest.raises(ValueError, match="refused: " + next(iter(change))):
+            ModelPredictiveController(plan, MPCConfig(ddp=ddp))
+        ModelPredictiveController(plan, MPCConfig(ddp=ddp, backend="jax"))  # the reference runs it
+    with pytest.raises(ValueError, match="backend must be"):
+        MPCConfig(backend="xla")  # type: ignore[arg-type]
+    rate_input = dataclasses.replace(ModelPredictiveController(plan).problem, rate_input=True)
+    with pytest.raises(ValueError, match="rate input"):
+        numba_ddp.generated_module(rate_input, params)
+    mpc = ModelPredictiveController(plan)
+    mpc.step(0, plan.states[0], params)
+    twin = copy.deepcopy(mpc)
+    assert twin.compiled is mpc.compiled is numba_step(mpc.problem, mpc.compiled.ddp)  # type: ignore[union-attr]
+    state = plan.states[10] + 0.01
+    a, b = mpc.step(10, state, params), twin.step(10, state, params)
+    np.testing.assert_array_equal(a.predicted_controls, b.predicted_controls)
+    module = mpc.compiled.module  # type: ignore[union-attr]
+    path = Path(module.__file__)
+    layout = params_from_vector(np.zeros(_N_PARAMS))
+    source = numba_ddp.module_source(mpc.problem, layout)
+    assert path.parent == numba_ddp.cache_dir() and path.read_text() == source
+    assert path.stem.endswith(hashlib.sha256(source.encode()).hexdigest()[:16])
+    for name in ("mpc_step", "solve", "backward_stage"):
+        assert getattr(module, name).targetoptions.get("nogil") is True, name
