@@ -45,5 +45,6 @@ clean:
 # compiles again what `warm_caches` runs (the rest compiles on first use).
 clean-caches: $(STAMP)
 	find wip_gym controllers benchmarks -name '*.nbi' -delete -o -name '*.nbc' -delete
-	rm -rf $${WIP_GYM_NUMBA_CACHE:-$$HOME/.cache/wip-gym/numba}  # the MPC's generated modules
+	cd $${WIP_GYM_NUMBA_CACHE:-$$HOME/.cache/wip-gym/numba} 2>/dev/null && \
+		rm -rf wipm_mpc_*.py __pycache__ || true  # the MPC's generated modules (numba_ddp)
 	$(PY) -m benchmarks.warm_caches

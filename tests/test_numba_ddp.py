@@ -9,6 +9,7 @@ import copy
 import dataclasses
 import hashlib
 import math
+import pickle
 from pathlib import Path
 
 import numpy as np
@@ -98,8 +99,10 @@ def test_numba_steps_equal_the_jax_steps_along_a_plan_and_past_its_end(
 def test_other_weights_and_bounds_run_through_the_same_machine_code(
     plans: dict[str, Plan], params: WIPMParams
 ) -> None:
-    """The problem's numbers are inputs of the generated code: an MPC with other weights, dt
-    and bounds shares the module (no new compilation) and still solves as the JAX backend."""
+    """The problem's numbers are inputs of the generated code: an MPC with other weights and
+    bounds shares the module (no new compilation) and still solves as the JAX backend. A
+    problem whose weight vectors have other lengths gets its own module, and inputs of other
+    lengths than the module's are refused."""
     plan = plans["planar"]
     default = ModelPredictiveController(plan)
     other = dataclasses.replace(MPCConfig(), q_theta=50.0, r_control=0.5, q_terminal=3e4)
@@ -112,44 +115,94 @@ def test_other_weights_and_bounds_run_through_the_same_machine_code(
     _assert_same_step(mpc.step(60, state, params), reference.step(60, state, params), "other")
     np.testing.assert_array_equal(mpc.compiled.constants, mpc.problem.constants())  # type: ignore[union-attr]
     assert mpc.problem.with_constants(mpc.problem.constants()) == mpc.problem
+    layout = params_from_vector(np.zeros(_N_PARAMS))
+    weights = dataclasses.replace(mpc.problem.weights, r_rate=(0.1,))
+    longer = dataclasses.replace(mpc.problem, weights=weights)
+    assert numba_ddp.generated_module(longer, layout) is not mpc.compiled.module  # type: ignore[union-attr]
+    host = pack_inputs(60, True, state, params)
+    for short in (host[:-1], np.append(host, 0.0)):
+        with pytest.raises(ValueError, match="another length"):
+            mpc.solve(short)
+
+
+#: (name, problem, MPCConfig changes, DDPConfig changes) of the schedule test
+_SCHEDULE_CASES = (
+    # one step size and a strict acceptance ratio: line searches fail and mu rises
+    (
+        "failed searches",
+        "planar",
+        {},
+        {"max_iterations": 6, "alphas": (1.0,), "line_search_c": 0.9},
+    ),
+    ("failed searches", "3d", {}, {"max_iterations": 6, "alphas": (1.0,), "line_search_c": 0.9}),
+    # ... and with a low ceiling on mu the solve is stuck and stops before its budget
+    (
+        "stuck",
+        "planar",
+        {},
+        {"max_iterations": 30, "alphas": (1.0,), "line_search_c": 0.9, "mu_max": 50.0},
+    ),
+    # a negative control weight: backward passes fail (Q_uu not positive) and are retried
+    ("failed backward", "planar", {"r_control": -50.0}, {"max_iterations": 4}),
+    # the stopping test (9) ends the solve before its budget
+    (
+        "tolerance",
+        "planar",
+        {},
+        {"max_iterations": 50, "abs_tolerance": 100.0, "final_backward": True},
+    ),
+    ("final backward", "3d", {}, {"final_backward": True}),
+    ("no iteration", "3d", {}, {"max_iterations": 0}),
+)
 
 
 def test_the_regularisation_schedule_and_the_stopping_test_follow_the_jax_solver(
     plans: dict[str, Plan], params: WIPMParams
 ) -> None:
-    """With one step size and a strict acceptance ratio, line searches fail and mu rises (the
-    JAX solver's mu history shows it); with a tolerance the stopping test (9) ends the solve
-    early. The numba solve's iterations, states and controls are the JAX solver's."""
-    plan = plans["planar"]
-    mpc = ModelPredictiveController(plan)
-    module, problem = mpc.compiled.module, mpc.problem  # type: ignore[union-attr]
-    horizon = mpc.horizon
-    x0 = plan.states[100] + 0.01
-    U = plan.control_window(100, horizon)
-    S = np.ascontiguousarray(plan.window(100, horizon + 1))
-    refs = refs_for(S, params)
-    P = np.array(pack_inputs(0, False, x0, params)[2 + x0.size :])
-    base = mpc.solver.config
-    iterations = {}
-    for name, change in (
-        ("failed searches", {"max_iterations": 6, "alphas": (1.0,), "line_search_c": 0.9}),
-        ("tolerance", {"max_iterations": 50, "abs_tolerance": 100.0, "final_backward": True}),
-    ):
-        config = dataclasses.replace(base, **change)  # type: ignore[arg-type]
-        ours = ddp_solver_for(problem, config).jitted(x0, U, params, refs)
-        if name == "failed searches":
-            assert (np.diff(np.asarray(ours.mu_history)) > 0).any()  # a search failed: mu rose
+    """The numba solve against the JAX solver in the corners of the loop (_SCHEDULE_CASES):
+    failed line searches (mu rises: the JAX solver's mu history shows it), a solve stuck at
+    ``mu_max``, failed backward passes retried, the stopping test, the final backward pass and
+    a budget of 0. The iterations, states, controls and costs are the JAX solver's, and each
+    case reaches the corner it is named for."""
+    from controllers.high_level.mpc import mpc_problem
+
+    for name, problem_name, mpc_change, ddp_change in _SCHEDULE_CASES:
+        plan = plans[problem_name]
+        mpc_config = dataclasses.replace(MPCConfig(), **mpc_change)  # type: ignore[arg-type]
+        problem = mpc_problem(plan.planar, mpc_config, plan.a_max, plan.theta_max)
+        base = ModelPredictiveController(plan).solver.config
+        config = dataclasses.replace(base, **ddp_change)  # type: ignore[arg-type]
+        horizon = MPCConfig().steps
+        x0 = plan.states[100] + 0.01
+        U = plan.control_window(100, horizon)
+        S = np.ascontiguousarray(plan.window(100, horizon + 1))
+        P = np.array(pack_inputs(0, False, x0, params)[2 + x0.size :])
+        ours = ddp_solver_for(problem, config).jitted(x0, U, params, refs_for(S, params))
         settings, alphas = numba_ddp.settings_vector(config)
-        X_init = np.empty_like(S)
-        X, Un, cost, initial, iterations[name] = module.solve(
-            x0, U, S, P, problem.constants(), settings, alphas, X_init
+        module = numba_ddp.generated_module(problem, params_from_vector(np.zeros(_N_PARAMS)))
+        X, Un, cost, initial, iterations = module.solve(
+            x0, U, S, P, problem.constants(), settings, alphas, np.empty_like(S)
         )
-        assert iterations[name] == int(ours.iterations), name
-        np.testing.assert_allclose(Un, np.asarray(ours.U), rtol=0, atol=1e-9)
-        np.testing.assert_allclose(X, np.asarray(ours.X), rtol=0, atol=1e-9)
-        assert initial == pytest.approx(float(ours.cost_history[0]), rel=1e-12)
-        assert cost == pytest.approx(float(ours.cost), rel=1e-12)
-    assert 0 < iterations["tolerance"] < 50  # the stopping test ended it
+        what = f"{name} ({problem_name})"
+        assert iterations == int(ours.iterations), what
+        np.testing.assert_allclose(Un, np.asarray(ours.U), rtol=0, atol=1e-9, err_msg=what)
+        np.testing.assert_allclose(X, np.asarray(ours.X), rtol=0, atol=1e-9, err_msg=what)
+        assert initial == pytest.approx(float(ours.cost_history[0]), rel=1e-12), what
+        assert cost == pytest.approx(float(ours.cost), rel=1e-12), what
+        mu = np.asarray(ours.mu_history)
+        budget = config.max_iterations
+        if name == "failed searches":
+            assert (np.diff(mu) > 0).any(), what
+        elif name == "stuck":
+            assert iterations < budget and not bool(ours.converged), what
+        elif name == "failed backward":
+            assert mu[0] > config.mu_init, what  # the first pass was retried with mu raised
+        elif name == "tolerance":
+            assert iterations < budget and bool(ours.converged), what
+        elif name == "no iteration":
+            assert iterations == 0 and np.array_equal(Un, U), what
+        else:
+            assert iterations == budget, what
 
 
 def test_a_rejected_solution_keeps_the_warm_start_as_the_jax_backend_does(
@@ -178,8 +231,9 @@ def test_a_rejected_solution_keeps_the_warm_start_as_the_jax_backend_does(
 
 def test_refusals_copies_and_the_module_on_disk(plans: dict[str, Plan], params: WIPMParams) -> None:
     """The settings the numba DDP does not run are refused by name, as is an unknown backend;
-    a copied or unpickled MPC shares the step and solves as the original; the module on disk
-    is the generated source, named by its hash, and its solves release the GIL."""
+    a copied MPC shares the step and solves as the original, and the step pickles as itself;
+    the module on disk is the generated source, named by its hash, and its solves release the
+    GIL."""
     plan = plans["planar"]
     for change in ({"second_order": True}, {"gradient_norm": True}):
         ddp = dataclasses.replace(MPCConfig().ddp, **change)  # type: ignore[arg-type]
@@ -195,6 +249,7 @@ def test_refusals_copies_and_the_module_on_disk(plans: dict[str, Plan], params: 
     mpc.step(0, plan.states[0], params)
     twin = copy.deepcopy(mpc)
     assert twin.compiled is mpc.compiled is numba_step(mpc.problem, mpc.compiled.ddp)  # type: ignore[union-attr]
+    assert pickle.loads(pickle.dumps(mpc.compiled)) is mpc.compiled
     state = plan.states[10] + 0.01
     a, b = mpc.step(10, state, params), twin.step(10, state, params)
     np.testing.assert_array_equal(a.predicted_controls, b.predicted_controls)
@@ -206,3 +261,27 @@ def test_refusals_copies_and_the_module_on_disk(plans: dict[str, Plan], params: 
     assert path.stem.endswith(hashlib.sha256(source.encode()).hexdigest()[:16])
     for name in ("mpc_step", "solve", "backward_stage"):
         assert getattr(module, name).targetoptions.get("nogil") is True, name
+
+
+def test_an_unwritable_cache_directory_falls_back_to_a_temporary_one(
+    plans: dict[str, Plan], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``WIP_GYM_NUMBA_CACHE`` under a file (not a directory): the module is written under the
+    temporary directory instead, with a warning that names the setting; a file in place is
+    never rewritten (numba's cache is keyed on its time stamp)."""
+    import tempfile
+
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    monkeypatch.setenv(numba_ddp.CACHE_ENV, str(blocker / "cache"))
+    problem = ModelPredictiveController(plans["planar"]).problem
+    layout = params_from_vector(np.zeros(_N_PARAMS))
+    with pytest.warns(RuntimeWarning, match=numba_ddp.CACHE_ENV):
+        module = numba_ddp._write_and_load(problem, layout)
+    path = Path(module.__file__)
+    assert path.parent.parent == Path(tempfile.gettempdir())
+    assert path.read_text() == numba_ddp.module_source(problem, layout)
+    stamp = path.stat().st_mtime_ns
+    again = numba_ddp._written(path.parent, path.stem, "another source")
+    assert again == path and path.stat().st_mtime_ns == stamp
+    assert not list(path.parent.glob(".*.tmp"))  # no temporary file left behind

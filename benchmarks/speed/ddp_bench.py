@@ -1,5 +1,5 @@
-"""The DDP half of ``wip-bench solvers``: our JAX DDP against crocoddyl and a NumPy iLQR on
-the WIPM.
+"""The DDP half of ``wip-bench solvers``: our DDP (the plan: the JAX DDP; the MPC step: its
+default backend, numba, ``MPCConfig.backend``) against crocoddyl and a NumPy iLQR on the WIPM.
 
 Two problems, both from Krang's ``lambda(q)`` at its initial pose (``Krang-v0``,
 ``reset(seed=0)``, no reset noise):

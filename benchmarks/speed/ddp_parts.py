@@ -80,7 +80,7 @@ class MPCWindow(NamedTuple):
 
 def mpc_window(problem: str, index: int = 400) -> MPCWindow:
     """The MPC workload of this module (and of ``riccati_floor``, ``stage_codegen``,
-    ``compiled_ddp``): Krang's WIPM, the plan to ``GOALS[problem]``, the window of ``N`` steps
+    ``mpc_backends``): Krang's WIPM, the plan to ``GOALS[problem]``, the window of ``N`` steps
     at plan ``index`` from the plan's state plus 0.01 (off the plan: every iteration has
     work)."""
     import jax  # noqa: PLC0415

@@ -1,7 +1,9 @@
-"""The first plan and the first MPC step of a new process: compilation, or loading it from JAX's
-persistent cache. Planar WIPM with Krang's ``lambda(q)``, goal 2 m.
+"""The first plan and the first MPC step of a new process: compilation, or loading it from the
+persistent caches (JAX's for the plan, numba's for the MPC's default backend,
+``controllers.optimizer.numba_ddp``). Planar WIPM with Krang's ``lambda(q)``, goal 2 m.
 
-    WIP_GYM_JAX_CACHE=$(mktemp -d) python -m benchmarks.speed.first_call   # empty cache: compiles
+    WIP_GYM_JAX_CACHE=$(mktemp -d) WIP_GYM_NUMBA_CACHE=$(mktemp -d) \
+        python -m benchmarks.speed.first_call   # empty caches: compiles
 
 Run it twice with the same directory: the second process loads what the first compiled.
 """

@@ -13,7 +13,11 @@ alternating round by round, a burst of warm reference steps every 50 MPC steps (
 not counted); the median per round, then the median of the rounds. Then the 3-D plan
 (``PlanConfig()``, N = 2000) solved ``--plans`` times by each version, alternating. Also printed:
 the largest difference between the versions' predicted states and controls over 20 MPC steps off the
-plan, and between their plans. On a shared machine only such interleaved figures compare."""
+plan, and between their plans. On a shared machine only such interleaved figures compare.
+
+Each version's MPC runs with its default settings; ``--backend jax`` or ``numba`` sets the working
+tree's backend (``MPCConfig.backend``; numba is its default since the backend came, the JAX DDP
+before), so that a change to either backend compares with a revision before it."""
 
 from __future__ import annotations
 
@@ -77,6 +81,9 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=6)
     parser.add_argument("--steps", type=int, default=200)
     parser.add_argument("--plans", type=int, default=7)
+    parser.add_argument(
+        "--backend", choices=("jax", "numba"), help="the working tree's MPC backend (its default)"
+    )
     args = parser.parse_args()
 
     import jax  # noqa: PLC0415
@@ -96,6 +103,7 @@ def main() -> None:
 
     base = load_revision(args.base)
     versions = {"base": base["controllers.high_level.mpc"], "new": mpc}
+    configs = {"base": None, "new": mpc.MPCConfig(backend=args.backend) if args.backend else None}
     params, theta0 = krang_params()
     reference = ReferenceStep()
     for _ in range(100):
@@ -109,7 +117,7 @@ def main() -> None:
         )
         off_plan = {}
         for name, module in versions.items():
-            controller = module.ModelPredictiveController(plan)
+            controller = module.ModelPredictiveController(plan, configs[name])
             controller.step(1000, plan.states[1000], params)  # compiles
             off_plan[name] = [
                 controller.step(i, plan.states[i] + 0.01, params) for i in range(0, 400, 20)
@@ -128,7 +136,7 @@ def main() -> None:
         units: list[float] = []
         for _ in range(args.rounds):
             for name, module in versions.items():
-                controller = module.ModelPredictiveController(plan)
+                controller = module.ModelPredictiveController(plan, configs[name])
                 controller.step(0, plan.states[0], params)
 
                 def timed(i: int, controller: Any = controller, states: Any = plan.states) -> float:

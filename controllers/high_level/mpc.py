@@ -290,7 +290,7 @@ def unpack_inputs(
             f"packed MPC inputs of shape {host.shape} for a plan of {n} states: expected "
             f"({_HEAD + n + _N_PARAMS},)"
         )
-    index = host[0].astype(jnp.int32)
+    index = jnp.maximum(host[0].astype(jnp.int32), 0)  # dynamic_slice would wrap a negative one
     first = host[1] != 0.0
     return (
         index,
@@ -312,8 +312,9 @@ def compiled_step(problem: WIPMProblem, ddp: DDPConfig, horizon: int) -> _Compil
 class _NumbaStep:
     """The MPC step of ``controllers.optimizer.numba_ddp`` for a problem and solver settings:
     the same inputs and outputs as :class:`_CompiledStep` (any horizon; the warm start and the
-    plan as NumPy arrays). Its machine code serves every problem of the same structure (the
-    problem's numbers are inputs); it copies and pickles as the shared step of its problem."""
+    plan as NumPy arrays; inputs of other lengths refused). Its machine code serves every
+    problem of the same structure (the problem's numbers are inputs); a copy or an unpickled
+    one is the shared step of its problem and settings (:func:`numba_step`)."""
 
     def __init__(self, problem: WIPMProblem, ddp: DDPConfig) -> None:
         self.problem, self.ddp = problem, ddp

@@ -367,7 +367,8 @@ def riccati_step(
     ``(l_x, l_u, l_xx, l_ux, l_uu, f_x, f_u[, f_xx, f_ux, f_uu])`` and the next step's value
     expansion ``V'_x``, ``V'_xx``, the value expansion here, the gains ``K``, ``k``, this step's
     terms of ``dV`` (5) and whether ``Q_uu + mu I`` was positive definite. A pure function: the
-    backward scan runs it, and ``benchmarks.speed.compiled_ddp`` compiles it outside XLA."""
+    backward scan runs it, and the MPC's numba backend (``controllers.optimizer.numba_ddp``)
+    writes it out of its jaxpr as scalar code."""
     lx, lu, lxx, lux, luu, fx, fu = derivatives[:7]
     n, m = fx.shape[0], lu.shape[0]
     # (2) from F = [f_x f_u]: F^T V_x and F^T V_xx F in two products instead of five (each
