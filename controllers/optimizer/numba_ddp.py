@@ -144,12 +144,12 @@ def backward_stage(z: np.ndarray, out: np.ndarray) -> None:
 
 def terminal_at(x_end: np.ndarray, s_end: np.ndarray, P: np.ndarray, C: np.ndarray) -> np.ndarray:
     """The terminal cost, its gradient and Hessian at ``x_end``, in one vector."""
-    n = x_end.shape[0]
-    z = np.empty(2 * n + P.shape[0] + C.shape[0])
+    n, ns = x_end.shape[0], s_end.shape[0]
+    z = np.empty(n + ns + P.shape[0] + C.shape[0])
     z[:n] = x_end
-    z[n : 2 * n] = s_end
-    z[2 * n : 2 * n + P.shape[0]] = P
-    z[2 * n + P.shape[0] :] = C
+    z[n : n + ns] = s_end
+    z[n + ns : n + ns + P.shape[0]] = P
+    z[n + ns + P.shape[0] :] = C
     out = np.empty(1 + n + n * n)
     terminal_stage(z, out)
     return out
@@ -172,10 +172,11 @@ def trajectory(  # noqa: PLR0913
     unread) into ``X_out``, ``U_out``; returns its cost (1)."""
     steps, m = U.shape
     n = x0.shape[0]
-    z = np.empty(2 * n + m + P.shape[0] + C.shape[0])
+    ns = S.shape[1]
+    z = np.empty(n + m + ns + P.shape[0] + C.shape[0])
     out = np.empty(n + 1)
-    z[2 * n + m : 2 * n + m + P.shape[0]] = P
-    z[2 * n + m + P.shape[0] :] = C
+    z[n + m + ns : n + m + ns + P.shape[0]] = P
+    z[n + m + ns + P.shape[0] :] = C
     X_out[0] = x0
     total = 0.0
     for t in range(steps):
@@ -189,7 +190,7 @@ def trajectory(  # noqa: PLR0913
             U_out[t, a] = v
         z[:n] = x
         z[n : n + m] = U_out[t]
-        z[n + m : 2 * n + m] = S[t]
+        z[n + m : n + m + ns] = S[t]
         rollout_stage(z, out)
         X_out[t + 1] = out[:n]
         total += out[n]
@@ -209,21 +210,22 @@ def backward(  # noqa: PLR0913
     """The backward pass (2)-(5): ``(dV_1, dV_2, ok)``, the gains into ``K``, ``k``."""
     steps, m = U.shape
     n = X.shape[1]
-    base = 2 * n + m + P.shape[0] + C.shape[0]
+    ns = S.shape[1]
+    base = n + m + ns + P.shape[0] + C.shape[0]
     z = np.empty(base + n + n * n + 1)
     out = np.empty(n + n * n + m * n + m + 3)
     o_K = n + n * n
     o_k = o_K + m * n
     o_dv = o_k + m
-    z[2 * n + m : 2 * n + m + P.shape[0]] = P
-    z[2 * n + m + P.shape[0] : base] = C
+    z[n + m + ns : n + m + ns + P.shape[0]] = P
+    z[n + m + ns + P.shape[0] : base] = C
     z[base : base + n + n * n] = terminal_at(X[steps], S[steps], P, C)[1:]  # V_x, V_xx at N
     z[base + n + n * n] = mu
     dv1, dv2, ok = 0.0, 0.0, True
     for t in range(steps - 1, -1, -1):
         z[:n] = X[t]
         z[n : n + m] = U[t]
-        z[n + m : 2 * n + m] = S[t]
+        z[n + m : n + m + ns] = S[t]
         backward_stage(z, out)
         z[base : base + n + n * n] = out[: n + n * n]
         for a in range(m):
@@ -436,12 +438,14 @@ def _stage_sources(problem: Any, params: Any) -> list[str]:
         vx_new, vxx_new, K, k, dv1, dv2, ok = riccati_step(derivatives, vx, vxx, mu, False)
         return vx_new, vxx_new, K, k, dv1, dv2, ok.astype(vx.dtype)
 
-    zn, zm, zero = jnp.zeros(n), jnp.zeros(m), jnp.zeros(())
+    # the DDP's state: the WIPM state, with the control appended under the rate input
+    nx = n + m if problem.rate_input else n
+    zx, zs, zm, zero = jnp.zeros(nx), jnp.zeros(n), jnp.zeros(m), jnp.zeros(())
     sources = []
     for name, fun, args in (
-        ("rollout_stage", rollout, (zn, zm, zn, params, constants)),
-        ("terminal_stage", terminal, (zn, zn, params, constants)),
-        ("backward_stage", backward, (zn, zm, zn, params, constants, zn, jnp.eye(n), zero)),
+        ("rollout_stage", rollout, (zx, zm, zs, params, constants)),
+        ("terminal_stage", terminal, (zx, zs, params, constants)),
+        ("backward_stage", backward, (zx, zm, zs, params, constants, zx, jnp.eye(nx), zero)),
     ):
         source, _, _ = scalar_source(fun, *args, name=name, fold=True)
         sources.append(source)
@@ -486,6 +490,9 @@ def generated_module(problem: Any, params: Any) -> ModuleType:
     (:func:`cache_dir`), loaded once per process. Its ``mpc_step`` and ``solve`` compile on
     their first call (or load from numba's cache); they refuse inputs of other lengths."""
     if problem.rate_input:
+        # the plan's problem: written out and solved as well (the driver reads the DDP state's
+        # and the reference's sizes apart), but untested here, and no faster over the plan's
+        # 2000 steps when tried (docs/performance.md §18)
         raise ValueError("the numba DDP runs the MPC's problem (state s, input u), not rate input")
     import jax  # noqa: PLC0415
 
