@@ -260,7 +260,14 @@ def test_refusals_copies_and_the_module_on_disk(plans: dict[str, Plan], params: 
     assert path.parent == numba_ddp.cache_dir() and path.read_text() == source
     assert path.stem.endswith(hashlib.sha256(source.encode()).hexdigest()[:16])
     for name in ("mpc_step", "solve", "backward_stage"):
-        assert getattr(module, name).targetoptions.get("nogil") is True, name
+        options = getattr(module, name).targetoptions
+        assert options.get("nogil") is True, name
+        # fused multiply-adds only: no fast-math flag that lets NaN or inf lose their meaning
+        assert set(options.get("fastmath")) == {"contract"}, name
+    # every generated function carries the options asked for (benchmarks.speed.numba_options)
+    other = numba_ddp.module_source(mpc.problem, layout, "cache=True")
+    functions = source.count("\ndef ")
+    assert other.count("@numba.njit(cache=True)\ndef ") == functions > 10
 
 
 def test_an_unwritable_cache_directory_falls_back_to_a_temporary_one(

@@ -398,7 +398,10 @@ def mpc_step(  # noqa: PLR0913
 
 
 _DRIVER = (terminal_at, trajectory, backward, increase, decrease, regularised, stops, solve)
-_DECORATOR = '@numba.njit(cache=True, error_model="numpy", nogil=True)'
+#: numba's options for every generated function: NumPy's error model (a division by zero gives
+#: inf or NaN, as in JAX); the GIL released; fused multiply-adds allowed (``contract``: 7 to 10 %
+#: off the 3-D step, interleaved; no other fast-math flag, so NaN and inf keep their meaning)
+OPTIONS = 'cache=True, error_model="numpy", nogil=True, fastmath={"contract"}'
 
 
 # ---------------------------------------------------------------------------------------------
@@ -452,8 +455,10 @@ def _stage_sources(problem: Any, params: Any) -> list[str]:
     return sources
 
 
-def module_source(problem: Any, params: Any) -> str:
-    """The generated module's source: the problem's stage functions and the driver."""
+def module_source(problem: Any, params: Any, options: str = OPTIONS) -> str:
+    """The generated module's source: the problem's stage functions and the driver, each under
+    ``@numba.njit(options)``."""
+    decorator = f"@numba.njit({options})"
     import jax  # noqa: PLC0415
 
     parameters = sum(int(np.size(leaf)) for leaf in jax.tree.leaves(params))
@@ -475,11 +480,11 @@ def module_source(problem: Any, params: Any) -> str:
     # self-contained: numba's cache would not see an edit of a function imported from elsewhere
     for function in (nan_max, nan_min):
         source = inspect.getsource(function.py_func)
-        parts.append(f"{_DECORATOR}\n{source[source.index('def ') :]}")  # its own decorator off
+        parts.append(f"{decorator}\n{source[source.index('def ') :]}")  # its own decorator off
     for source in _stage_sources(problem, params):
-        parts.append(f"{_DECORATOR}\n{source}")
+        parts.append(f"{decorator}\n{source}")
     for function in (*_DRIVER, mpc_step):
-        parts.append(f"{_DECORATOR}\n{inspect.getsource(function)}")
+        parts.append(f"{decorator}\n{inspect.getsource(function)}")
     return "\n\n".join(parts)
 
 
@@ -509,8 +514,11 @@ def generated_module(problem: Any, params: Any) -> ModuleType:
     return module
 
 
-def _write_and_load(problem: Any, params: Any) -> ModuleType:
-    source = module_source(problem, params)
+def _write_and_load(problem: Any, params: Any, options: str = OPTIONS) -> ModuleType:
+    """The module of ``module_source(problem, params, options)``, written (:func:`_written`)
+    and loaded, apart from the table of :func:`generated_module` (``benchmarks.speed.
+    numba_options`` loads variants side by side)."""
+    source = module_source(problem, params, options)
     digest = hashlib.sha256(source.encode()).hexdigest()[:16]
     name = f"wipm_mpc_{'planar' if problem.planar else 'spatial'}_{digest}"
     directory = cache_dir()
