@@ -78,6 +78,20 @@ class MPCWindow(NamedTuple):
     refs: Any
 
 
+def window_arguments(description: str, argv: list[str] | None) -> tuple[int, tuple[int, ...]]:
+    """``(rounds, indices)`` from a benchmark's ``--rounds`` (default 5, at least 1) and
+    repeatable ``--index`` (the windows' plan indices, default 100 and 400) arguments."""
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--rounds", type=int, default=5)
+    parser.add_argument(
+        "--index", type=int, action="append", help="plan indices of the windows (100 and 400)"
+    )
+    args = parser.parse_args(argv)
+    if args.rounds < 1:
+        parser.error("--rounds must be >= 1")
+    return args.rounds, tuple(args.index) if args.index else (100, 400)
+
+
 def mpc_window(problem: str, index: int = 400) -> MPCWindow:
     """The MPC workload of this module (and of ``riccati_floor``, ``stage_codegen``,
     ``mpc_backends``): Krang's WIPM, the plan to ``GOALS[problem]``, the window of ``N`` steps

@@ -12,9 +12,9 @@ in units, with the largest differences of their predictions (docs/performance.md
 
 from __future__ import annotations
 
-import argparse
-
 import numpy as np
+
+from benchmarks.speed.ddp_parts import window_arguments
 
 
 def measure(
@@ -65,17 +65,9 @@ def main(argv: list[str] | None = None) -> int:
     from controllers.optimizer import jax_setup  # noqa: PLC0415
 
     jax_setup.configure()
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--rounds", type=int, default=5)
-    parser.add_argument(
-        "--index", type=int, action="append", help="plan indices of the windows (100 and 400)"
-    )
-    args = parser.parse_args(argv)
-    if args.rounds < 1:
-        parser.error("--rounds must be >= 1")
-    indices = tuple(args.index) if args.index else (100, 400)
+    rounds, indices = window_arguments(__doc__.splitlines()[0], argv)
     print("the MPC step (2 DDP iterations), the JAX and numba backends, median us (units):")
-    for name, f in measure(args.rounds, indices).items():
+    for name, f in measure(rounds, indices).items():
         unit = f["unit_us"]
         print(
             f"  {name:11s} jax {f['jax_us']:6.1f} ({f['jax_us'] / unit:5.1f})  numba "

@@ -13,9 +13,9 @@ decorators): the first run compiles each, about half a minute per variant and pr
 
 from __future__ import annotations
 
-import argparse
-
 import numpy as np
+
+from benchmarks.speed.ddp_parts import window_arguments
 
 #: name -> the ``numba.njit`` options of every generated function
 VARIANTS = {
@@ -77,17 +77,9 @@ def main(argv: list[str] | None = None) -> int:
     from controllers.optimizer import jax_setup  # noqa: PLC0415
 
     jax_setup.configure()
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--rounds", type=int, default=5)
-    parser.add_argument(
-        "--index", type=int, action="append", help="plan indices of the windows (100 and 400)"
-    )
-    args = parser.parse_args(argv)
-    if args.rounds < 1:
-        parser.error("--rounds must be >= 1")
-    indices = tuple(args.index) if args.index else (100, 400)
+    rounds, indices = window_arguments(__doc__.splitlines()[0], argv)
     print("the numba MPC step under each variant's options, median us (units), max |dU| vs JAX:")
-    for window, row in measure(args.rounds, indices).items():
+    for window, row in measure(rounds, indices).items():
         unit = row["unit_us"]
         cells = "  ".join(
             f"{name} {row[f'{name}_us']:6.1f} ({row[f'{name}_us'] / unit:4.1f}) "
