@@ -68,9 +68,10 @@ def test_numba_steps_equal_the_jax_steps_along_a_plan_and_past_its_end(
     problem: str, plans: dict[str, Plan], params: WIPMParams
 ) -> None:
     """Warm-started MPC steps from disturbed plan states, each backend carrying its own warm
-    start, from the plan's start to past its end (the window padded with the goal): the same
-    predictions, costs and acceptances. The penalty is active in some windows and not in
-    others (checked), and the solves did work (their controls left the warm start)."""
+    start, from the plan's start to past its end (the window padded with the goal), and from
+    a negative index (taken as 0 by both): the same predictions, costs and acceptances. The
+    penalty is active at some of the predicted steps and not at others (checked), and the
+    solves did work (their controls left the warm start)."""
     plan = plans[problem]
     numba_mpc = ModelPredictiveController(plan, MPCConfig())
     jax_mpc = ModelPredictiveController(plan, MPCConfig(backend="jax"))
@@ -94,6 +95,20 @@ def test_numba_steps_equal_the_jax_steps_along_a_plan_and_past_its_end(
     assert 0 < np.mean(penalty) < 1  # the penalty's cond both ways
     assert max(moved) > 1e-3
     assert numba_mpc.solves == jax_mpc.solves and numba_mpc.rejected == jax_mpc.rejected == 0
+    # a negative index, packed by hand (inputs() clamps it): both take the window at 0
+    state = plan.states[0] + 0.01
+    steps = {}
+    for name, mpc in (("numba", numba_mpc), ("jax", jax_mpc)):
+        fresh = ModelPredictiveController(plan, mpc.config)
+        steps[name, -5] = fresh.solve(pack_inputs(-5, True, state, params))
+        steps[name, 0] = ModelPredictiveController(plan, mpc.config).solve(
+            pack_inputs(0, True, state, params)
+        )
+    for name in ("numba", "jax"):
+        np.testing.assert_array_equal(
+            steps[name, -5].predicted_controls, steps[name, 0].predicted_controls
+        )
+    _assert_same_step(steps["numba", -5], steps["jax", -5], "index -5")
 
 
 def test_other_weights_and_bounds_run_through_the_same_machine_code(
@@ -123,6 +138,18 @@ def test_other_weights_and_bounds_run_through_the_same_machine_code(
     for short in (host[:-1], np.append(host, 0.0)):
         with pytest.raises(ValueError, match="another length"):
             mpc.solve(short)
+    # the planar module given the 3-D problem's widths, or other lengths, refuses them
+    module, step = mpc.compiled.module, mpc.compiled  # type: ignore[union-attr]
+    warm = np.zeros((mpc.horizon, 1))
+    plan_states, plan_controls = mpc._plan_states, mpc._plan_controls
+    for states, controls, constants, settings in (
+        (np.zeros((plan_states.shape[0], 8)), plan_controls, step.constants, step.settings),
+        (plan_states, np.zeros((plan_controls.shape[0], 2)), step.constants, step.settings),
+        (plan_states, plan_controls, step.constants[:-1], step.settings),
+        (plan_states, plan_controls, step.constants, step.settings[:-1]),
+    ):
+        with pytest.raises(ValueError, match="another"):
+            module.mpc_step(host, warm, states, controls, constants, settings, step.alphas)
 
 
 #: (name, problem, MPCConfig changes, DDPConfig changes) of the schedule test
@@ -180,7 +207,7 @@ def test_the_regularisation_schedule_and_the_stopping_test_follow_the_jax_solver
         ours = ddp_solver_for(problem, config).jitted(x0, U, params, refs_for(S, params))
         settings, alphas = numba_ddp.settings_vector(config)
         module = numba_ddp.generated_module(problem, params_from_vector(np.zeros(_N_PARAMS)))
-        X, Un, cost, initial, iterations = module.solve(
+        X, Un, cost, initial, iterations, mu_last, K, k = module.solve(
             x0, U, S, P, problem.constants(), settings, alphas, np.empty_like(S)
         )
         what = f"{name} ({problem_name})"
@@ -190,6 +217,14 @@ def test_the_regularisation_schedule_and_the_stopping_test_follow_the_jax_solver
         assert initial == pytest.approx(float(ours.cost_history[0]), rel=1e-12), what
         assert cost == pytest.approx(float(ours.cost), rel=1e-12), what
         mu = np.asarray(ours.mu_history)
+        # the schedule itself, and the last backward pass's gains (the final one's, if asked)
+        assert mu_last == pytest.approx(float(mu[-1]), rel=1e-12), what
+        for ours_gain, jax_gain in ((K, ours.K), (k, ours.k)):
+            reference = np.asarray(jax_gain)
+            scale = max(float(np.abs(reference).max()), 1.0)
+            np.testing.assert_allclose(
+                ours_gain, reference, rtol=0, atol=1e-8 * scale, err_msg=what
+            )
         budget = config.max_iterations
         if name == "failed searches":
             assert (np.diff(mu) > 0).any(), what
@@ -281,13 +316,17 @@ def test_an_unwritable_cache_directory_falls_back_to_a_temporary_one(
     blocker = tmp_path / "a_file"
     blocker.write_text("")
     monkeypatch.setenv(numba_ddp.CACHE_ENV, str(blocker / "cache"))
+    temporary = tmp_path / "tmp"  # the fallback's temporary directory, this test's own
+    temporary.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(temporary))
     problem = ModelPredictiveController(plans["planar"]).problem
     layout = params_from_vector(np.zeros(_N_PARAMS))
     with pytest.warns(RuntimeWarning, match=numba_ddp.CACHE_ENV):
         module = numba_ddp._write_and_load(problem, layout)
     path = Path(module.__file__)
-    assert path.parent.parent == Path(tempfile.gettempdir())
+    assert path.parent.parent == temporary and path.parent.stat().st_mode & 0o077 == 0
     assert path.read_text() == numba_ddp.module_source(problem, layout)
+    assert path.stat().st_mode & 0o777 == 0o644  # others sharing a cache can read it
     stamp = path.stat().st_mtime_ns
     again = numba_ddp._written(path.parent, path.stem, "another source")
     assert again == path and path.stat().st_mtime_ns == stamp

@@ -3,7 +3,8 @@ MPC's settings (iLQR, no gradient norm), every derivative still written by JAX's
 
 Why: an MPC step is two DDP iterations over 100 steps of an 8-state model. In XLA:CPU the
 small scans' per-step overheads, not the arithmetic, set its time (docs/performance.md §15 to
-§17); the same solve as straight-line scalar code runs in about half the time.
+§17); the same solve as straight-line scalar code runs 1.3 to 1.9 times
+as fast (docs/performance.md §18).
 
 How: :func:`generated_module` traces three per-step functions of a :class:`WIPMProblem` to
 jaxprs and writes them out as scalar code (``controllers.optimizer.scalar_codegen``, folding the
@@ -117,6 +118,9 @@ def settings_vector(config: DDPConfig) -> tuple[np.ndarray, np.ndarray]:
 # Stand-ins for what each generated module defines itself: the lengths of lambda(q) and of the
 # problem's constants its stage functions read, and the per-step functions.
 
+N_STATE = 0  # the DDP's state
+N_CONTROL = 0
+N_REFERENCE = 0  # a reference state's
 PARAMETERS = 0
 CONSTANTS = 0
 
@@ -291,14 +295,18 @@ def solve(  # noqa: PLR0913
     settings: np.ndarray,
     alphas: np.ndarray,
     X_init: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, float, float, int]:
-    """``DDPSolver._solve`` with iLQR: ``(X, U, cost, the warm start's cost, iterations)``; the
-    warm start's open-loop rollout into ``X_init``."""
+) -> tuple[np.ndarray, np.ndarray, float, float, int, float, np.ndarray, np.ndarray]:
+    """``DDPSolver._solve`` with iLQR: ``(X, U, cost, the warm start's cost, iterations, mu,
+    K, k)`` (``mu``, ``K``, ``k``: the last backward pass's); the warm start's open-loop rollout
+    into ``X_init``. ``ValueError`` for inputs of other sizes than the module's (its stage
+    functions read and write fixed offsets)."""
     steps, m = U_init.shape
     n = x0.shape[0]
+    if n != N_STATE or m != N_CONTROL or S.shape[1] != N_REFERENCE:
+        raise ValueError("solve inputs of another width than generated for")
     if P.shape[0] != PARAMETERS or C.shape[0] != CONSTANTS or S.shape[0] != steps + 1:
         raise ValueError("solve inputs of another length than generated for")
-    if X_init.shape[0] != steps + 1 or settings.shape[0] != len(SETTINGS):
+    if X_init.shape != (steps + 1, n) or settings.shape[0] != len(SETTINGS):
         raise ValueError("solve inputs of another length than generated for")
     max_iterations = int(settings[0])
     c = settings[7]
@@ -342,7 +350,7 @@ def solve(  # noqa: PLR0913
             break
         dv1, dv2, ok, mu, dmu = regularised(X, U, S, P, C, mu, dmu, K, k, settings)
         done = stops(ok, dv1, dv2, cost, settings)
-    return X, U, cost, initial, iterations
+    return X, U, cost, initial, iterations, mu, K, k
 
 
 def mpc_step(  # noqa: PLR0913
@@ -359,6 +367,8 @@ def mpc_step(  # noqa: PLR0913
     plan. ``packed``: ``X``, ``U``, the cost, the warm start's cost and the acceptance flag."""
     H, m = warm.shape
     n = plan_states.shape[1]
+    if n != N_STATE or n != N_REFERENCE or m != N_CONTROL or plan_controls.shape[1] != m:
+        raise ValueError("MPC inputs of another width than generated for")
     if host.shape[0] != 2 + n + PARAMETERS or C.shape[0] != CONSTANTS:
         raise ValueError("MPC inputs or problem constants of another length than generated for")
     if plan_states.shape[0] < H + 1 or plan_controls.shape[0] < H + 1 or H < 1:
@@ -375,7 +385,7 @@ def mpc_step(  # noqa: PLR0913
     x0 = host[2 : 2 + n].copy()
     P = host[2 + n :].copy()
     X_init = np.empty((H + 1, n))
-    X, U, cost, initial, _ = solve(x0, U0, S, P, C, settings, alphas, X_init)
+    X, U, cost, initial, _, _, _, _ = solve(x0, U0, S, P, C, settings, alphas, X_init)
     accepted = (
         np.isfinite(cost)
         and np.isfinite(X).all()
@@ -399,7 +409,7 @@ def mpc_step(  # noqa: PLR0913
 
 _DRIVER = (terminal_at, trajectory, backward, increase, decrease, regularised, stops, solve)
 #: numba's options for every generated function: NumPy's error model (a division by zero gives
-#: inf or NaN, as in JAX); the GIL released; fused multiply-adds allowed (``contract``: 7 to 10 %
+#: inf or NaN, as in JAX); the GIL released; fused multiply-adds allowed (``contract``: 7 to 9 %
 #: off the 3-D step, interleaved; no other fast-math flag, so NaN and inf keep their meaning)
 OPTIONS = 'cache=True, error_model="numpy", nogil=True, fastmath={"contract"}'
 
@@ -471,6 +481,9 @@ def module_source(problem: Any, params: Any, options: str = OPTIONS) -> str:
         "import numba",
         "import numpy as np",
         "",
+        f"N_STATE = {problem.n_state + (problem.n_control if problem.rate_input else 0)}",
+        f"N_CONTROL = {problem.n_control}",
+        f"N_REFERENCE = {problem.n_state}",
         f"PARAMETERS = {parameters}",
         f"CONSTANTS = {problem.constants().size}",
         f"SETTINGS = {SETTINGS!r}",
@@ -496,8 +509,8 @@ def generated_module(problem: Any, params: Any) -> ModuleType:
     their first call (or load from numba's cache); they refuse inputs of other lengths."""
     if problem.rate_input:
         # the plan's problem: written out and solved as well (the driver reads the DDP state's
-        # and the reference's sizes apart), but untested here, and no faster over the plan's
-        # 2000 steps when tried (docs/performance.md §18)
+        # and the reference's sizes apart), but untested here, and only 6 to 8 % faster over
+        # the plan's 2000 steps when tried (docs/performance.md §18)
         raise ValueError("the numba DDP runs the MPC's problem (state s, input u), not rate input")
     import jax  # noqa: PLC0415
 
@@ -525,8 +538,7 @@ def _write_and_load(problem: Any, params: Any, options: str = OPTIONS) -> Module
     try:
         path = _written(directory, name, source)
     except OSError as error:
-        user = os.getuid() if hasattr(os, "getuid") else "user"
-        fallback = Path(tempfile.gettempdir()) / f"wip-gym-numba-{user}"
+        fallback = _private_temporary_directory()
         warnings.warn(
             f"cannot write the MPC's generated module under {directory} ({error}); using "
             f"{fallback} (set {CACHE_ENV} to a writable directory to keep it)",
@@ -537,16 +549,38 @@ def _write_and_load(problem: Any, params: Any, options: str = OPTIONS) -> Module
     return _load(path, f"wip_gym_generated_{name}")
 
 
+def _private_temporary_directory() -> Path:
+    """``<tmp>/wip-gym-numba-<uid>``, made private to this user; if it exists and is another
+    user's or writable by others (a file planted there would be executed), a fresh directory
+    of ``tempfile.mkdtemp`` instead (whose cache does not outlive the process's use of it)."""
+    uid = os.getuid() if hasattr(os, "getuid") else None
+    directory = Path(tempfile.gettempdir()) / f"wip-gym-numba-{uid if uid is not None else 'user'}"
+    try:
+        directory.mkdir(mode=0o700, exist_ok=True)
+        status = directory.lstat()
+        private = (uid is None or status.st_uid == uid) and not status.st_mode & 0o022
+        if private and not directory.is_symlink():
+            return directory
+    except OSError:
+        pass
+    return Path(tempfile.mkdtemp(prefix="wip-gym-numba-"))
+
+
 def _written(directory: Path, name: str, source: str) -> Path:
     """``directory/name.py`` holding ``source``: written whole to a temporary file, then put
     in place only if no file is there (a process never reads half a file, and a file in place
-    is never rewritten: numba's cache is keyed on its time stamp), even when processes race."""
+    is never rewritten: numba's cache is keyed on its time stamp), even when processes race;
+    readable by all (mode ``0o644``). On a file system
+    without hard links, a rename put in place only if no file is there yet: two processes
+    racing there may both rename, which changes nothing but the time stamp (one more
+    compilation)."""
     path = directory / f"{name}.py"
     if path.exists():
         return path
     directory.mkdir(parents=True, exist_ok=True)
     handle, temporary = tempfile.mkstemp(dir=directory, prefix=f".{name}.", suffix=".tmp")
     try:
+        os.fchmod(handle, 0o644)  # mkstemp makes it 0o600: others sharing the cache read it
         with os.fdopen(handle, "w") as file:
             file.write(source)
         try:
@@ -568,7 +602,11 @@ def _load(path: Path, name: str) -> ModuleType:
         raise ImportError(f"cannot load the generated module {path}")
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
-    spec.loader.exec_module(module)
+    try:
+        spec.loader.exec_module(module)
+    except BaseException:
+        del sys.modules[name]
+        raise
     return module
 
 
