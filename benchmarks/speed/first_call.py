@@ -28,8 +28,9 @@ def main() -> None:
     start = time.perf_counter()
     plan = plan_to_goal(state, params, np.asarray(GOALS["planar"]), planar=True)
     plan_s = time.perf_counter() - start
-    mpc = ModelPredictiveController(plan)
     start = time.perf_counter()
+    # its construction included: the numba backend traces and loads (or writes) its module
+    mpc = ModelPredictiveController(plan)
     mpc.step(0, plan.states[0], params)
     mpc_s = time.perf_counter() - start
     print(f"first plan {plan_s:.2f} s, first MPC step {mpc_s:.2f} s")
