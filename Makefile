@@ -46,5 +46,5 @@ clean:
 clean-caches: $(STAMP)
 	find wip_gym controllers benchmarks -name '*.nbi' -delete -o -name '*.nbc' -delete
 	cd $${WIP_GYM_NUMBA_CACHE:-$$HOME/.cache/wip-gym/numba} 2>/dev/null && \
-		rm -rf wipm_mpc_*.py __pycache__ || true  # the MPC's generated modules (numba_ddp)
+		rm -rf wipm_mpc_*.py .wipm_mpc_*.tmp __pycache__ || true  # the MPC's generated modules
 	$(PY) -m benchmarks.warm_caches
