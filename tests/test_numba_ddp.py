@@ -142,14 +142,25 @@ def test_other_weights_and_bounds_run_through_the_same_machine_code(
     module, step = mpc.compiled.module, mpc.compiled  # type: ignore[union-attr]
     warm = np.zeros((mpc.horizon, 1))
     plan_states, plan_controls = mpc._plan_states, mpc._plan_controls
-    for states, controls, constants, settings in (
-        (np.zeros((plan_states.shape[0], 8)), plan_controls, step.constants, step.settings),
-        (plan_states, np.zeros((plan_controls.shape[0], 2)), step.constants, step.settings),
-        (plan_states, plan_controls, step.constants[:-1], step.settings),
-        (plan_states, plan_controls, step.constants, step.settings[:-1]),
+    wide_host = pack_inputs(60, True, np.zeros(8), params)  # a host as long as 8 states need
+    for what, h, states, controls, constants, settings in (
+        ("width", wide_host, np.zeros((plan_states.shape[0], 8)), plan_controls, None, None),
+        ("width", host, plan_states, np.zeros((plan_controls.shape[0], 2)), None, None),
+        ("length", host, plan_states, plan_controls, step.constants[:-1], None),
+        ("length", host, plan_states, plan_controls, None, step.settings[:-1]),
     ):
-        with pytest.raises(ValueError, match="another"):
-            module.mpc_step(host, warm, states, controls, constants, settings, step.alphas)
+        constants = step.constants if constants is None else constants
+        settings = step.settings if settings is None else settings
+        with pytest.raises(ValueError, match=f"another {what}"):
+            module.mpc_step(h, warm, states, controls, constants, settings, step.alphas)
+    # solve, called directly, checks the widths too (its stage code reads fixed offsets)
+    H = mpc.horizon
+    P, C = host[6:], step.constants
+    U, S = np.zeros((H, 1)), np.zeros((H + 1, 4))
+    for x0, S_ in ((np.zeros(3), S), (np.zeros(4), np.zeros((H + 1, 3)))):
+        X_init = np.empty((H + 1, x0.size))
+        with pytest.raises(ValueError, match="another width"):
+            module.solve(x0, U, S_, P, C, step.settings, step.alphas, X_init)
 
 
 #: (name, problem, MPCConfig changes, DDPConfig changes) of the schedule test
@@ -221,6 +232,7 @@ def test_the_regularisation_schedule_and_the_stopping_test_follow_the_jax_solver
         assert mu_last == pytest.approx(float(mu[-1]), rel=1e-12), what
         for ours_gain, jax_gain in ((K, ours.K), (k, ours.k)):
             reference = np.asarray(jax_gain)
+            assert np.isfinite(reference).all(), what
             scale = max(float(np.abs(reference).max()), 1.0)
             np.testing.assert_allclose(
                 ours_gain, reference, rtol=0, atol=1e-8 * scale, err_msg=what
@@ -331,3 +343,25 @@ def test_an_unwritable_cache_directory_falls_back_to_a_temporary_one(
     again = numba_ddp._written(path.parent, path.stem, "another source")
     assert again == path and path.stat().st_mtime_ns == stamp
     assert not list(path.parent.glob(".*.tmp"))  # no temporary file left behind
+
+
+def test_the_fallback_directory_is_refused_when_others_can_write_to_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The fallback directory ``<tmp>/wip-gym-numba-<uid>`` is used when it is this user's and
+    private; writable by others, or a link, it is not (a planted module would be executed), and
+    a fresh directory is made instead."""
+    import os
+    import tempfile
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    first = numba_ddp._private_temporary_directory()
+    assert first.parent == tmp_path and first.stat().st_mode & 0o077 == 0
+    assert numba_ddp._private_temporary_directory() == first  # reused
+    os.chmod(first, 0o777)
+    shared = numba_ddp._private_temporary_directory()
+    assert shared != first and shared.parent == tmp_path and shared.stat().st_mode & 0o077 == 0
+    first.rmdir()
+    (tmp_path / "elsewhere").mkdir(mode=0o700)
+    first.symlink_to(tmp_path / "elsewhere")
+    assert numba_ddp._private_temporary_directory() not in (first, tmp_path / "elsewhere")

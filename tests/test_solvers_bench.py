@@ -192,8 +192,9 @@ def test_first_call_script_runs(capsys: pytest.CaptureFixture[str]) -> None:
     """``python -m benchmarks.speed.first_call`` plans, steps the MPC and prints both times."""
     from benchmarks.speed.first_call import main
 
-    main()
-    assert capsys.readouterr().out.startswith("first plan ")
+    main([])
+    out = capsys.readouterr().out
+    assert out.startswith("first plan ") and out.rstrip().endswith("(planar)")
 
 
 @pytest.mark.parametrize("planar", [True, False])

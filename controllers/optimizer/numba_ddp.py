@@ -37,6 +37,7 @@ active and not, through failed line searches and raised mu, and through a reject
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import importlib.util
 import inspect
@@ -550,9 +551,10 @@ def _write_and_load(problem: Any, params: Any, options: str = OPTIONS) -> Module
 
 
 def _private_temporary_directory() -> Path:
-    """``<tmp>/wip-gym-numba-<uid>``, made private to this user; if it exists and is another
-    user's or writable by others (a file planted there would be executed), a fresh directory
-    of ``tempfile.mkdtemp`` instead (whose cache does not outlive the process's use of it)."""
+    """``<tmp>/wip-gym-numba-<uid>``, made by this user with mode ``0o700``; if it exists as
+    another user's, a link, or writable by others than its owner (a file planted there would
+    be executed), a fresh directory of ``tempfile.mkdtemp`` instead (left behind, not reused:
+    each such process compiles its module again)."""
     uid = os.getuid() if hasattr(os, "getuid") else None
     directory = Path(tempfile.gettempdir()) / f"wip-gym-numba-{uid if uid is not None else 'user'}"
     try:
@@ -580,8 +582,9 @@ def _written(directory: Path, name: str, source: str) -> Path:
     directory.mkdir(parents=True, exist_ok=True)
     handle, temporary = tempfile.mkstemp(dir=directory, prefix=f".{name}.", suffix=".tmp")
     try:
-        os.fchmod(handle, 0o644)  # mkstemp makes it 0o600: others sharing the cache read it
         with os.fdopen(handle, "w") as file:
+            with contextlib.suppress(OSError, AttributeError):  # a convenience only
+                os.fchmod(file.fileno(), 0o644)  # mkstemp makes it 0o600: others may share it
             file.write(source)
         try:
             os.link(temporary, path)
@@ -605,7 +608,7 @@ def _load(path: Path, name: str) -> ModuleType:
     try:
         spec.loader.exec_module(module)
     except BaseException:
-        del sys.modules[name]
+        sys.modules.pop(name, None)
         raise
     return module
 
