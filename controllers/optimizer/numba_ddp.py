@@ -3,7 +3,7 @@ MPC's settings (iLQR, no gradient norm), every derivative still written by JAX's
 
 Why: an MPC step is two DDP iterations over 100 steps of an 8-state model. In XLA:CPU the
 small scans' per-step overheads, not the arithmetic, set its time (docs/performance.md §15 to
-§17); the same solve as straight-line scalar code runs 1.3 to 1.9 times
+§17); the same solve as straight-line scalar code runs 1.3 to 2.5 times
 as fast (docs/performance.md §18).
 
 How: :func:`generated_module` traces three per-step functions of a :class:`WIPMProblem` to
