@@ -4,7 +4,7 @@
 
 The compiled parts of the closed loop are cached on disk after their first use: numba's (the
 robot model, the env step, the low level: about a minute to compile on 2 cores, milliseconds to
-load; the MPC's generated DDP, ``controllers.optimizer.numba_ddp``: about 15 s planar and 25 s
+load; the MPC's generated DDP, ``controllers.optimizer.numba_ddp``: about 20 s planar and 35 s
 3-D) and JAX's (the DDP plan, ``controllers.optimizer.jax_setup``). This runs a few
 control steps of ``unified`` on each env (default: PlanarTray-v0 and KrangTray-v0, the planar and
 3-D problems) and prints the time each took. ``make install`` runs it.
