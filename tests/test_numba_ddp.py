@@ -365,3 +365,32 @@ def test_the_fallback_directory_is_refused_when_others_can_write_to_it(
     (tmp_path / "elsewhere").mkdir(mode=0o700)
     first.symlink_to(tmp_path / "elsewhere")
     assert numba_ddp._private_temporary_directory() not in (first, tmp_path / "elsewhere")
+
+
+def test_a_module_file_is_put_in_place_once_whatever_the_file_system(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``_written``: a file another process put in place first is kept (its link fails with
+    ``FileExistsError``); on a file system without hard links the file is renamed into place;
+    either way no temporary file is left and the file is readable by all."""
+    import os
+
+    source = "x = 1\n"
+    real_link = os.link
+
+    def racing_link(src: str, dst: str) -> None:  # another process wins the race
+        Path(dst).write_text("first\n")
+        real_link(src, dst)  # raises FileExistsError
+
+    monkeypatch.setattr(os, "link", racing_link)
+    raced = numba_ddp._written(tmp_path / "race", "module", source)
+    assert raced.read_text() == "first\n"
+
+    def no_links(src: str, dst: str) -> None:
+        raise OSError("hard links not supported")
+
+    monkeypatch.setattr(os, "link", no_links)
+    renamed = numba_ddp._written(tmp_path / "nolink", "module", source)
+    assert renamed.read_text() == source and renamed.stat().st_mode & 0o777 == 0o644
+    for directory in (tmp_path / "race", tmp_path / "nolink"):
+        assert not list(directory.glob(".*.tmp"))
