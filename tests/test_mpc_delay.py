@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import dataclasses
 import pickle
-from concurrent.futures import Future
 from typing import Any
 
 import gymnasium as gym
@@ -14,8 +13,9 @@ import pytest
 
 import wip_gym  # noqa: F401
 from controllers.hierarchical import HierarchicalConfig, HierarchicalController
-from controllers.high_level.mpc import ModelPredictiveController, MPCStep
+from controllers.high_level.mpc import ModelPredictiveController, MPCStep, params_from_vector
 from controllers.high_level.receding_horizon import HighLevel, HighLevelConfig
+from controllers.high_level.solve_thread import SolveThread
 from controllers.low_level.compiled_step import rows_and_kernel
 from controllers.low_level.kernel import kernel_step
 from controllers.low_level.task_stack import stack_rows
@@ -35,24 +35,33 @@ def _run(delay: int) -> tuple[np.ndarray, list[Any], list[Any], HierarchicalCont
     policy.reset(obs, info)
     mpc = policy.high_level.mpc
     calls: list[Any] = []
-    inputs, solve = mpc.inputs, mpc.solve
+    inputs_of, run, take = mpc.inputs_of, mpc.run, mpc.take
+    n = len(policy.plan.states[0])
 
-    # a solve is its inputs (on the control thread) and then the solve of those inputs (in the
-    # MPC's thread when delayed), one at a time
-    def recorded_inputs(index: int, state: np.ndarray, params: Any) -> np.ndarray:
+    # a solve is its inputs (on the control thread), the compiled step on those inputs (in the
+    # MPC's thread when delayed) and its outputs taken (on the control thread), one at a time
+    def recorded_inputs(index: int, wipm_inputs: np.ndarray) -> np.ndarray:
         assert all(call[3] is not None for call in calls), "inputs made before the last solve"
-        host = inputs(index, state, params)
-        calls.append([index, np.array(state), params, None, host])
+        host = inputs_of(index, wipm_inputs)
+        params = params_from_vector(wipm_inputs[n:].copy())
+        calls.append([index, wipm_inputs[:n].copy(), params, None, host, None])
         return host
 
-    def recorded_solve(host: np.ndarray) -> MPCStep:
-        solution = solve(host)
+    def recorded_run(host: np.ndarray) -> Any:
+        outputs = run(host)
         (call,) = [call for call in calls if call[4] is host]
+        call[5] = outputs
+        return outputs
+
+    def recorded_take(outputs: Any) -> MPCStep:
+        solution = take(outputs)
+        (call,) = [call for call in calls if call[5] is outputs]
         call[3] = solution
         return solution
 
-    mpc.inputs = recorded_inputs  # type: ignore[method-assign]
-    mpc.solve = recorded_solve  # type: ignore[method-assign]
+    mpc.inputs_of = recorded_inputs  # type: ignore[method-assign]
+    mpc.run = recorded_run  # type: ignore[method-assign]
+    mpc.take = recorded_take  # type: ignore[method-assign]
     actions, in_use = [], []
     for _ in range(STEPS):
         action = policy(obs)
@@ -74,7 +83,7 @@ def test_delayed_solutions_are_the_solves_of_d_steps_before() -> None:
         assert solution is calls[tick][3], k
     # the same solves made synchronously in the same order give the same solutions
     replay = ModelPredictiveController(policy.plan, policy.config.high_level.mpc)
-    for index, state, params, solution, _ in calls:
+    for index, state, params, solution, *_ in calls:
         again = replay.step(index, state, params)
         np.testing.assert_array_equal(again.predicted_states, solution.predicted_states)
         np.testing.assert_array_equal(again.predicted_controls, solution.predicted_controls)
@@ -112,14 +121,19 @@ def test_delay_is_validated_and_a_pending_solve_survives_pickling() -> None:
     with pytest.raises(ValueError, match="at least 2 steps"):
         HighLevel(HighLevelConfig(mpc=short, mpc_delay_steps=3), 1e-3)
     high_level = HighLevel(HighLevelConfig(mpc_delay_steps=3), 1e-3)
-    solution = MPCStep(np.zeros(1), np.ones((3, 2)), np.zeros((2, 1)), 0.0, True)
-    future: Future[MPCStep] = Future()
-    future.set_result(solution)
-    high_level._pending = (future, 20)
+    outputs = (np.arange(5.0), np.ones((2, 1)))
+    thread = SolveThread("test-mpc")
+    thread.submit(lambda: outputs)
+    high_level._thread, high_level._pending = thread, (thread, 20)
     copy = pickle.loads(pickle.dumps(high_level))
-    assert copy._executor is None and copy.config.mpc_delay_steps == 3
+    assert copy._thread is None and copy.config.mpc_delay_steps == 3
     assert copy._pending is not None and copy._pending[1] == 20
-    np.testing.assert_array_equal(copy._pending[0].result().predicted_states, np.ones((3, 2)))
+    (kept,) = copy._pending[0].result()[:1]
+    np.testing.assert_array_equal(kept, np.arange(5.0))
+    # the original keeps the outputs too, to take them at the same step
+    assert high_level._pending is not None and high_level._pending[0].result() is outputs
+    assert not thread.running
+    thread.close()
 
 
 def test_the_control_loops_compiled_calls_release_the_gil() -> None:

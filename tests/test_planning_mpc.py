@@ -201,6 +201,34 @@ def test_the_mpc_refuses_a_state_of_another_length_than_its_plan() -> None:
         mpc.step(0, np.zeros(8), params)
 
 
+@pytest.mark.parametrize("env_id", ["wip_gym/Planar-v0", "wip_gym/Krang-v0"])
+def test_inputs_of_the_robots_vector_are_the_packed_inputs(env_id: str) -> None:
+    """``inputs_of(index, robot.wipm_inputs())`` (the high level's path) is ``inputs(index,
+    state, params_from_robot(robot))`` to the bit, the index clamped alike and the first flag
+    set until a solve; a vector of another length or dtype, or a state not finite, is refused."""
+    from controllers.simplified.wipm import params_from_robot
+
+    env, robot, params, state = robot_state(env_id)
+    plan = plan_to_goal(state, params, np.array([0.5, 0.0]), planar=robot.layout.planar)
+    mpc = ModelPredictiveController(plan)
+    vector, reference = robot.wipm_inputs(), params_from_robot(robot)
+    for solved in (False, True):
+        for index in (-3, 0, 7, len(plan.states) + 50):
+            host = mpc.inputs_of(index, vector)
+            np.testing.assert_array_equal(host, mpc.inputs(index, state, reference))
+            assert host[1] == (not solved)
+        mpc.solve(host)
+    n = len(state)
+    for bad in (vector[:-1], vector.astype(np.float32), list(vector), np.append(vector, 0.0)):
+        with pytest.raises(ValueError, match="float64 vector of shape"):
+            mpc.inputs_of(0, bad)  # type: ignore[arg-type]
+    broken = vector.copy()
+    broken[n - 1] = np.nan
+    with pytest.raises(ValueError, match="not finite"):
+        mpc.inputs_of(0, broken)
+    env.close()
+
+
 def test_decoupled_mpc_packs_the_parameters_of_each_mpc_step() -> None:
     """``decoupled-mpc`` packs ``lambda(q)`` once per MPC step: at every control step its packed
     vector is that of the high level's current parameters (new at every MPC step)."""

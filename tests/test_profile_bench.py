@@ -474,7 +474,7 @@ def test_mpc_phase_runs_a_delayed_episode() -> None:
     assert all(np.isfinite(row["mean"]) and row["mean"] > 0 for row in result["phases"])
     assert result["solve_us"]["median"] > 0 and result["wait_us"]["median"] >= 0
     # the patches that time the solves and the waits are undone
-    assert mpc_phase.mpc_module.ModelPredictiveController.solve.__name__ == "solve"
+    assert mpc_phase.mpc_module.ModelPredictiveController.run.__name__ == "run"
     assert mpc_phase.HighLevel._wait_pending.__name__ == "_wait_pending"
     with pytest.raises(ValueError, match="delay must be >= 1"):
         mpc_phase.run("wip_gym/PlanarTray-v0", delay=0, duration=0.3, seed=0)

@@ -24,6 +24,7 @@ from dynamics_reference import (
     sample_contact_states,
 )
 
+from controllers.high_level.mpc import param_values
 from controllers.simplified import wipm
 from wip_gym.assets import mjcf_path
 from wip_gym.minimal_kernels import robot_update_at, wipm_values
@@ -451,6 +452,28 @@ def test_params_from_robot_equals_params_from_lambda(name: str) -> None:
         if k % 3 == 0:
             robot.update(qpos, qvel, dynamics=False)
             _assert_same_params(wipm.params_from_robot(robot), reference)
+
+
+@pytest.mark.parametrize("name", ["wip", "wip-skewed", "planar7", "krang"])
+def test_wipm_inputs_are_the_state_and_the_packed_params(name: str) -> None:
+    """``RobotModel.wipm_inputs``, the MPC's one call per step, is ``wipm_state()`` then
+    ``param_values(params_from_robot(robot))``, to the bit, on random states (turning, with and
+    without the update's dynamics) and after the model changed; a new vector each call."""
+    robot = _robot(name)
+    rng = np.random.default_rng(35)
+    n = 4 if robot.layout.planar else 8
+    for k in range(8):
+        qpos, qvel = robot.full_state(*random_minimal_state(robot, rng))
+        robot.update(qpos, qvel, dynamics=k % 2 == 0)
+        if k == 5 and name != "wip-skewed":
+            before = robot.wipm_inputs()
+            _change_model(robot.model, robot, rng)
+            assert not np.array_equal(robot.wipm_inputs()[n:], before[n:])
+        vector = robot.wipm_inputs()
+        expected = [*robot.wipm_state(), *param_values(wipm.params_from_robot(robot))]
+        assert vector.dtype == np.float64 and vector.shape == (n + 19,)
+        np.testing.assert_array_equal(vector, np.array(expected))
+        assert robot.wipm_inputs() is not vector
 
 
 def _change_model(model: mujoco.MjModel, robot: RobotModel, rng: np.random.Generator) -> None:

@@ -380,6 +380,49 @@ def wipm_values(
     return values, inertia_body
 
 
+WIPM_VECTOR_SIZES = (1, 1, 1, 9, 1, 1, 1, 1, 1, 1, 1)
+"""The entries of ``lambda(q)`` in :func:`wipm_inputs_into`'s vector, one per field of
+``controllers.simplified.wipm.WIPMParams`` in its order (``inertia_body`` row-major): the
+order in which the MPC packs its inputs (``controllers.high_level.mpc.param_values``)."""
+WIPM_VECTOR_LENGTH = sum(WIPM_VECTOR_SIZES)
+
+
+@njit(cache=True, nogil=True)
+def wipm_inputs_into(
+    out: np.ndarray,
+    planar: bool,
+    scalars: np.ndarray,
+    table: np.ndarray,
+    com: np.ndarray,
+    wheel_radius: float,
+    wheel_separation: float,
+) -> None:
+    """The WIPM state and ``lambda(q)`` of the last update in one vector ``out``: the state
+    (planar ``[theta, thetad, x, xd]``, 3-D ``[x, psi, theta, xd, psid, thetad, X0, Y0]``, from
+    the update's ``scalars``, :data:`UPDATE_SCALARS`), then :func:`wipm_values`' ``lambda(q)``
+    at the heading ``Rz(psi)`` of those scalars, in :data:`WIPM_VECTOR_SIZES`' order. What the
+    MPC reads at each of its steps, in one call (``RobotModel.wipm_inputs``)."""
+    c, s = scalars[2], scalars[3]
+    heading = np.zeros((3, 3))
+    heading[0, 0], heading[0, 1], heading[1, 0], heading[1, 1], heading[2, 2] = c, -s, s, c, 1.0
+    values, inertia_body = wipm_values(
+        table, heading, com, scalars[4], scalars[5], wheel_radius, wheel_separation
+    )
+    if planar:
+        out[0], out[1], out[2], out[3] = scalars[5], scalars[6], scalars[7], scalars[8]
+        n = 4
+    else:
+        out[0], out[1], out[2], out[3] = scalars[7], scalars[0], scalars[5], scalars[8]
+        out[4], out[5], out[6], out[7] = scalars[1], scalars[6], scalars[9], scalars[10]
+        n = 8
+    out[n], out[n + 1], out[n + 2] = values[0], values[1], values[2]
+    for a in range(3):
+        for b in range(3):
+            out[n + 3 + 3 * a + b] = inertia_body[a, b]
+    for k in range(3, 10):
+        out[n + 9 + k] = values[k]
+
+
 @njit(cache=True)
 def robot_update(
     model: int,

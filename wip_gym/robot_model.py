@@ -736,6 +736,28 @@ class RobotModel:
             lay.wheel_separation,
         )
 
+    def wipm_inputs(self) -> Array:
+        """:meth:`wipm_state` and ``lambda(q)`` (:meth:`wipm_values`) as one new vector, in one
+        compiled call (``minimal_kernels.wipm_inputs_into``): the state, then ``lambda(q)``
+        with one entry per field of ``controllers.simplified.wipm.WIPMParams`` in its order
+        (``inertia_body`` row-major; ``minimal_kernels.WIPM_VECTOR_SIZES``). The same floats as
+        those two methods (tested to the bit); what the MPC reads at each of its steps
+        (``ModelPredictiveController.inputs_of``). Needs an update."""
+        self._require()
+        lay = self.layout
+        n = 4 if lay.planar else 8
+        out = np.empty(n + kernels.WIPM_VECTOR_LENGTH)
+        kernels.wipm_inputs_into(
+            out,
+            lay.planar,
+            self._scalars,
+            self._wipm_table.rows,
+            self._com_buffer,
+            lay.wheel_radius,
+            lay.wheel_separation,
+        )
+        return out
+
     # ------------------------------------------------------- full state
     def full_state(
         self, q: ArrayLike, nu: ArrayLike, axle_xy: ArrayLike = (0.0, 0.0)

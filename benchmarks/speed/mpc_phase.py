@@ -7,9 +7,10 @@ One episode of ``unified`` with the MPC beside the loop (``mpc_delay_steps = --d
 control steps grouped by ``step % steps_per_mpc``: phase 0 starts the solve in the background
 thread, phase ``d`` takes its solution (and waits if the solve is not done). Each phase's mean,
 median, p90 and p99 (us) and, for the episode, the solve's own time in its thread (median
-and p90: from the call of ``ModelPredictiveController.solve`` in the MPC's thread to its
-return) and the control thread's wait for it at phase ``d`` (``HighLevel._wait_pending``, which
-also takes the solution into use: its rows as Python floats). The first 100 steps (the
+and p90: from the call of ``ModelPredictiveController.run``, the compiled step, in the MPC's
+thread to its return) and the control thread's wait for it at phase ``d`` (``HighLevel._wait_pending``, which
+also takes the solution into use: ``ModelPredictiveController.take``, its rows as Python
+floats). The first 100 steps (the
 start) are left out of the phases. Times in microseconds of the machine it runs on: compare runs
 of one process, or runs alternated with the same command (docs/performance.md §13).
 """
@@ -28,12 +29,10 @@ import numpy as np
 from benchmarks.overrides import resolve_run
 from benchmarks.rollout import rollout
 from controllers.high_level import mpc as mpc_module
-from controllers.high_level.receding_horizon import HighLevel
+from controllers.high_level.receding_horizon import MPC_THREAD, HighLevel
 from controllers.optimizer import jax_setup
 
 SKIPPED_STEPS = 100
-#: the name prefix of the MPC's thread (``HighLevel._solve_later``)
-MPC_THREAD = "wip-gym-mpc"
 
 
 def phase_table(control_times_s: np.ndarray, steps_per_mpc: int) -> list[dict[str, float]]:
@@ -78,12 +77,12 @@ def run(env_id: str, delay: int, duration: float, seed: int) -> dict[str, Any]:
     )
     solves: list[float] = []
     waits: list[float] = []
-    solve, wait = mpc_module.ModelPredictiveController.solve, HighLevel._wait_pending
+    run_step, wait = mpc_module.ModelPredictiveController.run, HighLevel._wait_pending
 
-    def timed_solve(self: Any, *args: Any, **kwargs: Any) -> Any:
+    def timed_run(self: Any, *args: Any, **kwargs: Any) -> Any:
         start = time.perf_counter()
-        result = solve(self, *args, **kwargs)
-        if threading.current_thread().name.startswith(MPC_THREAD):  # beside the loop
+        result = run_step(self, *args, **kwargs)
+        if threading.current_thread().name == MPC_THREAD:  # beside the loop
             solves.append(time.perf_counter() - start)
         return result
 
@@ -93,7 +92,7 @@ def run(env_id: str, delay: int, duration: float, seed: int) -> dict[str, Any]:
         waits.append(time.perf_counter() - start)
 
     with (
-        mock.patch.object(mpc_module.ModelPredictiveController, "solve", timed_solve),
+        mock.patch.object(mpc_module.ModelPredictiveController, "run", timed_run),
         mock.patch.object(HighLevel, "_wait_pending", timed_wait),
     ):
         episode = rollout(

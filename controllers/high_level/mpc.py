@@ -31,6 +31,7 @@ from controllers.optimizer import numba_ddp
 from controllers.optimizer.ddp import DDPConfig, rollout
 from controllers.simplified.wipm import WIPMParams
 from controllers.simplified.wipm_problem import Weights, WIPMProblem, ddp_solver_for
+from wip_gym.minimal_kernels import WIPM_VECTOR_LENGTH, WIPM_VECTOR_SIZES
 
 
 @dataclass(frozen=True)
@@ -233,9 +234,9 @@ class _CompiledStep:
 #: the host's inputs of a packed MPC step before the state: the plan index and the first flag
 _HEAD = 2
 #: WIPMParams' leaves in one vector: its scalars, with ``inertia_body``'s 9 entries (row-major)
-#: in its place
-_PARAM_SIZES = (1, 1, 1, 9, 1, 1, 1, 1, 1, 1, 1)
-_N_PARAMS = sum(_PARAM_SIZES)
+#: in its place (the layout ``RobotModel.wipm_inputs`` writes)
+_PARAM_SIZES = WIPM_VECTOR_SIZES
+_N_PARAMS = WIPM_VECTOR_LENGTH
 
 
 def param_values(params: WIPMParams) -> list[float]:
@@ -400,9 +401,46 @@ class ModelPredictiveController:
         index = min(max(int(index), 0), self._last_index)
         return pack_inputs(index, self._first, state, params)
 
+    def inputs_of(self, index: int, wipm_inputs: np.ndarray) -> np.ndarray:
+        """:meth:`inputs` from a vector of the WIPM state and ``lambda(q)``
+        (``RobotModel.wipm_inputs``: the state, then :func:`param_values`' floats), without
+        the :class:`WIPMParams`: the same host vector to the bit. The state is checked as by
+        :meth:`inputs`; ``ValueError`` for a vector of another dtype or length."""
+        n = self._shapes[0][1]
+        if (
+            type(wipm_inputs) is not np.ndarray
+            or wipm_inputs.dtype != np.float64
+            or wipm_inputs.shape != (n + _N_PARAMS,)
+        ):
+            raise ValueError(
+                f"MPC inputs must be a float64 vector of shape ({n + _N_PARAMS},) (the state, "
+                f"then lambda(q)), got {getattr(wipm_inputs, 'dtype', type(wipm_inputs))} of "
+                f"shape {np.shape(wipm_inputs)}"
+            )
+        if not np.isfinite(wipm_inputs[:n]).all():
+            raise ValueError(f"MPC state is not finite: {wipm_inputs[:n]}")
+        host = np.empty(_HEAD + n + _N_PARAMS)
+        host[0] = min(max(int(index), 0), self._last_index)
+        host[1] = self._first
+        host[_HEAD:] = wipm_inputs
+        return host
+
     def solve(self, host: np.ndarray) -> MPCStep:
-        """One MPC step from :meth:`inputs`' vector (made after the previous solve)."""
-        packed, self._warm = self.compiled(host, self._warm, self._plan_states, self._plan_controls)
+        """One MPC step from :meth:`inputs`' vector (made after the previous solve):
+        :meth:`take` of :meth:`run`."""
+        return self.take(self.run(host))
+
+    def run(self, host: np.ndarray) -> tuple[Any, Any]:
+        """The compiled step on :meth:`inputs`' vector from the current warm start: its packed
+        result and the next warm start, as the backend returns them. Changes nothing: the
+        solve beside the control loop runs this in its thread, and the control thread hands
+        the result to :meth:`take` (the Python of a step stays off the MPC's thread)."""
+        return self.compiled(host, self._warm, self._plan_states, self._plan_controls)  # type: ignore[no-any-return]
+
+    def take(self, outputs: tuple[Any, Any]) -> MPCStep:
+        """The :class:`MPCStep` of :meth:`run`'s ``outputs``, which become the current warm
+        start (each ``run``'s outputs taken once, in order)."""
+        packed, self._warm = outputs
         self._first = False
         self.solves += 1
         out = np.asarray(packed)

@@ -5,30 +5,42 @@ Between MPC steps the low level tracks the *current MPC solution's* predicted ``
 ``thetad``, interpolated linearly inside the 10 ms, with the MPC's ``thdd`` as feed-forward;
 the offline plan is only the MPC's reference, so the low level never fights a re-plan.
 
+At every MPC step the robot's WIPM state and ``lambda(q)`` come from one compiled call
+(``RobotModel.wipm_inputs``), packed as the MPC's inputs (``ModelPredictiveController.inputs_of``).
+
 With ``mpc_delay_steps = d > 0`` the MPC runs as on a robot whose MPC computes beside its
 control loop: the solve from the state at step ``k`` (its inputs checked and packed at step
-``k`` on the control thread, ``ModelPredictiveController.inputs``) runs in a background thread
-(the compiled DDP releases the GIL; so do the control loop's compiled calls and ``mj_step``,
-where the thread takes it to start the solve and to take its result) and its solution is
-applied from step ``k + d`` on; until then the low level follows the previous solution further
-along its prediction. Step ``k + d`` waits for the solve if it is not done, so an episode is
-the same whatever the machine's speed (deterministic), and the control step's worst case no
-longer holds a whole MPC solve. ``d = 0`` (the default, the paper's timing) solves in the
+``k`` on the control thread) runs in a background thread
+(``controllers.high_level.solve_thread``: the thread runs the compiled step alone, which
+releases the GIL; so do the control loop's compiled calls and ``mj_step``, where the thread
+takes it to start the solve and to hand back its result), and its solution is taken
+(``ModelPredictiveController.take``, on the control thread) and applied from step ``k + d``
+on; until then the low level follows the previous solution further along its prediction.
+Step ``k + d`` waits for the solve if it is not done, so an episode is the same whatever the
+machine's speed (deterministic), and the control step's worst case no longer holds a whole MPC
+solve. ``d = 0`` (the default, the paper's timing) solves in the
 control step that uses it.
 """
 
 from __future__ import annotations
 
-from concurrent.futures import Future, ThreadPoolExecutor
+import contextlib
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
-from controllers.high_level.mpc import ModelPredictiveController, MPCConfig, MPCStep
+from controllers.high_level.mpc import (
+    ModelPredictiveController,
+    MPCConfig,
+    MPCStep,
+    params_from_vector,
+)
 from controllers.high_level.planning import Plan, PlanConfig, plan_to_goal
+from controllers.high_level.solve_thread import SolveThread
 from controllers.simplified.wipm import WIPMParams, params_from_robot
 from controllers.simplified.wipm_problem import wipm_state
+from wip_gym.minimal_kernels import WIPM_VECTOR_LENGTH
 from wip_gym.robot_model import RobotModel
 
 
@@ -45,6 +57,20 @@ class HighLevelConfig:
     plan: PlanConfig = field(default_factory=PlanConfig)
     mpc: MPCConfig = field(default_factory=MPCConfig)
     mpc_delay_steps: int = 0
+
+
+#: the name of the MPC's thread beside the loop
+MPC_THREAD = "wip-gym-mpc"
+
+
+class _Finished(NamedTuple):
+    """A solve's outputs already taken from its thread (a pickled pending solve): its
+    ``result()`` is them."""
+
+    outputs: Any
+
+    def result(self) -> Any:
+        return self.outputs
 
 
 class HighLevelSetpoint(NamedTuple):
@@ -89,8 +115,13 @@ class HighLevel:
             2 + (self.steps_per_mpc - 1 + config.mpc_delay_steps) // self.steps_per_mpc
         )
         self._last_rows: tuple[list[list[float]], list[list[float]]] = ([], [])
-        self._pending: tuple[Future[MPCStep], int] | None = None
-        self._executor: ThreadPoolExecutor | None = None
+        # a solve beside the loop not taken yet: (its source, the step it started from); the
+        # source's result() is the compiled step's outputs (the thread, or _Finished after a
+        # pickle)
+        self._pending: tuple[SolveThread | _Finished, int] | None = None
+        self._thread: SolveThread | None = None
+        self._params: WIPMParams | None = None
+        self._wipm_inputs: np.ndarray | None = None  # the last MPC step's, params made from it
         self._rejections = 0
         if config.mpc_delay_steps > 0 and config.mpc.steps < 2:
             raise ValueError(
@@ -101,39 +132,37 @@ class HighLevel:
     def _discard_pending(self) -> None:
         """Wait for a background solve and drop it (its episode is over)."""
         if self._pending is not None:
-            future, _ = self._pending
+            source, _ = self._pending
             self._pending = None
-            future.exception()  # waits; an error of a finished episode's solve is not raised
+            # waits; an error of a finished episode's solve is not raised
+            with contextlib.suppress(Exception):
+                source.result()
 
     def __getstate__(self) -> dict[str, object]:
         state = self.__dict__.copy()
-        state["_executor"] = None  # threads do not pickle; made again when needed
-        if self._pending is not None:  # its solution, kept to be used at the same step
-            future, start = self._pending
-            state["_pending"] = (future.result(), start)
+        state["_thread"] = None  # threads do not pickle; made again when needed
+        if self._pending is not None:  # its outputs, kept to be taken at the same step
+            source, start = self._pending
+            if not isinstance(source, _Finished):
+                self._pending = (_Finished(source.result()), start)
+            state["_pending"] = self._pending
         return state
 
-    def __setstate__(self, state: dict[str, object]) -> None:
-        self.__dict__.update(state)
-        if self._pending is not None:
-            solution, start = self._pending
-            done: Future[MPCStep] = Future()
-            done.set_result(solution)  # type: ignore[arg-type]
-            self._pending = (done, start)  # type: ignore[assignment]
-
-    def _solve_later(self, index: int, state: np.ndarray, params: WIPMParams) -> None:
-        if self._executor is None:
-            self._executor = ThreadPoolExecutor(1, thread_name_prefix="wip-gym-mpc")
+    def _solve_later(self, host: np.ndarray) -> None:
+        """Start the MPC step of the packed inputs ``host`` in the MPC's thread."""
+        if self._thread is None:
+            self._thread = SolveThread(name=MPC_THREAD)
         assert self.mpc is not None
-        host = self.mpc.inputs(index, state, params)  # checked and packed here, not in the thread
-        self._pending = (self._executor.submit(self.mpc.solve, host), self._step)
+        self._thread.submit(self.mpc.run, host)
+        self._pending = (self._thread, self._step)
 
     def _wait_pending(self) -> None:
         """Take the pending solve's solution (waiting for it) as the one in use."""
         if self._pending is not None:
-            future, start = self._pending
+            source, start = self._pending
             self._pending = None
-            self._use(future.result(), start)
+            assert self.mpc is not None
+            self._use(self.mpc.take(source.result()), start)
 
     def _use(self, solution: MPCStep, start: int) -> None:
         """``solution``, solved from step ``start``'s state, in use from now on (counted on the
@@ -150,18 +179,18 @@ class HighLevel:
         """Plan from the robot's current state to the goal, build the MPC and run (and so
         compile) its first step. ``robot`` must be updated with dynamics."""
         self._discard_pending()  # a solve still running from the last episode
-        self.params = params_from_robot(robot)
+        self._params, self._wipm_inputs = params_from_robot(robot), None
         state = wipm_state(robot)
         self.plan = plan_to_goal(
             state,
-            self.params,
+            self._params,
             goal_xy,
             planar=robot.layout.planar,
             cup_friction=cup_friction,
             config=self.config.plan,
         )
         # one solve now compiles the MPC (reset does the slow work); then start afresh
-        ModelPredictiveController(self.plan, self.config.mpc).step(0, state, self.params)
+        ModelPredictiveController(self.plan, self.config.mpc).step(0, state, self._params)
         self.mpc = ModelPredictiveController(self.plan, self.config.mpc)
         self._step = 0
         self._last = None
@@ -177,12 +206,13 @@ class HighLevel:
         index, phase = divmod(step, steps_per_mpc)
         delay = self.config.mpc_delay_steps
         if phase == 0 or self._last is None:
-            self.params = params_from_robot(robot)  # one compiled call (a few us)
-            state = wipm_state(robot)
+            # the state and lambda(q) in one compiled call, packed without a WIPMParams
+            self._wipm_inputs, self._params = robot.wipm_inputs(), None
+            host = self.mpc.inputs_of(index, self._wipm_inputs)
             if delay == 0 or self._last is None:
-                self._use(self.mpc.step(index, state, self.params), step)
+                self._use(self.mpc.solve(host), step)
             else:
-                self._solve_later(index, state, self.params)
+                self._solve_later(host)
         pending = self._pending
         if pending is not None and step >= pending[1] + delay:
             self._wait_pending()
@@ -216,6 +246,18 @@ class HighLevel:
         )
 
     @property
+    def params(self) -> WIPMParams:
+        """``lambda(q)`` of the latest MPC step started (at reset: the plan's), made from its
+        inputs at the first read after that step (the same floats as ``params_from_robot``).
+        ``RuntimeError`` before :meth:`reset`."""
+        if self._params is None:
+            if self._wipm_inputs is None:
+                raise RuntimeError("HighLevel.reset() first")
+            lam = self._wipm_inputs[len(self._wipm_inputs) - WIPM_VECTOR_LENGTH :]
+            self._params = params_from_vector(lam.copy())
+        return self._params
+
+    @property
     def last_solution(self) -> MPCStep:
         """The latest MPC solution (``RuntimeError`` before the first ``reference``)."""
         if self._last is None:
@@ -231,6 +273,6 @@ class HighLevel:
     def close(self) -> None:
         """Let a background solve end and stop the MPC's thread (made again if needed)."""
         self._wait_pending()
-        if self._executor is not None:
-            self._executor.shutdown()
-            self._executor = None
+        if self._thread is not None:
+            self._thread.close()
+            self._thread = None
