@@ -8,9 +8,9 @@ control steps grouped by ``step % steps_per_mpc``: phase 0 starts the solve in t
 thread, phase ``d`` takes its solution (and waits if the solve is not done). Each phase's mean,
 median, p90 and p99 (us) and, for the episode, the solve's own time in its thread (median
 and p90: from the call of ``ModelPredictiveController.run``, the compiled step, in the MPC's
-thread to its return) and the control thread's wait for it at phase ``d`` (``HighLevel._wait_pending``, which
-also takes the solution into use: ``ModelPredictiveController.take``, its rows as Python
-floats). The first 100 steps (the
+thread to its return) and the control thread's wait for it at phase ``d``
+(``HighLevel._wait_pending``, which also takes the solution into use:
+``ModelPredictiveController.take``, its rows as Python floats). The first 100 steps (the
 start) are left out of the phases. Times in microseconds of the machine it runs on: compare runs
 of one process, or runs alternated with the same command (docs/performance.md §13).
 """

@@ -38,8 +38,7 @@ from controllers.high_level.mpc import (
 )
 from controllers.high_level.planning import Plan, PlanConfig, plan_to_goal
 from controllers.high_level.solve_thread import SolveThread
-from controllers.simplified.wipm import WIPMParams, params_from_robot
-from controllers.simplified.wipm_problem import wipm_state
+from controllers.simplified.wipm import WIPMParams
 from wip_gym.minimal_kernels import WIPM_VECTOR_LENGTH
 from wip_gym.robot_model import RobotModel
 
@@ -179,18 +178,20 @@ class HighLevel:
         """Plan from the robot's current state to the goal, build the MPC and run (and so
         compile) its first step. ``robot`` must be updated with dynamics."""
         self._discard_pending()  # a solve still running from the last episode
-        self._params, self._wipm_inputs = params_from_robot(robot), None
-        state = wipm_state(robot)
+        # the MPC steps' path, so that its compiled calls are loaded here, not at a step
+        self._wipm_inputs, self._params = robot.wipm_inputs(), None
+        state = self._wipm_inputs[: len(self._wipm_inputs) - WIPM_VECTOR_LENGTH].copy()
         self.plan = plan_to_goal(
             state,
-            self._params,
+            self.params,
             goal_xy,
             planar=robot.layout.planar,
             cup_friction=cup_friction,
             config=self.config.plan,
         )
         # one solve now compiles the MPC (reset does the slow work); then start afresh
-        ModelPredictiveController(self.plan, self.config.mpc).step(0, state, self._params)
+        first = ModelPredictiveController(self.plan, self.config.mpc)
+        first.solve(first.inputs_of(0, self._wipm_inputs))
         self.mpc = ModelPredictiveController(self.plan, self.config.mpc)
         self._step = 0
         self._last = None
