@@ -165,6 +165,47 @@ def test_a_copied_task_qp_builds_its_own_table(copier: object) -> None:
         pickle.dumps(one._table)
 
 
+@pytest.mark.parametrize("copier", [copy.deepcopy, lambda qp: pickle.loads(pickle.dumps(qp))])
+def test_a_copied_task_qp_solves_by_proxqp(copier: object) -> None:
+    """A copy of a task QP whose ProxQP has run solves by ProxQP too (the solver object does not
+    survive a pickle: it pickles empty, and an update of it crashed the process): the same
+    torques as the original's, to ProxQP's tolerance; and it keeps trying the unconstrained
+    minimiser first where the original does."""
+    robot = RobotModel(_load("planar7"))
+    low, high = robot.model.actuator_ctrlrange.T.copy()
+    qp = TaskQP(robot, low, high, QPSettings(unconstrained_first=False))
+    rng = np.random.default_rng(26)
+    robot.update(*robot.full_state(*random_minimal_state(robot, rng)))
+    tasks = _realistic_tasks(robot)
+    first = qp.solve(robot, None, tasks)
+    assert first.solved and first.iterations > 0 and qp._qp is not None
+    clone_robot, clone, clone_tasks = copier((robot, qp, tasks))  # type: ignore[operator]
+    assert clone._qp is None
+    state = robot.full_state(*random_minimal_state(robot, rng))
+    robot.update(*state)
+    clone_robot.update(*state)
+    original, copied = qp.solve(robot, None, tasks), clone.solve(clone_robot, None, clone_tasks)
+    assert original.solved and copied.solved and copied.iterations > 0
+    scale = float(np.abs(original.actuators).max())
+    np.testing.assert_allclose(copied.actuators, original.actuators, rtol=0.0, atol=1e-6 * scale)
+    # with the shortcut on, a copy made after ProxQP's first solve tries the unconstrained
+    # minimiser first, as the original does: the same torques to the bit (a state near rest,
+    # where that minimiser meets every constraint)
+    q, nu = random_minimal_state(robot, rng)
+    state = robot.full_state(0.1 * q, 0.1 * nu)
+    robot.update(*state)
+    tasks = _realistic_tasks(robot)
+    shortcut = TaskQP(robot, low, high, QPSettings())
+    assert shortcut.solve(robot, None, tasks).iterations > 0  # the first step: ProxQP
+    clone_robot, clone, clone_tasks = copier((robot, shortcut, tasks))  # type: ignore[operator]
+    robot.update(*state)
+    clone_robot.update(*state)
+    original = shortcut.solve(robot, None, tasks)
+    copied = clone.solve(clone_robot, None, clone_tasks)
+    assert shortcut.proxqp_calls == clone.proxqp_calls == 1  # neither called ProxQP again
+    np.testing.assert_array_equal(copied.actuators, original.actuators)
+
+
 def test_the_table_reads_and_writes_the_arrays_it_was_built_from() -> None:
     rng = np.random.default_rng(25)
     arrays = [

@@ -3,6 +3,7 @@ step ``k``'s state is used from step ``k + d`` on, whatever the machine's speed.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import pickle
 from typing import Any
@@ -20,7 +21,7 @@ from controllers.low_level.compiled_step import rows_and_kernel
 from controllers.low_level.kernel import kernel_step
 from controllers.low_level.task_stack import stack_rows
 from wip_gym.envs.measures import env_measures
-from wip_gym.minimal_kernels import robot_update_at
+from wip_gym.minimal_kernels import robot_update_at, wipm_inputs_into
 
 STEPS = 45
 
@@ -142,5 +143,58 @@ def test_the_control_loops_compiled_calls_release_the_gil() -> None:
     (MuJoCo's ``mj_step``, and these compiled calls). Held through them, the solve took 1.4 to
     1.7 ms in its thread (0.85 to 0.97 ms since) and was often not done ``d = 5`` steps later
     (docs/performance.md §13)."""
-    for kernel in (robot_update_at, rows_and_kernel, stack_rows, kernel_step, env_measures):
+    kernels = (robot_update_at, rows_and_kernel, stack_rows, kernel_step, env_measures)
+    for kernel in (*kernels, wipm_inputs_into):
         assert kernel.targetoptions.get("nogil") is True, kernel.__name__
+
+
+def test_a_copy_with_a_solve_pending_goes_on_as_the_original() -> None:
+    """A controller deep-copied while a solve runs beside its loop takes the same solution at
+    the same step: on the same observations, the copy's next actions are the original's to
+    the bit."""
+    env = gym.make("wip_gym/PlanarTray-v0", max_episode_steps=-1)
+    obs, info = env.reset(seed=5)
+    config = HierarchicalConfig(high_level=HighLevelConfig(mpc_delay_steps=3))
+    policy = HierarchicalController.for_env(env, config)
+    policy.reset(obs, info)
+    for _ in range(11):  # the tick at step 10 started a solve
+        obs, *_ = env.step(policy(obs))
+    assert policy.high_level._pending is not None
+    twin = copy.deepcopy(policy)
+    assert twin.high_level._thread is None and twin.high_level._pending is not None
+    for k in range(25):  # both on the same observations
+        action = policy(obs)
+        np.testing.assert_array_equal(twin(obs), action, err_msg=f"step {k}")
+        obs, *_ = env.step(action)
+    policy.high_level.close()
+    twin.high_level.close()
+    env.close()
+
+
+def test_a_failed_solve_is_raised_where_it_is_taken_and_the_thread_ends() -> None:
+    """The solve's error is raised by the step that takes it, also after a copy made while it
+    ran (kept, not lost); ``close`` ends the thread even then; ``reset`` drains a job left by
+    an interrupted wait."""
+    high_level = HighLevel(HighLevelConfig(mpc_delay_steps=3), 1e-3)
+
+    def fail(*_: Any) -> None:
+        raise FloatingPointError("the solve diverged")
+
+    thread = SolveThread("test-mpc-fail")
+    high_level._thread = thread
+    thread.submit(fail)
+    high_level._pending = (thread, 0)
+    twin = copy.deepcopy(high_level)
+    with pytest.raises(FloatingPointError, match="diverged"):
+        twin._wait_pending()
+    assert twin._pending is None
+    with pytest.raises(FloatingPointError, match="diverged"):
+        high_level.close()
+    assert high_level._thread is None and not thread._thread.is_alive()
+    # a wait interrupted (KeyboardInterrupt) leaves the job in the thread and nothing pending
+    thread = SolveThread("test-mpc-interrupted")
+    high_level._thread = thread
+    thread.submit(lambda: 1)
+    high_level._discard_pending()
+    assert not thread.running
+    thread.close()

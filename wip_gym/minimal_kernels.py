@@ -402,19 +402,20 @@ def wipm_inputs_into(
     the update's ``scalars``, :data:`UPDATE_SCALARS`), then :func:`wipm_values`' ``lambda(q)``
     at the heading ``Rz(psi)`` of those scalars, in :data:`WIPM_VECTOR_SIZES`' order. What the
     MPC reads at each of its steps, in one call (``RobotModel.wipm_inputs``)."""
-    c, s = scalars[2], scalars[3]
+    c, s = scalars[_COS_PSI], scalars[_SIN_PSI]
     heading = np.zeros((3, 3))
     heading[0, 0], heading[0, 1], heading[1, 0], heading[1, 1], heading[2, 2] = c, -s, s, c, 1.0
     values, inertia_body = wipm_values(
-        table, heading, com, scalars[4], scalars[5], wheel_radius, wheel_separation
+        table, heading, com, scalars[_BODY_MASS], scalars[_THETA], wheel_radius, wheel_separation
     )
     if planar:
-        out[0], out[1], out[2], out[3] = scalars[5], scalars[6], scalars[7], scalars[8]
-        n = 4
+        n = len(_PLANAR_STATE)
+        for k in range(n):
+            out[k] = scalars[_PLANAR_STATE[k]]
     else:
-        out[0], out[1], out[2], out[3] = scalars[7], scalars[0], scalars[5], scalars[8]
-        out[4], out[5], out[6], out[7] = scalars[1], scalars[6], scalars[9], scalars[10]
-        n = 8
+        n = len(_SPATIAL_STATE)
+        for k in range(n):
+            out[k] = scalars[_SPATIAL_STATE[k]]
     out[n], out[n + 1], out[n + 2] = values[0], values[1], values[2]
     for a in range(3):
         for b in range(3):
@@ -584,6 +585,15 @@ UPDATE_SCALARS = (
     "xd",
     "axle_x",
     "axle_y",
+)
+_COS_PSI, _SIN_PSI, _BODY_MASS, _THETA = (
+    UPDATE_SCALARS.index(name) for name in ("cos_psi", "sin_psi", "body_mass", "theta")
+)
+#: the WIPM state (``RobotModel.wipm_state``) as indices into :data:`UPDATE_SCALARS`
+_PLANAR_STATE = tuple(UPDATE_SCALARS.index(name) for name in ("theta", "thetad", "x", "xd"))
+_SPATIAL_STATE = tuple(
+    UPDATE_SCALARS.index(name)
+    for name in ("x", "psi", "theta", "xd", "psid", "thetad", "axle_x", "axle_y")
 )
 """The entries of :func:`robot_update`'s ``scalars``, in order (``x``, ``xd``: the first
 minimal coordinate and its rate; ``axle_x``, ``axle_y``: the base origin's world position)."""

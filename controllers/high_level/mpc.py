@@ -349,8 +349,10 @@ class ModelPredictiveController:
     (:func:`compiled_step`, or :func:`numba_step`) with its host inputs packed in one vector
     (:func:`pack_inputs`) and one transfer of its packed result. ``solver`` is the JAX solver
     of the same problem and settings, whichever the backend (the reference).
-    ``step`` is :meth:`solve` of :meth:`inputs`: a solve beside the control loop makes its
-    inputs on the control thread and solves in its own thread, one solve after the other.
+    ``step`` is :meth:`solve` of :meth:`inputs`, and :meth:`solve` is :meth:`take` of
+    :meth:`run`. The high level makes its inputs with :meth:`inputs_of` (from
+    ``RobotModel.wipm_inputs``); beside the control loop, :meth:`run` runs in the MPC's thread
+    and :meth:`take` on the control thread, one solve after the other.
     """
 
     def __init__(self, plan: Plan, config: MPCConfig | None = None) -> None:
@@ -388,9 +390,8 @@ class ModelPredictiveController:
         return self.solve(self.inputs(index, state, params))
 
     def inputs(self, index: int, state: np.ndarray, params: WIPMParams) -> np.ndarray:
-        """The next :meth:`solve`'s host inputs (checked, packed: :func:`pack_inputs`). A solve
-        beside the control loop packs them on the control thread, so that its own thread
-        needs the GIL for as little Python as possible."""
+        """The next :meth:`solve`'s host inputs (checked, packed: :func:`pack_inputs`): the
+        reference of :meth:`inputs_of`, which the high level uses."""
         state = np.asarray(state, dtype=np.float64)
         if state.shape != (self._shapes[0][1],):
             raise ValueError(

@@ -72,6 +72,16 @@ class _Finished(NamedTuple):
         return self.outputs
 
 
+class _Failed(NamedTuple):
+    """A solve's error already taken from its thread (a pickled pending solve that failed):
+    its ``result()`` raises it."""
+
+    error: Exception
+
+    def result(self) -> Any:
+        raise self.error
+
+
 class HighLevelSetpoint(NamedTuple):
     """What the low level tracks at one control step (a NamedTuple: one is made every control
     step, 4 times cheaper than a frozen dataclass)."""
@@ -117,7 +127,7 @@ class HighLevel:
         # a solve beside the loop not taken yet: (its source, the step it started from); the
         # source's result() is the compiled step's outputs (the thread, or _Finished after a
         # pickle)
-        self._pending: tuple[SolveThread | _Finished, int] | None = None
+        self._pending: tuple[SolveThread | _Finished | _Failed, int] | None = None
         self._thread: SolveThread | None = None
         self._params: WIPMParams | None = None
         self._wipm_inputs: np.ndarray | None = None  # the last MPC step's, params made from it
@@ -129,10 +139,13 @@ class HighLevel:
             )
 
     def _discard_pending(self) -> None:
-        """Wait for a background solve and drop it (its episode is over)."""
-        if self._pending is not None:
-            source, _ = self._pending
-            self._pending = None
+        """Wait for a background solve and drop it (its episode is over); also a job left in
+        the thread by a wait that was interrupted (``KeyboardInterrupt``)."""
+        sources = [] if self._pending is None else [self._pending[0]]
+        if self._thread is not None and self._thread.running and self._thread not in sources:
+            sources.append(self._thread)
+        self._pending = None
+        for source in sources:
             # waits; an error of a finished episode's solve is not raised
             with contextlib.suppress(Exception):
                 source.result()
@@ -142,8 +155,13 @@ class HighLevel:
         state["_thread"] = None  # threads do not pickle; made again when needed
         if self._pending is not None:  # its outputs, kept to be taken at the same step
             source, start = self._pending
-            if not isinstance(source, _Finished):
-                self._pending = (_Finished(source.result()), start)
+            if isinstance(source, SolveThread):
+                finished: _Finished | _Failed
+                try:
+                    finished = _Finished(source.result())
+                except Exception as error:  # kept, to be raised where it would have been
+                    finished = _Failed(error)
+                self._pending = (finished, start)
             state["_pending"] = self._pending
         return state
 
@@ -159,9 +177,15 @@ class HighLevel:
         """Take the pending solve's solution (waiting for it) as the one in use."""
         if self._pending is not None:
             source, start = self._pending
+            try:
+                outputs = source.result()
+            except Exception:  # the solve's own error: it is over
+                self._pending = None
+                raise
+            # (a wait interrupted by KeyboardInterrupt keeps the solve pending)
             self._pending = None
             assert self.mpc is not None
-            self._use(self.mpc.take(source.result()), start)
+            self._use(self.mpc.take(outputs), start)
 
     def _use(self, solution: MPCStep, start: int) -> None:
         """``solution``, solved from step ``start``'s state, in use from now on (counted on the
@@ -176,22 +200,24 @@ class HighLevel:
 
     def reset(self, robot: RobotModel, goal_xy: np.ndarray, cup_friction: float | None) -> Plan:
         """Plan from the robot's current state to the goal, build the MPC and run (and so
-        compile) its first step. ``robot`` must be updated with dynamics."""
+        compile) its first step. ``robot`` must be updated."""
         self._discard_pending()  # a solve still running from the last episode
         # the MPC steps' path, so that its compiled calls are loaded here, not at a step
-        self._wipm_inputs, self._params = robot.wipm_inputs(), None
-        state = self._wipm_inputs[: len(self._wipm_inputs) - WIPM_VECTOR_LENGTH].copy()
-        self.plan = plan_to_goal(
-            state,
-            self.params,
+        inputs = robot.wipm_inputs()
+        n = len(inputs) - WIPM_VECTOR_LENGTH
+        params = params_from_vector(inputs[n:].copy())
+        plan = plan_to_goal(
+            inputs[:n].copy(),
+            params,
             goal_xy,
             planar=robot.layout.planar,
             cup_friction=cup_friction,
             config=self.config.plan,
         )
         # one solve now compiles the MPC (reset does the slow work); then start afresh
-        first = ModelPredictiveController(self.plan, self.config.mpc)
-        first.solve(first.inputs_of(0, self._wipm_inputs))
+        first = ModelPredictiveController(plan, self.config.mpc)
+        first.solve(first.inputs_of(0, inputs))
+        self.plan, self._wipm_inputs, self._params = plan, inputs, params
         self.mpc = ModelPredictiveController(self.plan, self.config.mpc)
         self._step = 0
         self._last = None
@@ -272,8 +298,11 @@ class HighLevel:
         return self._rejections
 
     def close(self) -> None:
-        """Let a background solve end and stop the MPC's thread (made again if needed)."""
-        self._wait_pending()
-        if self._thread is not None:
-            self._thread.close()
-            self._thread = None
+        """Let a background solve end (taken into use; its error raised) and stop the MPC's
+        thread (made again if needed)."""
+        try:
+            self._wait_pending()
+        finally:
+            if self._thread is not None:
+                self._thread.close()
+                self._thread = None

@@ -43,8 +43,9 @@ def _serve(jobs: queue.SimpleQueue[_Job], results: queue.SimpleQueue[tuple[bool,
 
 
 class SolveThread:
-    """A daemon thread running one job at a time (module docstring). It ends at :meth:`close`,
-    when the object is collected, or at the interpreter's exit, after its current job."""
+    """A daemon thread running one job at a time (module docstring). It ends after its current
+    job at :meth:`close` or when the object is collected; the interpreter's exit does not
+    wait for a job (a daemon thread: call ``close`` to wait)."""
 
     def __init__(self, name: str) -> None:
         self._jobs: queue.SimpleQueue[_Job] = queue.SimpleQueue()

@@ -173,6 +173,10 @@ class TaskQP:
         self._limit_min, self._limit_max = q_min.astype(float), q_max.astype(float)
         self._index_q1, self._wheel_radius = k, float(lay.wheel_radius)
         self._qp: proxsuite.proxqp.dense.QP | None = None
+        # whether ProxQP solved a step since the start or its last failure: only then is the
+        # unconstrained minimiser tried first (the first step, and the one after a failure,
+        # go to ProxQP). Kept by a copy, which drops the solver object (__getstate__)
+        self._proxqp_ready = False
         self.failures = 0
         self.proxqp_calls = 0
         self.motion = MotionProbe(robot)
@@ -241,6 +245,11 @@ class TaskQP:
         state = self.__dict__.copy()
         state["_stack"] = None  # holds views on MuJoCo's arrays: made again on the next step
         state["_table"], state["_table_for"] = None, (None, None)  # addresses: likewise
+        # ProxQP's object pickles as an empty C++ object, which crashes the process at its
+        # next update (and a deep copy is a pickle): a copy starts a new one at its next
+        # ProxQP solve, not warm-started from the original's last result (so that solve
+        # agrees with the original's to ProxQP's tolerance, not to the bit)
+        state["_qp"] = None
         return state
 
     def _snapshot(self, robot: RobotModel, tasks: Sequence[Task]) -> None:
@@ -347,7 +356,7 @@ class TaskQP:
         """The task QP of this state (``iso`` None: eq. iso3 computed in the kernel from
         ``robot``). ``proxqp_calls`` counts the steps ProxQP solved."""
         H, g, C, lower, upper = self.assemble(robot, iso, tasks)
-        if self._qp is not None and self.settings.unconstrained_first and self._feasible:
+        if self._proxqp_ready and self.settings.unconstrained_first and self._feasible:
             k = self.kernel
             if self._terms_ready:  # the one-call step computed what x implies
                 terms = (k.generalized.copy(), k.actuators.copy(), k.nu_dot.copy())
@@ -362,10 +371,11 @@ class TaskQP:
         results = self._qp.results
         iterations = int(results.info.iter)
         if results.info.status == _SOLVED and bool(np.all(np.isfinite(results.x))):
+            self._proxqp_ready = True
             return self._solution(np.array(results.x), iterations)
         self.failures += 1
         # start the next step cold: a warm start from a failed result does not recover
-        self._qp = None
+        self._qp, self._proxqp_ready = None, False
         if self._last_actuators is None:
             raise RuntimeError("the first task QP was not solved: no feasible torques yet")
         nan = np.full(self.n, np.nan)
