@@ -20,7 +20,7 @@ import pytest
 
 import benchmarks.speed.profile as profile_module
 from benchmarks.cli import main
-from benchmarks.speed import mpc_phase
+from benchmarks.speed import mpc_inputs, mpc_phase
 from benchmarks.speed.closed_loop_table import MissingFigure
 from benchmarks.speed.closed_loop_table import comparison as closed_loop_comparison
 from benchmarks.speed.closed_loop_table import figure as closed_loop_figure
@@ -478,3 +478,13 @@ def test_mpc_phase_runs_a_delayed_episode() -> None:
     assert mpc_phase.HighLevel._wait_pending.__name__ == "_wait_pending"
     with pytest.raises(ValueError, match="delay must be >= 1"):
         mpc_phase.run("wip_gym/PlanarTray-v0", delay=0, duration=0.3, seed=0)
+
+
+def test_mpc_inputs_times_both_paths_on_equal_inputs() -> None:
+    result = mpc_inputs.run("wip_gym/PlanarTray-v0", steps=30, seed=0)
+    for path in mpc_inputs.PATHS:
+        assert len(result["times_us"][path]) == 3  # one per MPC period
+        assert all(value > 0 for value in result["times_us"][path])
+    assert sum(len(result["first_us"][path]) for path in mpc_inputs.PATHS) == 3
+    with pytest.raises(ValueError, match="steps must be >= 10"):
+        mpc_inputs.run("wip_gym/PlanarTray-v0", steps=5, seed=0)
