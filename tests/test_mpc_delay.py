@@ -36,16 +36,16 @@ def _run(delay: int) -> tuple[np.ndarray, list[Any], list[Any], HierarchicalCont
     policy.reset(obs, info)
     mpc = policy.high_level.mpc
     calls: list[Any] = []
-    inputs_of, run, take = mpc.inputs_of, mpc.run, mpc.take
+    inputs_from, run, take = mpc.inputs_from, mpc.run, mpc.take
     n = len(policy.plan.states[0])
 
     # a solve is its inputs (on the control thread), the compiled step on those inputs (in the
     # MPC's thread when delayed) and its outputs taken (on the control thread), one at a time
-    def recorded_inputs(index: int, wipm_inputs: np.ndarray) -> np.ndarray:
+    def recorded_inputs(index: int, robot: Any) -> np.ndarray:
         assert all(call[3] is not None for call in calls), "inputs made before the last solve"
-        host = inputs_of(index, wipm_inputs)
-        params = params_from_vector(wipm_inputs[n:].copy())
-        calls.append([index, wipm_inputs[:n].copy(), params, None, host, None])
+        host = inputs_from(index, robot)
+        state, params = host[2 : 2 + n].copy(), params_from_vector(host[2 + n :].copy())
+        calls.append([index, state, params, None, host, None])
         return host
 
     def recorded_run(host: np.ndarray) -> Any:
@@ -60,7 +60,7 @@ def _run(delay: int) -> tuple[np.ndarray, list[Any], list[Any], HierarchicalCont
         call[3] = solution
         return solution
 
-    mpc.inputs_of = recorded_inputs  # type: ignore[method-assign]
+    mpc.inputs_from = recorded_inputs  # type: ignore[method-assign]
     mpc.run = recorded_run  # type: ignore[method-assign]
     mpc.take = recorded_take  # type: ignore[method-assign]
     actions, in_use = [], []

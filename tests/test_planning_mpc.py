@@ -203,9 +203,10 @@ def test_the_mpc_refuses_a_state_of_another_length_than_its_plan() -> None:
 
 @pytest.mark.parametrize("env_id", ["wip_gym/Planar-v0", "wip_gym/Krang-v0"])
 def test_inputs_of_the_robots_vector_are_the_packed_inputs(env_id: str) -> None:
-    """``inputs_of(index, robot.wipm_inputs())`` (the high level's path) is ``inputs(index,
-    state, params_from_robot(robot))`` to the bit, the index clamped alike and the first flag
-    set until a solve; a vector of another length or dtype, or a state not finite, is refused."""
+    """``inputs_of(index, robot.wipm_inputs())`` and ``inputs_from(index, robot)`` (the high
+    level's path) are ``inputs(index, state, params_from_robot(robot))`` to the bit, the index
+    clamped alike and the first flag set until a solve; a vector of another length or dtype, a
+    state not finite, or a robot of the other kind is refused."""
     from controllers.simplified.wipm import params_from_robot
 
     env, robot, params, state = robot_state(env_id)
@@ -216,8 +217,16 @@ def test_inputs_of_the_robots_vector_are_the_packed_inputs(env_id: str) -> None:
         for index in (-3, 0, 7, len(plan.states) + 50):
             host = mpc.inputs_of(index, vector)
             np.testing.assert_array_equal(host, mpc.inputs(index, state, reference))
+            np.testing.assert_array_equal(mpc.inputs_from(index, robot), host)
             assert host[1] == (not solved)
         mpc.solve(host)
+    # a robot of the other kind (planar against 3-D): its vector does not fit the plan's
+    other_env, other_robot, *_ = robot_state(
+        "wip_gym/Krang-v0" if robot.layout.planar else "wip_gym/Planar-v0"
+    )
+    with pytest.raises(ValueError, match="out must be"):
+        mpc.inputs_from(0, other_robot)
+    other_env.close()
     n = len(state)
     for bad in (vector[:-1], vector.astype(np.float32), list(vector), np.append(vector, 0.0)):
         with pytest.raises(ValueError, match="float64 vector of shape"):

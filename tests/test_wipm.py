@@ -474,6 +474,23 @@ def test_wipm_inputs_are_the_state_and_the_packed_params(name: str) -> None:
         assert vector.dtype == np.float64 and vector.shape == (n + 19,)
         np.testing.assert_array_equal(vector, np.array(expected))
         assert robot.wipm_inputs() is not vector
+        into = np.full(n + 21, np.nan)
+        assert robot.wipm_inputs(into[2:]) is not None  # written in place, in a view
+        np.testing.assert_array_equal(into[2:], vector)
+        assert np.isnan(into[:2]).all()
+    for bad in (
+        np.empty(n + 18),
+        np.empty(n + 19, dtype=np.float32),
+        np.empty(2 * (n + 19))[::2],
+        np.empty(n + 19).reshape(1, -1),
+        list(range(n + 19)),
+    ):
+        with pytest.raises(ValueError, match="out must be"):
+            robot.wipm_inputs(bad)  # type: ignore[arg-type]
+    frozen = np.empty(n + 19)
+    frozen.flags.writeable = False
+    with pytest.raises(ValueError, match="out must be"):
+        robot.wipm_inputs(frozen)
 
 
 def _change_model(model: mujoco.MjModel, robot: RobotModel, rng: np.random.Generator) -> None:

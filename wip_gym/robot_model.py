@@ -736,17 +736,31 @@ class RobotModel:
             lay.wheel_separation,
         )
 
-    def wipm_inputs(self) -> Array:
-        """:meth:`wipm_state` and ``lambda(q)`` (:meth:`wipm_values`) as one new vector, in one
+    def wipm_inputs(self, out: Array | None = None) -> Array:
+        """:meth:`wipm_state` and ``lambda(q)`` (:meth:`wipm_values`) as one vector, in one
         compiled call (``minimal_kernels.wipm_inputs_into``): the state, then ``lambda(q)``
         with one entry per field of ``controllers.simplified.wipm.WIPMParams`` in its order
         (``inertia_body`` row-major; ``minimal_kernels.WIPM_VECTOR_SIZES``). The same floats as
         those two methods (tested to the bit); what the MPC reads at each of its steps
-        (``ModelPredictiveController.inputs_of``). Needs an update."""
+        (``ModelPredictiveController.inputs_from``). Written into ``out`` (a float64 vector
+        of that length, C-contiguous: ``ValueError`` otherwise) if given, else into a new
+        vector; returned. Needs an update."""
         self._require()
         lay = self.layout
-        n = 4 if lay.planar else 8
-        out = np.empty(n + kernels.WIPM_VECTOR_LENGTH)
+        size = (4 if lay.planar else 8) + kernels.WIPM_VECTOR_LENGTH
+        if out is None:
+            out = np.empty(size)
+        elif (
+            type(out) is not np.ndarray
+            or out.shape != (size,)
+            or out.dtype != np.float64
+            or not out.flags.c_contiguous
+            or not out.flags.writeable
+        ):
+            raise ValueError(
+                f"wipm_inputs: out must be a writable, C-contiguous float64 vector of shape "
+                f"({size},), got {getattr(out, 'dtype', type(out))} of shape {np.shape(out)}"
+            )
         kernels.wipm_inputs_into(
             out,
             lay.planar,

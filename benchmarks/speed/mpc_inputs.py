@@ -8,8 +8,8 @@ inputs from the robot run once, in a random order:
 
 * ``reference``: ``ModelPredictiveController.inputs(index, wipm_state(robot),
   params_from_robot(robot))`` (the path before ``RobotModel.wipm_inputs``);
-* ``compiled``: ``ModelPredictiveController.inputs_of(index, robot.wipm_inputs())`` (the high
-  level's path: one compiled call for the state and ``lambda(q)``).
+* ``compiled``: ``ModelPredictiveController.inputs_from(index, robot)`` (the high level's
+  path: one compiled call writes the state and ``lambda(q)`` into the packed inputs).
 
 Each call is checked to give the same vector to the bit; each path runs once before the
 episode (its compiled calls loaded from numba's cache). Printed: the median and mean of each,
@@ -50,7 +50,7 @@ def run(env_id: str, steps: int, seed: int) -> dict[str, Any]:
     period = high_level.steps_per_mpc
     # each path's compiled calls loaded (the reference's is no longer on the controller's path)
     high_level.mpc.inputs(0, wipm_state(robot), params_from_robot(robot))
-    high_level.mpc.inputs_of(0, robot.wipm_inputs())
+    high_level.mpc.inputs_from(0, robot)
     rng = np.random.default_rng(seed)
     times: dict[str, list[float]] = {path: [] for path in PATHS}
     first: dict[str, list[float]] = {path: [] for path in PATHS}
@@ -67,7 +67,7 @@ def run(env_id: str, steps: int, seed: int) -> dict[str, Any]:
             if path == "reference":
                 hosts[path] = mpc.inputs(k // period, wipm_state(robot), params_from_robot(robot))
             else:
-                hosts[path] = mpc.inputs_of(k // period, robot.wipm_inputs())
+                hosts[path] = mpc.inputs_from(k // period, robot)
             elapsed = (time.perf_counter() - start) * 1e6
             times[path].append(elapsed)
             if position == 0:

@@ -32,6 +32,7 @@ from controllers.optimizer.ddp import DDPConfig, rollout
 from controllers.simplified.wipm import WIPMParams
 from controllers.simplified.wipm_problem import Weights, WIPMProblem, ddp_solver_for
 from wip_gym.minimal_kernels import WIPM_VECTOR_LENGTH, WIPM_VECTOR_SIZES
+from wip_gym.robot_model import RobotModel
 
 
 @dataclass(frozen=True)
@@ -232,7 +233,7 @@ class _CompiledStep:
 
 
 #: the host's inputs of a packed MPC step before the state: the plan index and the first flag
-_HEAD = 2
+HOST_HEAD = 2
 #: WIPMParams' leaves in one vector: its scalars, with ``inertia_body``'s 9 entries (row-major)
 #: in its place (the layout ``RobotModel.wipm_inputs`` writes)
 _PARAM_SIZES = WIPM_VECTOR_SIZES
@@ -286,18 +287,18 @@ def unpack_inputs(
     """The arguments of ``_CompiledStep._step`` from :func:`pack_inputs`' vector (its state
     as long as the plan's; another length is refused when the step is traced)."""
     n = plan_states.shape[1]
-    if host.shape != (_HEAD + n + _N_PARAMS,):
+    if host.shape != (HOST_HEAD + n + _N_PARAMS,):
         raise ValueError(
             f"packed MPC inputs of shape {host.shape} for a plan of {n} states: expected "
-            f"({_HEAD + n + _N_PARAMS},)"
+            f"({HOST_HEAD + n + _N_PARAMS},)"
         )
     index = jnp.maximum(host[0].astype(jnp.int32), 0)  # dynamic_slice would wrap a negative one
     first = host[1] != 0.0
     return (
         index,
         first,
-        host[_HEAD : _HEAD + n],
-        params_from_vector(host[_HEAD + n :]),
+        host[HOST_HEAD : HOST_HEAD + n],
+        params_from_vector(host[HOST_HEAD + n :]),
         warm,
         plan_states,
         plan_controls,
@@ -350,9 +351,9 @@ class ModelPredictiveController:
     (:func:`pack_inputs`) and one transfer of its packed result. ``solver`` is the JAX solver
     of the same problem and settings, whichever the backend (the reference).
     ``step`` is :meth:`solve` of :meth:`inputs`, and :meth:`solve` is :meth:`take` of
-    :meth:`run`. The high level makes its inputs with :meth:`inputs_of` (from
-    ``RobotModel.wipm_inputs``); beside the control loop, :meth:`run` runs in the MPC's thread
-    and :meth:`take` on the control thread, one solve after the other.
+    :meth:`run`. The high level makes its inputs with :meth:`inputs_from` (the robot's
+    ``RobotModel.wipm_inputs`` written into them); beside the control loop, :meth:`run` runs
+    in the MPC's thread and :meth:`take` on the control thread, one solve after the other.
     """
 
     def __init__(self, plan: Plan, config: MPCConfig | None = None) -> None:
@@ -384,6 +385,7 @@ class ModelPredictiveController:
         self._sizes = ((H + 1) * n, H * m)
         self._shapes = ((H + 1, n), (H, m))
         self._last_index = len(plan.states)  # dynamic_slice clamps: past it, all goal
+        self._host_size = HOST_HEAD + n + _N_PARAMS
 
     def step(self, index: int, state: np.ndarray, params: WIPMParams) -> MPCStep:
         """Solve at plan time index ``index`` from WIPM ``state`` with parameters ``params``."""
@@ -420,10 +422,21 @@ class ModelPredictiveController:
             )
         if not np.isfinite(wipm_inputs[:n]).all():
             raise ValueError(f"MPC state is not finite: {wipm_inputs[:n]}")
-        host = np.empty(_HEAD + n + _N_PARAMS)
+        host = np.empty(HOST_HEAD + n + _N_PARAMS)
         host[0] = min(max(int(index), 0), self._last_index)
         host[1] = self._first
-        host[_HEAD:] = wipm_inputs
+        host[HOST_HEAD:] = wipm_inputs
+        return host
+
+    def inputs_from(self, index: int, robot: RobotModel) -> np.ndarray:
+        """:meth:`inputs_of` of ``robot.wipm_inputs()`` (the high level's path), the robot's
+        vector written in place in the host vector: the same host vector to the bit. The state
+        is not checked again: an updated ``RobotModel`` refuses a state that is not finite.
+        ``ValueError`` for a robot whose WIPM is not the plan's (planar or 3-D)."""
+        host = np.empty(self._host_size)
+        robot.wipm_inputs(host[HOST_HEAD:])
+        host[0] = min(max(int(index), 0), self._last_index)
+        host[1] = self._first
         return host
 
     def solve(self, host: np.ndarray) -> MPCStep:

@@ -6,7 +6,8 @@ Between MPC steps the low level tracks the *current MPC solution's* predicted ``
 the offline plan is only the MPC's reference, so the low level never fights a re-plan.
 
 At every MPC step the robot's WIPM state and ``lambda(q)`` come from one compiled call
-(``RobotModel.wipm_inputs``), packed as the MPC's inputs (``ModelPredictiveController.inputs_of``).
+(``RobotModel.wipm_inputs``), written into the MPC's packed inputs
+(``ModelPredictiveController.inputs_from``).
 
 With ``mpc_delay_steps = d > 0`` the MPC runs as on a robot whose MPC computes beside its
 control loop: the solve from the state at step ``k`` (its inputs checked and packed at step
@@ -31,6 +32,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from controllers.high_level.mpc import (
+    HOST_HEAD,
     ModelPredictiveController,
     MPCConfig,
     MPCStep,
@@ -216,7 +218,7 @@ class HighLevel:
         )
         # one solve now compiles the MPC (reset does the slow work); then start afresh
         first = ModelPredictiveController(plan, self.config.mpc)
-        first.solve(first.inputs_of(0, inputs))
+        first.solve(first.inputs_from(0, robot))
         self.plan, self._wipm_inputs, self._params = plan, inputs, params
         self.mpc = ModelPredictiveController(self.plan, self.config.mpc)
         self._step = 0
@@ -233,9 +235,9 @@ class HighLevel:
         index, phase = divmod(step, steps_per_mpc)
         delay = self.config.mpc_delay_steps
         if phase == 0 or self._last is None:
-            # the state and lambda(q) in one compiled call, packed without a WIPMParams
-            self._wipm_inputs, self._params = robot.wipm_inputs(), None
-            host = self.mpc.inputs_of(index, self._wipm_inputs)
+            # the state and lambda(q) in one compiled call, written into the packed inputs
+            host = self.mpc.inputs_from(index, robot)
+            self._wipm_inputs, self._params = host[HOST_HEAD:], None
             if delay == 0 or self._last is None:
                 self._use(self.mpc.solve(host), step)
             else:
