@@ -148,10 +148,11 @@ def test_the_control_loops_compiled_calls_release_the_gil() -> None:
         assert kernel.targetoptions.get("nogil") is True, kernel.__name__
 
 
-def test_a_copy_with_a_solve_pending_goes_on_as_the_original() -> None:
-    """A controller deep-copied while a solve runs beside its loop takes the same solution at
-    the same step: on the same observations, the copy's next actions are the original's to
-    the bit."""
+@pytest.mark.parametrize("pickled", [False, True])
+def test_a_copy_with_a_solve_pending_goes_on_as_the_original(pickled: bool) -> None:
+    """A controller deep-copied or pickled while a solve runs beside its loop takes the same
+    solution at the same step: on the same observations, the copy's next actions are the
+    original's to the bit."""
     env = gym.make("wip_gym/PlanarTray-v0", max_episode_steps=-1)
     obs, info = env.reset(seed=5)
     config = HierarchicalConfig(high_level=HighLevelConfig(mpc_delay_steps=3))
@@ -160,7 +161,7 @@ def test_a_copy_with_a_solve_pending_goes_on_as_the_original() -> None:
     for _ in range(11):  # the tick at step 10 started a solve
         obs, *_ = env.step(policy(obs))
     assert policy.high_level._pending is not None
-    twin = copy.deepcopy(policy)
+    twin = pickle.loads(pickle.dumps(policy)) if pickled else copy.deepcopy(policy)
     assert twin.high_level._thread is None and twin.high_level._pending is not None
     for k in range(25):  # both on the same observations
         action = policy(obs)

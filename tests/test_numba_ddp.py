@@ -278,7 +278,8 @@ def test_a_rejected_solution_keeps_the_warm_start_as_the_jax_backend_does(
 
 def test_refusals_copies_and_the_module_on_disk(plans: dict[str, Plan], params: WIPMParams) -> None:
     """The settings the numba DDP does not run are refused by name, as is an unknown backend;
-    a copied MPC shares the step and solves as the original, and the step pickles as itself;
+    a copied or pickled MPC (either backend) shares the step and solves as the original, and
+    the step pickles as itself;
     the module on disk is the generated source, named by its hash, and its solves release the
     GIL."""
     plan = plans["planar"]
@@ -300,6 +301,13 @@ def test_refusals_copies_and_the_module_on_disk(plans: dict[str, Plan], params: 
     state = plan.states[10] + 0.01
     a, b = mpc.step(10, state, params), twin.step(10, state, params)
     np.testing.assert_array_equal(a.predicted_controls, b.predicted_controls)
+    for backend in ("numba", "jax"):  # a pickled MPC: the shared step and solver, found again
+        original = ModelPredictiveController(plan, MPCConfig(backend=backend))
+        original.step(0, plan.states[0], params)
+        unpickled = pickle.loads(pickle.dumps(original))
+        assert unpickled.compiled is original.compiled and unpickled.solver is original.solver
+        a, b = original.step(10, state, params), unpickled.step(10, state, params)
+        np.testing.assert_array_equal(a.predicted_controls, b.predicted_controls)
     module = mpc.compiled.module  # type: ignore[union-attr]
     path = Path(module.__file__)
     layout = params_from_vector(np.zeros(_N_PARAMS))

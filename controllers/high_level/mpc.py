@@ -156,6 +156,7 @@ class _CompiledStep:
     (docs/performance.md §13)."""
 
     def __init__(self, problem: WIPMProblem, ddp: DDPConfig, horizon: int) -> None:
+        self.problem, self.ddp = problem, ddp
         self.solver = ddp_solver_for(problem, ddp)
         self.dynamics = problem.dynamics()
         self.horizon = horizon
@@ -167,6 +168,10 @@ class _CompiledStep:
     ) -> tuple[Any, Any]:
         """``(packed, next_warm)`` of one step (:meth:`_step`)."""
         return self.jitted(host, warm, plan_states, plan_controls)
+
+    def __reduce__(self) -> tuple[Any, tuple[WIPMProblem, DDPConfig, int]]:
+        # a copy or an unpickled one is the shared step of its problem, settings and horizon
+        return compiled_step, (self.problem, self.ddp, self.horizon)
 
     def _one_trip(
         self, host: jax.Array, warm: jax.Array, plan_states: jax.Array, plan_controls: jax.Array
@@ -364,6 +369,7 @@ class ModelPredictiveController:
         self.problem = mpc_problem(plan.planar, self.config, plan.a_max, plan.theta_max)
         ddp = DDPConfig(**{**self.config.ddp.__dict__, "max_iterations": self.config.iterations})
         self.horizon = self.config.steps
+        self._ddp = ddp
         self.solver = ddp_solver_for(self.problem, ddp)
         self.compiled: _CompiledStep | _NumbaStep
         self.rejected = 0
@@ -386,6 +392,15 @@ class ModelPredictiveController:
         self._shapes = ((H + 1, n), (H, m))
         self._last_index = len(plan.states)  # dynamic_slice clamps: past it, all goal
         self._host_size = HOST_HEAD + n + _N_PARAMS
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["solver"] = None  # closures do not pickle: the shared solver, found again
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self.solver = ddp_solver_for(self.problem, self._ddp)
 
     def step(self, index: int, state: np.ndarray, params: WIPMParams) -> MPCStep:
         """Solve at plan time index ``index`` from WIPM ``state`` with parameters ``params``."""
