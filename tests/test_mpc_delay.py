@@ -174,8 +174,7 @@ def test_a_copy_with_a_solve_pending_goes_on_as_the_original(pickled: bool) -> N
 
 def test_a_failed_solve_is_raised_where_it_is_taken_and_the_thread_ends() -> None:
     """The solve's error is raised by the step that takes it, also after a copy made while it
-    ran (kept, not lost); ``close`` ends the thread even then; ``reset`` drains a job left by
-    an interrupted wait."""
+    ran (kept, not lost); ``close`` ends the thread even then."""
     high_level = HighLevel(HighLevelConfig(mpc_delay_steps=3), 1e-3)
 
     def fail(*_: Any) -> None:
@@ -192,10 +191,49 @@ def test_a_failed_solve_is_raised_where_it_is_taken_and_the_thread_ends() -> Non
     with pytest.raises(FloatingPointError, match="diverged"):
         high_level.close()
     assert high_level._thread is None and not thread._thread.is_alive()
-    # a wait interrupted (KeyboardInterrupt) leaves the job in the thread and nothing pending
+
+
+class _Interrupted:
+    """A pending solve whose first wait is interrupted (``KeyboardInterrupt``), as by Ctrl-C."""
+
+    def __init__(self, thread: SolveThread) -> None:
+        self.thread, self.interrupted = thread, False
+
+    def result(self) -> Any:
+        if not self.interrupted:
+            self.interrupted = True
+            raise KeyboardInterrupt
+        return self.thread.result()
+
+
+def test_an_interrupted_wait_keeps_the_solve_and_reset_or_close_drain_it() -> None:
+    """A wait interrupted by ``KeyboardInterrupt`` leaves the solve pending (a later wait takes
+    it); ``_discard_pending`` (reset) drains a job left running with nothing pending; ``close``
+    after an interrupted wait leaves nothing pending and can be called again."""
+    high_level = HighLevel(HighLevelConfig(mpc_delay_steps=3), 1e-3)
     thread = SolveThread("test-mpc-interrupted")
     high_level._thread = thread
     thread.submit(lambda: 1)
+    source = _Interrupted(thread)
+    high_level._pending = (source, 0)  # type: ignore[assignment]
+    with pytest.raises(KeyboardInterrupt):
+        high_level._wait_pending()
+    assert high_level._pending == (source, 0) and thread.running
+    high_level._pending = None  # as if the interrupt had come between the submit and its record
     high_level._discard_pending()
     assert not thread.running
-    thread.close()
+    # close interrupted while waiting: the thread ends, nothing stays pending, close again is fine
+    thread.submit(lambda: 2)
+    high_level._pending = (thread, 0)
+    thread_result = thread.result
+
+    def interrupted_result() -> Any:
+        raise KeyboardInterrupt
+
+    thread.result = interrupted_result  # type: ignore[method-assign]
+    with pytest.raises(KeyboardInterrupt):
+        high_level.close()
+    thread.result = thread_result  # type: ignore[method-assign]
+    assert high_level._thread is None and high_level._pending is None
+    assert not thread._thread.is_alive()
+    high_level.close()

@@ -408,7 +408,7 @@ class ModelPredictiveController:
 
     def inputs(self, index: int, state: np.ndarray, params: WIPMParams) -> np.ndarray:
         """The next :meth:`solve`'s host inputs (checked, packed: :func:`pack_inputs`): the
-        reference of :meth:`inputs_of`, which the high level uses."""
+        reference of :meth:`inputs_of` and :meth:`inputs_from` (the high level's path)."""
         state = np.asarray(state, dtype=np.float64)
         if state.shape != (self._shapes[0][1],):
             raise ValueError(

@@ -10,8 +10,8 @@ At every MPC step the robot's WIPM state and ``lambda(q)`` come from one compile
 (``ModelPredictiveController.inputs_from``).
 
 With ``mpc_delay_steps = d > 0`` the MPC runs as on a robot whose MPC computes beside its
-control loop: the solve from the state at step ``k`` (its inputs checked and packed at step
-``k`` on the control thread) runs in a background thread
+control loop: the solve from the state at step ``k`` (its inputs packed at step ``k`` on the
+control thread) runs in a background thread
 (``controllers.high_level.solve_thread``: the thread runs the compiled step alone, which
 releases the GIL; so do the control loop's compiled calls and ``mj_step``, where the thread
 takes it to start the solve and to hand back its result), and its solution is taken
@@ -306,5 +306,7 @@ class HighLevel:
             self._wait_pending()
         finally:
             if self._thread is not None:
-                self._thread.close()
+                self._thread.close()  # a job still running (an interrupted wait) is dropped
+                if self._pending is not None and self._pending[0] is self._thread:
+                    self._pending = None
                 self._thread = None
