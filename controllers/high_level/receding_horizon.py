@@ -278,7 +278,8 @@ class HighLevel:
     def params(self) -> WIPMParams:
         """``lambda(q)`` of the latest MPC step started (at reset: the plan's), made from its
         inputs at the first read after that step (the same floats as ``params_from_robot``).
-        ``RuntimeError`` before :meth:`reset`."""
+        Read-only (it was a plain attribute before the MPC read its inputs in one compiled
+        call). ``RuntimeError`` before :meth:`reset`."""
         if self._params is None:
             if self._wipm_inputs is None:
                 raise RuntimeError("HighLevel.reset() first")
