@@ -143,14 +143,14 @@ class HighLevel:
     def _discard_pending(self) -> None:
         """Wait for a background solve and drop it (its episode is over); also a job left in
         the thread by a wait that was interrupted (``KeyboardInterrupt``)."""
-        # each waits; an error of a finished episode's solve is not raised
-        if self._pending is not None:
-            source, self._pending = self._pending[0], None
+        sources = [] if self._pending is None else [self._pending[0]]
+        if self._thread is not None and self._thread.running and self._thread not in sources:
+            sources.append(self._thread)
+        self._pending = None
+        for source in sources:
+            # waits; an error of a finished episode's solve is not raised
             with contextlib.suppress(Exception):
                 source.result()
-        if self._thread is not None and self._thread.running:  # left by an interrupted wait
-            with contextlib.suppress(Exception):
-                self._thread.result()
 
     def __getstate__(self) -> dict[str, object]:
         state = self.__dict__.copy()
