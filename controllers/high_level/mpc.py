@@ -437,7 +437,9 @@ class ModelPredictiveController:
             )
         if not np.isfinite(wipm_inputs[:n]).all():
             raise ValueError(f"MPC state is not finite: {wipm_inputs[:n]}")
-        host = self._new_host(index)
+        host = np.empty(HOST_HEAD + n + _N_PARAMS)
+        host[0] = min(max(int(index), 0), self._last_index)
+        host[1] = self._first
         host[HOST_HEAD:] = wipm_inputs
         return host
 
@@ -446,14 +448,8 @@ class ModelPredictiveController:
         vector written in place in the host vector: the same host vector to the bit. The state
         is not checked again: an updated ``RobotModel`` refuses a state that is not finite.
         ``ValueError`` for a robot whose WIPM is not the plan's (planar or 3-D)."""
-        host = self._new_host(index)
-        robot.wipm_inputs(host[HOST_HEAD:])
-        return host
-
-    def _new_host(self, index: int) -> np.ndarray:
-        """A host vector with its head written (the plan index clamped as by :meth:`inputs`,
-        the first-step flag); the state and ``lambda(q)`` left to the caller."""
         host = np.empty(self._host_size)
+        robot.wipm_inputs(host[HOST_HEAD:])
         host[0] = min(max(int(index), 0), self._last_index)
         host[1] = self._first
         return host

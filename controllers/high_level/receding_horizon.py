@@ -204,7 +204,7 @@ class HighLevel:
         """Plan from the robot's current state to the goal, build the MPC and run (and so
         compile) its first step. ``robot`` must be updated."""
         self._discard_pending()  # a solve still running from the last episode
-        # the MPC steps' compiled call (RobotModel.wipm_inputs), loaded here, not at a step
+        # the MPC steps' path, so that its compiled calls are loaded here, not at a step
         inputs = robot.wipm_inputs()
         n = len(inputs) - WIPM_VECTOR_LENGTH
         params = params_from_vector(inputs[n:].copy())
@@ -218,7 +218,7 @@ class HighLevel:
         )
         # one solve now compiles the MPC (reset does the slow work); then start afresh
         first = ModelPredictiveController(plan, self.config.mpc)
-        first.solve(first.inputs_of(0, inputs))  # the same vector inputs_from writes
+        first.solve(first.inputs_from(0, robot))
         self.plan, self._wipm_inputs, self._params = plan, inputs, params
         self.mpc = ModelPredictiveController(self.plan, self.config.mpc)
         self._step = 0
