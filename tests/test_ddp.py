@@ -18,6 +18,7 @@ from controllers.optimizer.ddp import (
     DDPSolver,
     ddp_solve,
     make_ddp_solver,
+    riccati_step,
     rollout,
     trajectory_cost,
 )
@@ -284,6 +285,62 @@ def test_lq_problem_one_iteration_equals_riccati(horizon: int) -> None:
     assert K_err < 1e-9
     assert k_max < 1e-9
     assert cost_err < 1e-12
+
+
+@pytest.mark.parametrize(("n", "m", "second_order"), [(8, 2, False), (8, 2, True), (4, 1, False)])
+def test_riccati_step_equals_the_textbook_step(n: int, m: int, second_order: bool) -> None:
+    """One step of (2)-(5) on random derivatives against NumPy's matrix products: the step
+    computes the symmetric products' upper triangles only (``_mirrored_upper``); its ``V_xx``
+    is exactly symmetric."""
+    rng = np.random.default_rng(n + m + second_order)
+
+    def symmetric(size: int, shift: float = 0.0) -> np.ndarray:
+        a = rng.normal(size=(size, size))
+        return a @ a.T + shift * np.eye(size)
+
+    lx, lu = rng.normal(size=n), rng.normal(size=m)
+    lxx, luu, lux = symmetric(n), symmetric(m, 1.0), rng.normal(size=(m, n))
+    fx, fu = np.eye(n) + 0.1 * rng.normal(size=(n, n)), rng.normal(size=(n, m))
+    vx, vxx, mu = rng.normal(size=n), symmetric(n), 0.3
+    derivatives = [lx, lu, lxx, lux, luu, fx, fu]
+    qx, qu = lx + fx.T @ vx, lu + fu.T @ vx
+    qxx, qux, quu = lxx + fx.T @ vxx @ fx, lux + fu.T @ vxx @ fx, luu + fu.T @ vxx @ fu
+    if second_order:
+        fxx = rng.normal(size=(n, n, n))
+        fxx = fxx + fxx.transpose(0, 2, 1)
+        fux, fuu = rng.normal(size=(n, m, n)), rng.normal(size=(n, m, m))
+        fuu = fuu + fuu.transpose(0, 2, 1)
+        derivatives += [fxx, fux, fuu]
+        qxx = qxx + np.einsum("i,ijk->jk", vx, fxx)
+        qux = qux + np.einsum("i,ijk->jk", vx, fux)
+        quu = quu + np.einsum("i,ijk->jk", vx, fuu)
+    gains = -np.linalg.solve(quu + mu * np.eye(m), np.column_stack([qu, qux]))
+    k, K = gains[:, 0], gains[:, 1:]
+    want = (
+        qx + K.T @ quu @ k + K.T @ qu + qux.T @ k,
+        qxx + K.T @ quu @ K + K.T @ qux + qux.T @ K,
+        K,
+        k,
+        k @ qu,
+        0.5 * k @ quu @ k,
+    )
+    got = riccati_step(
+        tuple(jnp.asarray(d) for d in derivatives),
+        jnp.asarray(vx),
+        jnp.asarray(vxx),
+        jnp.asarray(mu),
+        second_order,
+    )
+    for name, value, expected in zip(
+        ("V_x", "V_xx", "K", "k", "dV_1", "dV_2"), got[:6], want, strict=True
+    ):
+        scale = max(1.0, float(np.max(np.abs(expected))))
+        np.testing.assert_allclose(
+            np.asarray(value), expected, rtol=0, atol=1e-12 * scale, err_msg=name
+        )
+    assert bool(got[6])
+    vxx_new = np.asarray(got[1])
+    assert np.array_equal(vxx_new, vxx_new.T)
 
 
 # ------------------------------------------------------------------------- 3. DDP vs iLQR

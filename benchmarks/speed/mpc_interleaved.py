@@ -3,9 +3,11 @@ timed interleaved in one process, the MPC step in units (``benchmarks.speed.yard
 
     python -m benchmarks.speed.mpc_interleaved --base REV [--rounds 6] [--steps 200] [--plans 7]
 
-The revision's ``controllers/optimizer/ddp.py``, ``controllers/simplified/wipm_problem.py`` and
-``controllers/high_level/mpc.py`` are loaded from ``git show REV:...`` as modules of their own
-(their imports of one another redirected to each other), so that both versions run side by side on
+The revision's ``controllers/optimizer/ddp.py``, ``controllers/optimizer/numba_ddp.py`` (so
+that each version's numba backend writes its own module), ``controllers/simplified/
+wipm_problem.py`` and ``controllers/high_level/mpc.py`` are loaded from ``git show REV:...`` as
+modules of their own (their imports of one another redirected to each other; a revision without
+``numba_ddp`` is not supported), so that both versions run side by side on
 the same plan (``wip-bench solvers``' problems: Krang's ``lambda(q)``, the plan to (2, 0) planar and
 (2, 1) 3-D). Per problem: each version's ``ModelPredictiveController`` along the plan's first
 ``--steps`` indices from the plan's states (``wip-bench solvers``' MPC workload), the versions
@@ -23,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import linecache
 import subprocess
 import sys
 import time
@@ -36,6 +39,7 @@ REPO = Path(__file__).resolve().parents[2]
 # (module path, file) in the order they import one another
 FILES = (
     ("controllers.optimizer.ddp", "controllers/optimizer/ddp.py"),
+    ("controllers.optimizer.numba_ddp", "controllers/optimizer/numba_ddp.py"),
     ("controllers.simplified.wipm_problem", "controllers/simplified/wipm_problem.py"),
     ("controllers.high_level.mpc", "controllers/high_level/mpc.py"),
 )
@@ -52,12 +56,17 @@ def load_revision(revision: str) -> dict[str, types.ModuleType]:
             text=True,
         ).stdout
         for other, _ in FILES:
+            alias = f"_rev_{other.replace('.', '_')}"
+            package, _, leaf = other.rpartition(".")
+            source = source.replace(f"from {other} import", f"from {alias} import")
             source = source.replace(
-                f"from {other} import", f"from _rev_{other.replace('.', '_')} import"
+                f"from {package} import {leaf}\n", f"import {alias} as {leaf}\n"
             )
         name = f"_rev_{dotted.replace('.', '_')}"
         module = types.ModuleType(name)
         module.__file__ = f"{revision}:{path}"
+        # inspect.getsource (numba_ddp copies its driver's source) reads it from linecache
+        linecache.cache[module.__file__] = (len(source), None, source.splitlines(True), path)
         sys.modules[name] = module
         exec(compile(source, module.__file__, "exec"), module.__dict__)  # noqa: S102
         modules[dotted] = module

@@ -323,6 +323,18 @@ def _tmm(a: Array, b: Array) -> Array:
     return jnp.sum(a[:, :, None] * b[:, None, :], axis=0)
 
 
+def _mirrored_upper(a: Array) -> Array:
+    """The symmetric matrix whose upper triangle (diagonal included) is ``a``'s.
+
+    For a product known to be symmetric (``F' V F``, the new ``V_xx``): its lower triangle is
+    then never read, so in the scalar code that the MPC's numba backend writes from the jaxpr
+    (``controllers.optimizer.numba_ddp``) those products are dead and the compiler drops them
+    (the 3-D backward pass about a quarter faster, docs/performance.md §20). XLA computes both
+    triangles and selects. The result is exactly symmetric."""
+    upper = np.triu(np.ones(a.shape, dtype=bool))
+    return jnp.where(upper, a, a.T)
+
+
 def _contract(v: Array, t: Array) -> Array:
     """``sum_i v_i t[i]`` (the value gradient contracted with a dynamics Hessian's output
     index, the DDP terms of (2))."""
@@ -376,7 +388,8 @@ def riccati_step(
     # otherwise: the 3-D plan is bit-equal, planar within 3e-14; the recursion 11 % faster)
     F = jnp.concatenate([fx, fu], axis=1)
     q_lin = _tmv(F, vx)
-    quad = _tmm(F, _mm(vxx, F))  # [[f_x' V f_x, f_x' V f_u], [f_u' V f_x, f_u' V f_u]]
+    # [[f_x' V f_x, f_x' V f_u], [f_u' V f_x, f_u' V f_u]], symmetric: its upper triangle
+    quad = _mirrored_upper(_tmm(F, _mm(vxx, F)))
     qx = lx + q_lin[:n]
     qu = lu + q_lin[n:]
     qxx = lxx + quad[:n, :n]
@@ -395,8 +408,8 @@ def riccati_step(
     quu_k = _mv(quu, k)
     vx_new = qx + _tmv(K, quu_k) + _tmv(K, qu) + _tmv(qux, k)
     cross = _tmm(K, qux)  # K' Q_ux; Q_ux' K is its transpose (the same products)
-    vxx_new = qxx + _tmm(K, _mm(quu, K)) + cross + cross.T
-    vxx_new = 0.5 * (vxx_new + vxx_new.T)
+    # (4), symmetric: its upper triangle
+    vxx_new = _mirrored_upper(qxx + _tmm(K, _mm(quu, K)) + cross + cross.T)
     return vx_new, vxx_new, K, k, jnp.sum(k * qu), 0.5 * jnp.sum(k * quu_k), ok
 
 
