@@ -51,6 +51,7 @@ TOP_KEYS = {
     "control_dt_s",
     "frame_skip",
     "setup_s",
+    "collector_passes",
     "reference_step_us",
     "control_time_ms",
     "control_time_units",

@@ -37,6 +37,11 @@ a floor and a reference step after every control step alternating with blocks wi
 runs, docs/performance.md §12): without them, the control step's median 0.74 to 0.82 times,
 its mean 0.84 to 0.88 times, what it is with them.
 
+The loop and the floor run with the setup's objects frozen (``benchmarks.heap.setup_frozen``):
+a full pass of the garbage collector over them costs 85 to 155 ms here, and fell inside some
+8 s episodes and not others, adding about 2 units to a mean (docs/performance.md §20). The
+passes that remain in the loop are reported (``collector_passes``).
+
 The unit (``benchmarks.speed.yardstick``): ``reference_step_us``, the median of a bare, warm
 ``mj_step`` of Krang-v0's model at its reset state, timed in this process before and after the
 episode and in bursts of :data:`UNIT_BURST` steps every :data:`UNIT_EVERY` control steps (so
@@ -76,6 +81,8 @@ JSON schema (``--json PATH``; times per control step in microseconds unless name
       "real_time_factor": float,          # steps * dt / sum(control + env_step)
       "sim_only_real_time_factor": float, # steps * dt / sum(mujoco_step): the ceiling
       "fell": bool,
+      "collector_passes": {"by_generation": [int, int, int], "longest_ms": float,
+                           "total_ms": float},  # the garbage collector's, in the timed loop
       "machine": {"cpu": str, "cores": int, "python": str}
     }
 
@@ -101,6 +108,7 @@ import gymnasium as gym
 import mujoco
 import numpy as np
 
+from benchmarks.heap import CollectorPasses, setup_frozen
 from benchmarks.overrides import parse_assignment, resolve_run
 from benchmarks.presets import add_configuration_arguments
 from benchmarks.scenario import resolve_env_id
@@ -281,26 +289,29 @@ def profile_episode(
     unit_samples: list[float] = []
     fell = False
     n = 0
-    for n in range(steps):
-        tick = time.perf_counter()
-        action = policy(observation)
-        tock = time.perf_counter()
-        for name, timer in timers.items():
-            parts[name][n] = timer.take()
-        mujoco.mj_getState(model, data, states[n], STATE)  # the floor's, timed after
-        actions[n] = action
-        start = time.perf_counter()
-        observation, _, terminated, truncated, info = env.step(action)
-        env_step[n] = time.perf_counter() - start
-        physics[n] = physics_timer.take()
-        control[n] = tock - tick
-        if burst_due(n, UNIT_EVERY, steps):
-            unit_samples += reference_step.burst(UNIT_BURST)
-        fell = fell or bool(info.get("fallen", False))
-        if terminated or truncated:
-            break
-    k = n + 1
-    floor = floor_times(model, states[:k], actions[:k], frame_skip)
+    # the setup's objects out of the collector's full passes while the loop and its floor are
+    # timed: such a pass (85 to 155 ms) landed inside some episodes and not others (benchmarks.heap)
+    with setup_frozen(), CollectorPasses() as collector:
+        for n in range(steps):
+            tick = time.perf_counter()
+            action = policy(observation)
+            tock = time.perf_counter()
+            for name, timer in timers.items():
+                parts[name][n] = timer.take()
+            mujoco.mj_getState(model, data, states[n], STATE)  # the floor's, timed after
+            actions[n] = action
+            start = time.perf_counter()
+            observation, _, terminated, truncated, info = env.step(action)
+            env_step[n] = time.perf_counter() - start
+            physics[n] = physics_timer.take()
+            control[n] = tock - tick
+            if burst_due(n, UNIT_EVERY, steps):
+                unit_samples += reference_step.burst(UNIT_BURST)
+            fell = fell or bool(info.get("fallen", False))
+            if terminated or truncated:
+                break
+        k = n + 1
+        floor = floor_times(model, states[:k], actions[:k], frame_skip)
     env.close()
     reference = float(
         np.median(np.concatenate([reference_before, unit_samples, reference_step_samples()]))
@@ -357,6 +368,7 @@ def profile_episode(
         "real_time_factor": float(k * dt / (control.sum() + env_step.sum())),
         "sim_only_real_time_factor": float(k * dt / floor.sum()),
         "fell": fell,
+        "collector_passes": collector.summary(),
         "machine": {
             "cpu": platform.processor() or platform.machine(),
             "cores": os.cpu_count() or 0,
@@ -400,6 +412,11 @@ def format_table(result: dict[str, Any]) -> str:
         f"real-time factor: {result['real_time_factor']:.1f} (simulation alone "
         f"{result['sim_only_real_time_factor']:.1f})",
     ]
+    passes = result["collector_passes"]
+    lines.append(
+        f"garbage collector in the loop: {sum(passes['by_generation'])} passes (by generation "
+        f"{passes['by_generation']}), longest {passes['longest_ms']:.1f} ms"
+    )
     if result["qp_iterations"] is not None:
         lines.append(
             f"QP: {result['qp_paths']['shortcut']} steps by the unconstrained shortcut, "

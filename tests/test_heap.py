@@ -1,0 +1,121 @@
+"""``benchmarks.heap.setup_frozen``: the objects made before a timed loop are frozen for the loop
+and thawed after it (also on an error, and only by the outermost freeze); the episode runner
+and ``wip-bench profile`` run their loops under it."""
+
+from __future__ import annotations
+
+import gc
+from typing import Any
+
+import pytest
+
+from benchmarks.heap import setup_frozen
+from benchmarks.rollout import rollout
+from benchmarks.speed import profile as profile_module
+from benchmarks.speed.profile import profile_episode
+
+
+@pytest.fixture(autouse=True)
+def _thawed() -> Any:
+    """Every test starts with nothing frozen, and leaves nothing frozen."""
+    gc.unfreeze()
+    yield
+    assert gc.get_freeze_count() == 0
+    gc.unfreeze()
+
+
+def test_the_objects_made_before_are_frozen_in_the_block_and_thawed_after() -> None:
+    before = [object() for _ in range(3)]  # a list: tracked by the collector
+    with setup_frozen():
+        assert gc.get_freeze_count() > 0
+        assert not any(o is before for o in gc.get_objects())  # out of every generation
+        made_inside = [1, 2]
+        assert gc.is_tracked(made_inside)
+        assert any(o is made_inside for o in gc.get_objects())  # still collectable
+    assert gc.get_freeze_count() == 0
+    assert any(o is before for o in gc.get_objects())  # back in a generation
+
+
+def test_an_error_in_the_block_still_thaws() -> None:
+    with pytest.raises(RuntimeError, match="inside"), setup_frozen():
+        raise RuntimeError("inside")
+    assert gc.get_freeze_count() == 0
+
+
+def test_a_nested_freeze_leaves_the_thawing_to_the_outer_one() -> None:
+    with setup_frozen():
+        with setup_frozen():
+            pass
+        assert gc.get_freeze_count() > 0
+    assert gc.get_freeze_count() == 0
+
+
+def test_the_episode_runner_steps_with_the_setup_frozen() -> None:
+    counts: list[int] = []
+
+    def on_step(env: Any, info: dict[str, Any], index: int) -> None:
+        counts.append(gc.get_freeze_count())
+
+    episode = rollout("wip_gym/PlanarTray-v0", {}, "decoupled", None, 0, 0.02, on_step=on_step)
+    assert episode.metrics["steps"] == 20
+    assert counts[0] == 0  # the hook after the reset, before the loop
+    assert len(counts) == 21 and min(counts[1:]) > 0  # every step inside the loop
+
+
+def test_the_profiler_times_its_loop_and_floor_with_the_setup_frozen(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    counts: list[int] = []
+    real_floor_times = profile_module.floor_times
+
+    def floor_times(*args: Any) -> Any:
+        counts.append(gc.get_freeze_count())
+        return real_floor_times(*args)
+
+    monkeypatch.setattr(profile_module, "floor_times", floor_times)
+    result = profile_episode("PlanarTray-v0", "decoupled", duration=0.02)
+    assert result["steps"] == 20
+    assert len(counts) == 1 and counts[0] > 0
+
+
+def test_the_profiler_reports_the_collector_passes_in_its_loop(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A full pass forced into the fifth control step is counted, as generation 2; the other
+    fields add up."""
+    real_make_policy = profile_module.make_policy
+
+    def policy_with_a_pass(*args: Any, **kwargs: Any) -> Any:
+        policy = real_make_policy(*args, **kwargs)
+        step = policy.__call__
+        calls = [0]
+
+        def call(observation: Any) -> Any:
+            calls[0] += 1
+            if calls[0] == 5:
+                gc.collect()
+            return step(observation)
+
+        policy.__call__ = call
+        return _Calling(policy)
+
+    monkeypatch.setattr(profile_module, "make_policy", policy_with_a_pass)
+    result = profile_episode("PlanarTray-v0", "decoupled", duration=0.02)
+    passes = result["collector_passes"]
+    assert passes["by_generation"][2] == 1
+    assert 0.0 < passes["longest_ms"] <= passes["total_ms"]
+    assert "garbage collector in the loop" in profile_module.format_table(result)
+
+
+class _Calling:
+    """A policy whose instance ``__call__`` is used (Python looks special methods up on the
+    type); every other attribute is the policy's."""
+
+    def __init__(self, policy: Any) -> None:
+        self._policy = policy
+
+    def __call__(self, observation: Any) -> Any:
+        return self._policy.__call__(observation)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._policy, name)
