@@ -2,7 +2,7 @@
 
 A closed-loop episode starts in a process that holds a few hundred thousand objects (JAX's,
 numba's, MuJoCo's bindings, the env, the policy and its plan). The collector's full pass (its
-oldest generation) walks all of them: 85 to 155 ms here, at a time set by the allocation counts,
+oldest generation) walks all of them: 131 ms here, at a time set by the allocation counts,
 so now inside an episode's timed loop, now outside it (``python -m benchmarks.speed.gc_pauses``;
 docs/performance.md §20). One such pause in an 8 s episode adds about 2 units to its mean
 control step, and it came and went between two revisions whose timed code was the same.
@@ -20,21 +20,27 @@ from __future__ import annotations
 import gc
 import time
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from typing import Any
+
+_depth = 0  # setup_frozen blocks open in this process
 
 
 @contextmanager
 def setup_frozen() -> Iterator[None]:
     """Freeze the objects that exist now for the ``with`` block (module docstring). Nested in
-    another freeze (``gc.get_freeze_count() > 0`` on entry), it freezes what was made since and
-    leaves the unfreezing to the outer one."""
-    outermost = gc.get_freeze_count() == 0
+    another ``setup_frozen``, it freezes what was made since and leaves the thawing to the
+    outermost one. The collector's permanent generation is one per process: the outermost
+    block's exit thaws every freeze, a ``gc.freeze()`` made before it and another thread's
+    included (they lose the benefit; nothing is lost)."""
+    global _depth
     gc.freeze()
+    _depth += 1
     try:
         yield
     finally:
-        if outermost:
+        _depth -= 1
+        if _depth == 0:
             gc.unfreeze()
 
 
@@ -58,7 +64,8 @@ class CollectorPasses:
         return self
 
     def __exit__(self, *exc: object) -> None:
-        gc.callbacks.remove(self)
+        with suppress(ValueError):  # gone if someone cleared gc.callbacks
+            gc.callbacks.remove(self)
 
     def summary(self) -> dict[str, Any]:
         """``{"by_generation": [n0, n1, n2], "longest_ms": float, "total_ms": float}``."""

@@ -16,6 +16,8 @@ from controllers.optimizer.ddp import (
     DDPConfig,
     DDPResult,
     DDPSolver,
+    _mirrored_upper,
+    _symmetrised,
     ddp_solve,
     make_ddp_solver,
     riccati_step,
@@ -341,6 +343,17 @@ def test_riccati_step_equals_the_textbook_step(n: int, m: int, second_order: boo
     assert bool(got[6])
     vxx_new = np.asarray(got[1])
     assert np.array_equal(vxx_new, vxx_new.T)
+
+
+def test_mirrored_upper_keeps_the_upper_triangle_and_symmetrised_keeps_a_symmetric_matrix() -> None:
+    a = np.random.default_rng(3).normal(size=(5, 5))
+    mirrored = np.asarray(_mirrored_upper(jnp.asarray(a)))
+    upper = np.triu_indices(5)
+    np.testing.assert_array_equal(mirrored[upper], a[upper])  # the upper triangle, to the bit
+    np.testing.assert_array_equal(mirrored, mirrored.T)
+    s = a + a.T  # exactly symmetric: unchanged to the bit
+    np.testing.assert_array_equal(np.asarray(_symmetrised(jnp.asarray(s))), s)
+    np.testing.assert_array_equal(np.asarray(_symmetrised(jnp.asarray(a))), 0.5 * (a + a.T))
 
 
 # ------------------------------------------------------------------------- 3. DDP vs iLQR

@@ -10,6 +10,7 @@ import dataclasses
 import hashlib
 import math
 import pickle
+import re
 from pathlib import Path
 
 import numpy as np
@@ -323,6 +324,25 @@ def test_refusals_copies_and_the_module_on_disk(plans: dict[str, Plan], params: 
     other = numba_ddp.module_source(mpc.problem, layout, "cache=True")
     functions = source.count("\ndef ")
     assert other.count("@numba.njit(cache=True)\ndef ") == functions > 10
+
+
+def test_the_generated_backward_stage_writes_v_xx_from_one_triangle(
+    plans: dict[str, Plan],
+) -> None:
+    """``riccati_step`` mirrors the upper triangle of the new ``V_xx`` (``_mirrored_upper``): in
+    the generated 3-D backward stage, ``V_xx[i, j]`` and ``V_xx[j, i]`` are written from the same
+    variable, so the other triangle's products are dead code for the compiler."""
+    mpc = ModelPredictiveController(plans["3d"])
+    layout = params_from_vector(np.zeros(_N_PARAMS))
+    source = numba_ddp.module_source(mpc.problem, layout)
+    stage = source[source.index("def backward_stage(") :]
+    stage = stage[: stage.index("\n@numba.njit")]
+    written = dict(re.findall(r"^    out\[(\d+)\] = (\S+)$", stage, flags=re.MULTILINE))
+    n = mpc.problem.n_state
+    for i in range(n):
+        for j in range(i + 1, n):
+            upper, lower = written[str(n + i * n + j)], written[str(n + j * n + i)]
+            assert upper == lower, (i, j)
 
 
 def test_an_unwritable_cache_directory_falls_back_to_a_temporary_one(

@@ -7,7 +7,8 @@ The revision's ``controllers/optimizer/ddp.py``, ``controllers/optimizer/numba_d
 that each version's numba backend writes its own module), ``controllers/simplified/
 wipm_problem.py`` and ``controllers/high_level/mpc.py`` are loaded from ``git show REV:...`` as
 modules of their own (their imports of one another redirected to each other; a revision without
-``numba_ddp`` is not supported), so that both versions run side by side on
+``numba_ddp`` is not supported; both use this checkout's ``scalar_codegen``, so a change to the
+code writer itself does not show here), so that both versions run side by side on
 the same plan (``wip-bench solvers``' problems: Krang's ``lambda(q)``, the plan to (2, 0) planar and
 (2, 1) 3-D). Per problem: each version's ``ModelPredictiveController`` along the plan's first
 ``--steps`` indices from the plan's states (``wip-bench solvers``' MPC workload), the versions
@@ -70,6 +71,9 @@ def load_revision(revision: str) -> dict[str, types.ModuleType]:
         sys.modules[name] = module
         exec(compile(source, module.__file__, "exec"), module.__dict__)  # noqa: S102
         modules[dotted] = module
+    mpc = modules["controllers.high_level.mpc"]
+    if mpc.numba_ddp is not modules["controllers.optimizer.numba_ddp"]:  # an import not redirected
+        raise RuntimeError(f"{revision}'s mpc.py did not import its own numba_ddp")
     return modules
 
 

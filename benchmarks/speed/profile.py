@@ -38,7 +38,7 @@ runs, docs/performance.md §12): without them, the control step's median 0.74 to
 its mean 0.84 to 0.88 times, what it is with them.
 
 The loop and the floor run with the setup's objects frozen (``benchmarks.heap.setup_frozen``):
-a full pass of the garbage collector over them costs 85 to 155 ms here, and fell inside some
+a full pass of the garbage collector over them costs about 130 ms here, and fell inside some
 8 s episodes and not others, adding about 2 units to a mean (docs/performance.md §20). The
 passes that remain in the loop are reported (``collector_passes``).
 
@@ -82,7 +82,7 @@ JSON schema (``--json PATH``; times per control step in microseconds unless name
       "sim_only_real_time_factor": float, # steps * dt / sum(mujoco_step): the ceiling
       "fell": bool,
       "collector_passes": {"by_generation": [int, int, int], "longest_ms": float,
-                           "total_ms": float},  # the garbage collector's, in the timed loop
+                           "total_ms": float},  # the garbage collector's, in the loop
       "machine": {"cpu": str, "cores": int, "python": str}
     }
 
@@ -290,26 +290,28 @@ def profile_episode(
     fell = False
     n = 0
     # the setup's objects out of the collector's full passes while the loop and its floor are
-    # timed: such a pass (85 to 155 ms) landed inside some episodes and not others (benchmarks.heap)
-    with setup_frozen(), CollectorPasses() as collector:
-        for n in range(steps):
-            tick = time.perf_counter()
-            action = policy(observation)
-            tock = time.perf_counter()
-            for name, timer in timers.items():
-                parts[name][n] = timer.take()
-            mujoco.mj_getState(model, data, states[n], STATE)  # the floor's, timed after
-            actions[n] = action
-            start = time.perf_counter()
-            observation, _, terminated, truncated, info = env.step(action)
-            env_step[n] = time.perf_counter() - start
-            physics[n] = physics_timer.take()
-            control[n] = tock - tick
-            if burst_due(n, UNIT_EVERY, steps):
-                unit_samples += reference_step.burst(UNIT_BURST)
-            fell = fell or bool(info.get("fallen", False))
-            if terminated or truncated:
-                break
+    # timed: such a pass (about 130 ms) landed inside some episodes and not others
+    # (benchmarks.heap); the passes left in the loop are recorded
+    with setup_frozen():
+        with CollectorPasses() as collector:
+            for n in range(steps):
+                tick = time.perf_counter()
+                action = policy(observation)
+                tock = time.perf_counter()
+                for name, timer in timers.items():
+                    parts[name][n] = timer.take()
+                mujoco.mj_getState(model, data, states[n], STATE)  # the floor's, timed after
+                actions[n] = action
+                start = time.perf_counter()
+                observation, _, terminated, truncated, info = env.step(action)
+                env_step[n] = time.perf_counter() - start
+                physics[n] = physics_timer.take()
+                control[n] = tock - tick
+                if burst_due(n, UNIT_EVERY, steps):
+                    unit_samples += reference_step.burst(UNIT_BURST)
+                fell = fell or bool(info.get("fallen", False))
+                if terminated or truncated:
+                    break
         k = n + 1
         floor = floor_times(model, states[:k], actions[:k], frame_skip)
     env.close()

@@ -44,7 +44,7 @@ definite) at any step makes the pass fail; ``mu`` is then increased and the pass
 "improved value update", consistent with the step actually taken):
 
     V_x  = Q_x  + K^T Q_uu k + K^T Q_u + Q_ux^T k                                (4)
-    V_xx = Q_xx + K^T Q_uu K + K^T Q_ux + Q_ux^T K          (then symmetrised)
+    V_xx = Q_xx + K^T Q_uu K + K^T Q_ux + Q_ux^T K          (its upper triangle, mirrored)
 
 and the expected cost change of a step of size ``alpha`` is
 
@@ -323,6 +323,13 @@ def _tmm(a: Array, b: Array) -> Array:
     return jnp.sum(a[:, :, None] * b[:, None, :], axis=0)
 
 
+def _symmetrised(a: Array) -> Array:
+    """``(a + a^T) / 2``: the terminal Hessian, symmetric to round-off as autodiff makes it, made
+    exactly symmetric, as ``riccati_step`` takes ``V'_xx`` (its products read one triangle).
+    An exactly symmetric ``a`` comes back unchanged to the bit."""
+    return 0.5 * (a + a.T)
+
+
 def _mirrored_upper(a: Array) -> Array:
     """The symmetric matrix whose upper triangle (diagonal included) is ``a``'s.
 
@@ -377,8 +384,9 @@ def riccati_step(
 ) -> tuple[Array, Array, Array, Array, Array, Array, Array]:
     """One step of the backward pass's recursion (2)-(5): from the stage derivatives
     ``(l_x, l_u, l_xx, l_ux, l_uu, f_x, f_u[, f_xx, f_ux, f_uu])`` and the next step's value
-    expansion ``V'_x``, ``V'_xx``, the value expansion here, the gains ``K``, ``k``, this step's
-    terms of ``dV`` (5) and whether ``Q_uu + mu I`` was positive definite. A pure function: the
+    expansion ``V'_x``, ``V'_xx`` (exactly symmetric: the products below read one triangle of
+    what it makes), the value expansion here, the gains ``K``, ``k``, this step's terms of
+    ``dV`` (5) and whether ``Q_uu + mu I`` was positive definite. A pure function: the
     backward scan runs it, and the MPC's numba backend (``controllers.optimizer.numba_ddp``)
     writes it out of its jaxpr as scalar code."""
     lx, lu, lxx, lux, luu, fx, fu = derivatives[:7]
@@ -572,7 +580,7 @@ class DDPSolver:
 
         xN, refN = X[-1], _last(refs)
         vx = jax.grad(self.terminal)(xN, refN)
-        vxx = jax.hessian(self.terminal)(xN, refN)
+        vxx = _symmetrised(jax.hessian(self.terminal)(xN, refN))
         zero = jnp.zeros((), vx.dtype)
         init = (vx, vxx, vx, zero, zero, jnp.array(True), zero)
         zs = (X[:-1], U, _head(refs))

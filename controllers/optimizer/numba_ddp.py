@@ -12,7 +12,7 @@ exact zeros of the Jacobians):
 
 - ``rollout_stage``: the discrete dynamics and the running cost (1);
 - ``terminal_stage``: the terminal cost with its gradient and Hessian (``jax.grad``,
-  ``jax.hessian``, as the JAX solver takes them);
+  ``jax.hessian`` made exactly symmetric, as the JAX solver takes them);
 - ``backward_stage``: the problem's own stage derivatives, then
   ``controllers.optimizer.ddp.riccati_step``, the step (2)-(5) that the JAX solver's backward
   scan runs.
@@ -442,7 +442,8 @@ def _stage_sources(problem: Any, params: Any) -> list[str]:
     def terminal(x: Any, s: Any, p: Any, c: Any) -> Any:
         _, cost = traced(c).costs()
         ref = (s, p)
-        return cost(x, ref), jax.grad(cost)(x, ref), jax.hessian(cost)(x, ref)
+        hessian = jax.hessian(cost)(x, ref)  # made exactly symmetric, as the JAX solver does
+        return cost(x, ref), jax.grad(cost)(x, ref), 0.5 * (hessian + hessian.T)
 
     def backward(x: Any, u: Any, s: Any, p: Any, c: Any, vx: Any, vxx: Any, mu: Any) -> Any:
         wipm = traced(c)
