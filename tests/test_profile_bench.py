@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import math
 import re
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -51,6 +52,7 @@ TOP_KEYS = {
     "control_dt_s",
     "frame_skip",
     "setup_s",
+    "setup_frozen",
     "collector_passes",
     "reference_step_us",
     "control_time_ms",
@@ -489,3 +491,30 @@ def test_mpc_inputs_times_both_paths_on_equal_inputs() -> None:
     assert sum(len(result["first_us"][path]) for path in mpc_inputs.PATHS) == 3
     with pytest.raises(ValueError, match="steps must be >= 10"):
         mpc_inputs.run("wip_gym/PlanarTray-v0", steps=5, seed=0)
+
+
+def test_episode_stalls_prints_every_part_and_the_collector(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``benchmarks.speed.episode_stalls`` on a short episode: a row per part the unified
+    controller has, each with its largest sample's step inside the episode, and the
+    collector's line; the profiler's own instrumentation is restored."""
+    from benchmarks.speed import episode_stalls
+
+    monkeypatch.setattr(
+        sys, "argv", ["episode_stalls", "--env", "PlanarTray-v0", "--duration", "0.05"]
+    )
+    instrument = profile_module._instrument
+    episode_stalls.main()
+    printed = capsys.readouterr().out
+    rows = [line.split(" | ") for line in printed.splitlines() if line.startswith("| ")][1:]
+    assert [row[0][2:] for row in rows] == [
+        "robot_model",
+        "qp_assembly",
+        "qp_solve_total",
+        "high_level",
+    ]
+    for row in rows:
+        assert 0 <= int(row[4].rstrip(" |")) < 50
+    assert "collector:" in printed and "full passes, ms:" in printed
+    assert profile_module._instrument is instrument

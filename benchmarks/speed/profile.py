@@ -40,7 +40,8 @@ its mean 0.84 to 0.88 times, what it is with them.
 The loop and the floor run with the setup's objects frozen (``benchmarks.heap.setup_frozen``):
 a full pass of the garbage collector over them costs about 130 ms here, and fell inside some
 8 s episodes and not others, adding about 2 units to a mean (docs/performance.md §20). The
-passes that remain in the loop are reported (``collector_passes``).
+passes that remain in the loop are reported (``collector_passes``); ``--no-freeze`` times the
+loop without the freeze.
 
 The unit (``benchmarks.speed.yardstick``): ``reference_step_us``, the median of a bare, warm
 ``mj_step`` of Krang-v0's model at its reset state, timed in this process before and after the
@@ -81,6 +82,7 @@ JSON schema (``--json PATH``; times per control step in microseconds unless name
       "real_time_factor": float,          # steps * dt / sum(control + env_step)
       "sim_only_real_time_factor": float, # steps * dt / sum(mujoco_step): the ceiling
       "fell": bool,
+      "setup_frozen": bool,               # the loop under benchmarks.heap.setup_frozen
       "collector_passes": {"by_generation": [int, int, int], "longest_ms": float,
                            "total_ms": float},  # the garbage collector's, in the loop
       "machine": {"cpu": str, "cores": int, "python": str}
@@ -101,6 +103,7 @@ import os
 import platform
 import time
 from collections.abc import Callable
+from contextlib import nullcontext
 from pathlib import Path
 from typing import Any
 
@@ -253,10 +256,12 @@ def profile_episode(
     seed: int = 0,
     env_kwargs: dict[str, Any] | None = None,
     config: Any = None,
+    freeze_setup: bool = True,
 ) -> dict[str, Any]:
     """Run one instrumented episode; return the JSON-ready profile (module docstring).
     ``env_kwargs`` and ``config`` (the controller's) default to the env's and the
-    controller's defaults."""
+    controller's defaults. ``freeze_setup=False`` times the loop without
+    ``benchmarks.heap.setup_frozen`` (what a loop of one's own sees without it)."""
     if duration <= 0:
         raise ValueError(f"duration must be positive, got {duration}")
     env_id = resolve_env_id(env_id)
@@ -292,7 +297,7 @@ def profile_episode(
     # the setup's objects out of the collector's full passes while the loop and its floor are
     # timed: such a pass (about 130 ms) landed inside some episodes and not others
     # (benchmarks.heap); the passes left in the loop are recorded
-    with setup_frozen():
+    with setup_frozen() if freeze_setup else nullcontext():
         with CollectorPasses() as collector:
             for n in range(steps):
                 tick = time.perf_counter()
@@ -370,6 +375,7 @@ def profile_episode(
         "real_time_factor": float(k * dt / (control.sum() + env_step.sum())),
         "sim_only_real_time_factor": float(k * dt / floor.sum()),
         "fell": fell,
+        "setup_frozen": freeze_setup,
         "collector_passes": collector.summary(),
         "machine": {
             "cpu": platform.processor() or platform.machine(),
@@ -437,6 +443,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--duration", type=float, default=5.0, help="episode length (s)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--json", type=Path, default=None, help="write the profile here")
+    parser.add_argument(
+        "--no-freeze",
+        action="store_true",
+        help="time the loop without the setup's objects frozen (benchmarks.heap): a full "
+        "garbage-collector pass may then fall inside it",
+    )
     add_configuration_arguments(
         parser, set_help="env.<argument> or <controller>.<field.path>, as in compare (repeatable)"
     )
@@ -455,6 +467,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         args.seed,
         spec.env_kwargs,
         spec.configs[args.controller],
+        freeze_setup=not args.no_freeze,
     )
     result["preset"] = args.preset
     result["overrides"] = spec.overrides
