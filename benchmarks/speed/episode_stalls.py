@@ -11,9 +11,10 @@ profile process's), with the profiler's part timers wrapped to keep every step's
 times every collector pass through ``gc.callbacks``. Printed: per part, its mean, median, and
 its largest sample with the step it fell on; then every full pass (the oldest generation) with
 its duration, and the count of the younger ones. It uses only what the profiler has had since
-docs/performance.md §12 (``_instrument`` and its timers' ``take``), so it runs on the
-revisions of §19 as well: that is how §20 found a 123 to 138 ms full pass at step 325 of their
-KrangTray-v0 episodes (their profiler has no freeze).
+docs/performance.md §12 (``_instrument`` and its timers' ``take``), so it runs on older
+revisions too: docs/performance.md §20 found with it a 123 to 142 ms full pass at step 325 of
+KrangTray-v0's episodes at the revisions of its table and of the one before (their profiler
+has no freeze).
 """
 
 from __future__ import annotations
