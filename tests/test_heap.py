@@ -83,7 +83,7 @@ def test_the_profiler_times_its_loop_and_floor_with_the_setup_frozen(
 
     monkeypatch.setattr(profile_module, "floor_times", floor_times)
     result = profile_episode("PlanarTray-v0", "decoupled", duration=0.02)
-    assert result["steps"] == 20
+    assert result["steps"] == 20 and result["setup_frozen"] is True
     assert len(counts) == 1 and counts[0] > 0
 
 
@@ -120,3 +120,17 @@ class _FullPassAtCall:
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._policy, name)
+
+
+def test_the_profiler_can_time_its_loop_without_the_freeze(monkeypatch: pytest.MonkeyPatch) -> None:
+    counts: list[int] = []
+    real_floor_times = profile_module.floor_times
+
+    def floor_times(*args: Any) -> Any:
+        counts.append(gc.get_freeze_count())
+        return real_floor_times(*args)
+
+    monkeypatch.setattr(profile_module, "floor_times", floor_times)
+    result = profile_episode("PlanarTray-v0", "decoupled", duration=0.02, freeze_setup=False)
+    assert counts == [0] and result["setup_frozen"] is False
+    assert "setup not frozen" in profile_module.format_table(result)

@@ -2,7 +2,7 @@
 against the simulator's own floor measured in the same run.
 
     wip-bench profile --env KrangTray-v0 --controller unified [--duration 5] [--seed 0]
-                      [--preset paper] [--set KEY=VALUE ...] [--json PATH]
+                      [--preset paper] [--set KEY=VALUE ...] [--json PATH] [--no-freeze]
 
 ``--preset`` and ``--set`` are compare's (``benchmarks.overrides``): for example
 ``--set unified.high_level.mpc_delay_steps=5`` profiles the MPC solved beside the loop.
@@ -421,9 +421,10 @@ def format_table(result: dict[str, Any]) -> str:
         f"{result['sim_only_real_time_factor']:.1f})",
     ]
     passes = result["collector_passes"]
+    frozen = "setup frozen" if result["setup_frozen"] else "setup not frozen: --no-freeze"
     lines.append(
-        f"garbage collector in the loop: {sum(passes['by_generation'])} passes (by generation "
-        f"{passes['by_generation']}), longest {passes['longest_ms']:.1f} ms"
+        f"garbage collector in the loop ({frozen}): {sum(passes['by_generation'])} passes (by "
+        f"generation {passes['by_generation']}), longest {passes['longest_ms']:.1f} ms"
     )
     if result["qp_iterations"] is not None:
         lines.append(
