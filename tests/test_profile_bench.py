@@ -518,3 +518,16 @@ def test_episode_stalls_prints_every_part_and_the_collector(
         assert 0 <= int(row[4].rstrip(" |")) < 50
     assert "collector:" in printed and "full passes:" in printed
     assert profile_module._instrument is instrument
+
+
+def test_qp_paths_counts_the_steps_proxqp_solved() -> None:
+    """``benchmarks.speed.qp_paths``: on PlanarTray-v0 the default drive's first second takes
+    the shortcut at every step, and with a 3 kg payload put in the hand at 0.1 s some of its
+    steps go to ProxQP (the table of docs/performance.md §20: most steps once it drives)."""
+    from benchmarks.speed.qp_paths import proxqp_steps
+
+    env_id = "wip_gym/PlanarTray-v0"
+    assert proxqp_steps(env_id, "unified", None, {}, 0, 1.0) == (0, 1000)
+    payload = {"env.payload_mass": 3.0, "env.payload_time": 0.1}
+    solved, steps = proxqp_steps(env_id, "unified", None, payload, 0, 1.0)
+    assert steps == 1000 and 0 < solved <= 900
