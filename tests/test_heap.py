@@ -71,9 +71,9 @@ def test_the_episode_runner_steps_with_the_setup_frozen() -> None:
     assert len(counts) == 21 and min(counts[1:]) > 0  # every step inside the loop
 
 
-def test_the_profiler_times_its_loop_and_floor_with_the_setup_frozen(
-    monkeypatch: pytest.MonkeyPatch,
-) -> None:
+def _freeze_counts_at_the_floor(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """``gc.get_freeze_count()`` at each call of the profiler's ``floor_times`` (which it runs
+    after its loop, inside the same freeze), recorded into the returned list."""
     counts: list[int] = []
     real_floor_times = profile_module.floor_times
 
@@ -82,6 +82,13 @@ def test_the_profiler_times_its_loop_and_floor_with_the_setup_frozen(
         return real_floor_times(*args)
 
     monkeypatch.setattr(profile_module, "floor_times", floor_times)
+    return counts
+
+
+def test_the_profiler_times_its_loop_and_floor_with_the_setup_frozen(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    counts = _freeze_counts_at_the_floor(monkeypatch)
     result = profile_episode("PlanarTray-v0", "decoupled", duration=0.02)
     assert result["steps"] == 20 and result["setup_frozen"] is True
     assert len(counts) == 1 and counts[0] > 0
@@ -123,14 +130,7 @@ class _FullPassAtCall:
 
 
 def test_the_profiler_can_time_its_loop_without_the_freeze(monkeypatch: pytest.MonkeyPatch) -> None:
-    counts: list[int] = []
-    real_floor_times = profile_module.floor_times
-
-    def floor_times(*args: Any) -> Any:
-        counts.append(gc.get_freeze_count())
-        return real_floor_times(*args)
-
-    monkeypatch.setattr(profile_module, "floor_times", floor_times)
+    counts = _freeze_counts_at_the_floor(monkeypatch)
     result = profile_episode("PlanarTray-v0", "decoupled", duration=0.02, freeze_setup=False)
     assert counts == [0] and result["setup_frozen"] is False
     assert "setup not frozen" in profile_module.format_table(result)
