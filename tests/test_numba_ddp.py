@@ -383,6 +383,10 @@ def test_the_fallback_directory_is_refused_when_others_can_write_to_it(
     import tempfile
 
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    removed_at_exit: list[Path] = []
+    monkeypatch.setattr(
+        numba_ddp.atexit, "register", lambda function, path, **_: removed_at_exit.append(path)
+    )
     first = numba_ddp._private_temporary_directory()
     assert first.parent == tmp_path and first.stat().st_mode & 0o077 == 0
     assert numba_ddp._private_temporary_directory() == first  # reused
@@ -392,7 +396,10 @@ def test_the_fallback_directory_is_refused_when_others_can_write_to_it(
     first.rmdir()
     (tmp_path / "elsewhere").mkdir(mode=0o700)
     first.symlink_to(tmp_path / "elsewhere")
-    assert numba_ddp._private_temporary_directory() not in (first, tmp_path / "elsewhere")
+    fresh = numba_ddp._private_temporary_directory()
+    assert fresh not in (first, tmp_path / "elsewhere")
+    # the fresh directories, and only they, are removed when the process exits
+    assert removed_at_exit == [shared, fresh]
 
 
 def test_a_module_file_is_put_in_place_once_whatever_the_file_system(

@@ -37,11 +37,13 @@ active and not, through failed line searches and raised mu, and through a reject
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import hashlib
 import importlib.util
 import inspect
 import os
+import shutil
 import sys
 import tempfile
 import threading
@@ -554,8 +556,8 @@ def _write_and_load(problem: Any, params: Any, options: str = OPTIONS) -> Module
 def _private_temporary_directory() -> Path:
     """``<tmp>/wip-gym-numba-<uid>``, made by this user with mode ``0o700``; if it exists as
     another user's, a link, or writable by others than its owner (a file planted there would
-    be executed), a fresh directory of ``tempfile.mkdtemp`` instead (left behind, not reused:
-    each such process compiles its module again)."""
+    be executed), a fresh directory of ``tempfile.mkdtemp`` instead, removed when the process
+    exits (not reused: each such process compiles its module again)."""
     uid = os.getuid() if hasattr(os, "getuid") else None
     directory = Path(tempfile.gettempdir()) / f"wip-gym-numba-{uid if uid is not None else 'user'}"
     try:
@@ -566,7 +568,9 @@ def _private_temporary_directory() -> Path:
             return directory
     except OSError:
         pass
-    return Path(tempfile.mkdtemp(prefix="wip-gym-numba-"))
+    fresh = Path(tempfile.mkdtemp(prefix="wip-gym-numba-"))
+    atexit.register(shutil.rmtree, fresh, ignore_errors=True)
+    return fresh
 
 
 def _written(directory: Path, name: str, source: str) -> Path:
