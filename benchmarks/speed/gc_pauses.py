@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import gc
 import time
+from contextlib import nullcontext
 
 import gymnasium as gym
 import numpy as np
@@ -32,14 +33,10 @@ from controllers.registry import make_policy
 
 def full_pass_s(frozen: bool) -> float:
     """The time of one ``gc.collect()``, inside :func:`setup_frozen` if ``frozen``."""
-    if frozen:
-        with setup_frozen():
-            start = time.perf_counter()
-            gc.collect()
-            return time.perf_counter() - start
-    start = time.perf_counter()
-    gc.collect()
-    return time.perf_counter() - start
+    with setup_frozen() if frozen else nullcontext():
+        start = time.perf_counter()
+        gc.collect()
+        return time.perf_counter() - start
 
 
 def main() -> None:

@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 
 from benchmarks.overrides import resolve_run
@@ -42,9 +43,6 @@ SCENARIOS: tuple[tuple[str, str | None, dict[str, Any]], ...] = (
 )
 
 
-PUSH_DURATION_S = 0.2
-
-
 def proxqp_steps(
     env_id: str,
     controller: str,
@@ -54,8 +52,6 @@ def proxqp_steps(
     duration: float,
 ) -> tuple[int, int]:
     """``(steps solved by ProxQP, steps)`` of one episode."""
-    if "env.push_force" in overrides:
-        overrides = {**overrides, "env.push_duration": PUSH_DURATION_S}
     spec = resolve_run(env_id, [controller], preset, overrides=overrides)
     episode = rollout(env_id, spec.env_kwargs, controller, spec.configs[controller], seed, duration)
     iterations = np.asarray(episode.policy.diagnostics["qp_iterations"])
@@ -72,14 +68,16 @@ def main() -> None:
     if args.seeds < 1 or args.duration <= 0:
         parser.error("--seeds must be at least 1 and --duration positive")
     controllers = [name.strip() for name in args.controllers.split(",") if name.strip()]
-    full = round(args.duration / 0.001)
-    print(f"{args.seeds} seeds, {args.duration} s episodes ({full} steps when none ends early)")
+    print(f"{args.seeds} seeds, {args.duration} s episodes")
     print(
         "| env | scenario | controller | ProxQP steps, mean share | largest share | largest "
         "count | episodes ended early |"
     )
     print("|---|---|---|---|---|---|---|")
     for env_id in ENVS:
+        probe = gym.make(env_id)
+        full = round(args.duration / probe.unwrapped.dt)  # the steps of an episode run through
+        probe.close()
         for name, preset, overrides in SCENARIOS:
             for controller in controllers:
                 runs = [

@@ -324,9 +324,10 @@ def _tmm(a: Array, b: Array) -> Array:
 
 
 def _symmetrised(a: Array) -> Array:
-    """``(a + a^T) / 2``: the terminal Hessian, symmetric to round-off as autodiff makes it, made
-    exactly symmetric, as ``riccati_step`` takes ``V'_xx`` (its products read one triangle).
-    An exactly symmetric ``a`` comes back unchanged to the bit."""
+    """``(a + a^T) / 2``, exactly symmetric; an exactly symmetric ``a`` comes back unchanged to
+    the bit. The terminal Hessian (symmetric to round-off as autodiff makes it) goes through it
+    before the recursion, as ``riccati_step`` takes ``V'_xx`` (its products read one
+    triangle), and so do ``Q_xx`` and ``Q_uu``."""
     return 0.5 * (a + a.T)
 
 
@@ -408,8 +409,8 @@ def riccati_step(
         qxx = qxx + _contract(vx, fxx)
         qux = qux + _contract(vx, fux)
         quu = quu + _contract(vx, fuu)
-    qxx = 0.5 * (qxx + qxx.T)
-    quu = 0.5 * (quu + quu.T)
+    qxx = _symmetrised(qxx)
+    quu = _symmetrised(quu)
     eye = jnp.eye(m, dtype=quu.dtype)
     sol, ok = _cholesky_solve(quu + mu * eye, jnp.concatenate([qu[:, None], qux], 1))
     k, K = -sol[:, 0], -sol[:, 1:]

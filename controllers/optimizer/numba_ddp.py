@@ -427,7 +427,7 @@ def _stage_sources(problem: Any, params: Any) -> list[str]:
     import jax  # noqa: PLC0415
     import jax.numpy as jnp  # noqa: PLC0415
 
-    from controllers.optimizer.ddp import riccati_step  # noqa: PLC0415
+    from controllers.optimizer.ddp import _symmetrised, riccati_step  # noqa: PLC0415
     from controllers.optimizer.scalar_codegen import scalar_source  # noqa: PLC0415
 
     n, m = problem.n_state, problem.n_control
@@ -444,8 +444,8 @@ def _stage_sources(problem: Any, params: Any) -> list[str]:
     def terminal(x: Any, s: Any, p: Any, c: Any) -> Any:
         _, cost = traced(c).costs()
         ref = (s, p)
-        hessian = jax.hessian(cost)(x, ref)  # made exactly symmetric, as the JAX solver does
-        return cost(x, ref), jax.grad(cost)(x, ref), 0.5 * (hessian + hessian.T)
+        # made exactly symmetric, as the JAX solver does
+        return cost(x, ref), jax.grad(cost)(x, ref), _symmetrised(jax.hessian(cost)(x, ref))
 
     def backward(x: Any, u: Any, s: Any, p: Any, c: Any, vx: Any, vxx: Any, mu: Any) -> Any:
         wipm = traced(c)
