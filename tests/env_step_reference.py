@@ -310,7 +310,9 @@ def reference_step(
 
 
 def reference_reset_info(env: WIPEnv) -> dict[str, Any]:
-    """The old ``_get_reset_info`` (after ``reset_model``'s ``_measure``)."""
+    """The old ``_get_reset_info`` (after ``reset_model``; the old ``_measure`` redone here at the
+    reset state, which also gives a push in ``reference_step`` its first heading)."""
+    measure(env)
     info = info_of(env, is_fallen=False)
     if env._tray:
         frame = cup_in_tray_frame(env)

@@ -151,6 +151,32 @@ def test_push_moves_the_robot_along_the_heading() -> None:
     assert final_x(-200.0) < final_x(0.0) - 1e-3
 
 
+def test_push_owns_its_bodys_applied_force_only_in_an_env_with_a_push() -> None:
+    """Without a push the env leaves ``xfrc_applied`` to the user (a force set on the push
+    body stays); with one it writes the push along the heading in its window and zero after."""
+    plain = gym.make("wip_gym/Krang-v0")
+    plain.reset(seed=0)
+    base = plain.unwrapped
+    body = base._push_body
+    base.data.xfrc_applied[body] = (30.0, -20.0, 0.0, 0.0, 1.0, 0.0)
+    for _ in range(3):
+        plain.step(np.zeros(plain.action_space.shape))
+    np.testing.assert_array_equal(base.data.xfrc_applied[body], (30.0, -20.0, 0.0, 0.0, 1.0, 0.0))
+
+    pushed = gym.make("wip_gym/Krang-v0", push_force=100.0, push_time=0.0, push_duration=0.002)
+    _, info = pushed.reset(seed=0)
+    base = pushed.unwrapped
+    base.data.xfrc_applied[body] = (30.0, -20.0, 0.0, 0.0, 1.0, 0.0)
+    pushed.step(np.zeros(pushed.action_space.shape))
+    psi = info["psi"]  # the heading at the step's start
+    np.testing.assert_allclose(
+        base.data.xfrc_applied[body], (100.0 * np.cos(psi), 100.0 * np.sin(psi), 0, 0, 0, 0)
+    )
+    for _ in range(3):
+        pushed.step(np.zeros(pushed.action_space.shape))
+    np.testing.assert_array_equal(base.data.xfrc_applied[body], 0.0)
+
+
 def test_payload_changes_the_mass_when_it_appears() -> None:
     env = gym.make("wip_gym/Krang-v0", payload_mass=2.0, payload_time=0.05)
     env.reset(seed=0)

@@ -242,7 +242,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         self.robot = RobotModel(self.model)
         lay = self.robot.layout
         self._layout = lay
-        self._cos_psi, self._sin_psi = 1.0, 0.0
+        self._planar = lay.planar
         self._nq, self._nv = lay.nq, lay.nv
         obs: dict[str, spaces.Space[Any]] = {
             "qpos": spaces.Box(-np.inf, np.inf, (lay.nq,), np.float64),
@@ -331,7 +331,11 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             floats[ms.F_CUP_FRICTION] = self._cup_friction
         self._measure_ints, self._measure_floats = ints, floats
         self._measures = np.zeros(ms.N_OUT)
+        self._block = self._measures.copy()
         self._values = self._measures.tolist()
+        self._action_shape = self.action_space.shape
+        # step() applies a push or a payload only while one can still come (reset_model)
+        self._events_due = push_force != 0.0
         ms.compile_once()
         self._bind_views()
 
@@ -413,6 +417,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             m.body_mass[self._robot_bodies] *= scale
             m.body_inertia[self._robot_bodies] *= scale[:, None]
         self._payload_attached = self._payload_time <= 0.0
+        self._events_due = self._push[0] != 0.0 or not self._payload_attached
         if self._payload_mass > 0 and not self._payload_attached:
             m.body_mass[self._payload_body] = 0.0
             m.body_inertia[self._payload_body] = 0.0
@@ -511,31 +516,18 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         # the action's check and its ctrl cost, one compiled call (_check_action explains a
         # rejected action)
         a = np.asarray(action, dtype=np.float64)
-        if a.shape != self.action_space.shape:
+        if a.shape != self._action_shape:
             a = self._check_action(a)
         effort = action_effort(a, self._action_table)
         if effort != effort:  # NaN: a torque beyond the band, or NaN
             a = self._check_action(a)
             effort = float(np.sum(np.square(a / self._action_scale)))
-        m, d = self.model, self.data
-        if self._views_of[1] is not d or self._views_of[0] is not m:
-            self._bind_views()
-        t = d.time
-        force, start, duration = self._push
-        push = self._view_push
-        push[:] = 0.0
-        if force != 0.0 and start <= t < start + duration:
-            push[:3] = (force * self._cos_psi, force * self._sin_psi, 0)
-        if not self._payload_attached and t >= self._payload_time:
-            m.body_mass[self._payload_body] = self._payload_mass
-            m.body_inertia[self._payload_body] = self._nominal_inertia[self._payload_body]
-            # mj_setConst overwrites the data it is given (qpos reset to qpos0): use scratch data
-            mujoco.mj_setConst(m, mujoco.MjData(m))
-            self._payload_attached = True
+        if self._events_due:
+            self._apply_events()
         self.do_simulation(a, self.frame_skip)
         values = self._measure()
         fallen = values[ms.FALLEN] != 0.0
-        info = self._info(values, fallen=fallen)
+        info = self._info(values, fallen)
         newly_lost = False
         if self._tray:
             kept = self._tray_entries(info, values)
@@ -548,11 +540,31 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         info["reward_fall"] = fall = -fall_pen if fallen else 0.0
         info["reward_cup_loss"] = cup_loss = -cup_pen if newly_lost else 0.0
         self._prev_distance = distance
-        reward = float(progress + ctrl + fall + cup_loss)
         terminated = bool(fallen or (self._tray and self._terminate_on_cup_loss and self._cup_lost))
         if self.render_mode == "human":
             self.render()
-        return self._get_obs(), reward, terminated, False, info
+        return self._get_obs(), float(progress + ctrl + fall + cup_loss), terminated, False, info
+
+    def _apply_events(self) -> None:
+        """Before a step: the push on (its force along the heading at the step's start) or off
+        (zeroed) on its body; a payload due in the hand put there. Only an env with a push
+        (``push_force != 0``) writes its body's ``xfrc_applied``; others leave it to the user."""
+        if self._views_of[1] is not self.data or self._views_of[0] is not self.model:
+            self._bind_views()
+        m, t = self.model, self.data.time
+        force, start, duration = self._push
+        if force != 0.0:
+            push = self._view_push
+            push[:] = 0.0
+            if start <= t < start + duration:
+                push[:3] = (force * self._values[ms.COS_PSI], force * self._values[ms.SIN_PSI], 0)
+        if not self._payload_attached and t >= self._payload_time:
+            m.body_mass[self._payload_body] = self._payload_mass
+            m.body_inertia[self._payload_body] = self._nominal_inertia[self._payload_body]
+            # mj_setConst overwrites the data it is given (qpos reset to qpos0): use scratch data
+            mujoco.mj_setConst(m, mujoco.MjData(m))
+            self._payload_attached = True
+            self._events_due = force != 0.0
 
     def do_simulation(self, ctrl: NDArray[np.float64], n_frames: int) -> None:
         """``n_frames`` MuJoCo steps with the (validated) torques ``ctrl``. Unlike Gymnasium's,
@@ -593,38 +605,22 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         ``psid``, ``x``, ``xd`` (the minimal coordinates of ``RobotModel``), the axle position,
         ``theta``, ``thetad`` of the body CoM (wheels excluded) about the axle in the heading
         frame (``RobotModel.theta``), the goal distance, the fall, the end effector's drift, a
-        tray task's cup and tray) into ``_measures``; returned as floats (also kept as
-        ``_values``, the robot's also as attributes)."""
-        m, d = self.model, self.data
-        if self._views_of[1] is not d or self._views_of[0] is not m:
+        tray task's cup and tray) into ``_measures``. Returned as floats and kept as
+        ``_values``; ``_block`` is a fresh copy of ``_measures`` whose slices are the step's
+        array-valued info and observation entries (one allocation for all of them)."""
+        if self._views_of[1] is not self.data or self._views_of[0] is not self.model:
             self._bind_views()
         out = self._measures
-        env_measures(self._measure_table, d.ncon, self._measure_ints, self._measure_floats, out)
-        values = out.tolist()
-        (
-            self._x,
-            self._xd,
-            self._theta,
-            self._thetad,
-            self._psi,
-            self._psid,
-            self._cos_psi,
-            self._sin_psi,
-            ax,
-            ay,
-            az,
-        ) = values[: ms.AXLE + 3]
-        self._axle_xyz = (ax, ay, az)
-        self._axle = out[ms.AXLE : ms.AXLE + 3].copy()
-        self._values = values
+        env_measures(
+            self._measure_table, self.data.ncon, self._measure_ints, self._measure_floats, out
+        )
+        self._block = block = out.copy()
+        self._values = values = block.tolist()
         return values
 
     def _goal_distance(self) -> float:
-        gx, gy = self._goal_xy
-        ax, ay, _ = self._axle_xyz
-        if self._spec.planar:
-            return abs(gx - ax)
-        return math.hypot(gx - ax, gy - ay)
+        """The axle's distance to the goal at the last ``_measure`` (planar: along x)."""
+        return self._values[ms.GOAL_DISTANCE]
 
     def _ee_in_axle_frame(self) -> NDArray[np.float64]:
         """The end effector in the axle frame at the last ``_measure`` (zeros without one)."""
@@ -648,7 +644,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         return math.degrees(math.acos(min(1.0, max(-1.0, z))))
 
     def _info(
-        self, values: list[float] | None = None, *, fallen: bool | None = None
+        self, values: list[float] | None = None, fallen: bool | None = None
     ) -> dict[str, Any]:
         """The robot's info from ``_measure``'s ``values`` (the last if None; ``fallen``: as
         found there if None); a tray task's entries are added by ``_tray_entries``."""
@@ -661,13 +657,16 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             "xd": values[ms.XD],
             "theta": values[ms.THETA],
             "thetad": values[ms.THETAD],
-            "axle_position": self._axle,
+            "axle_position": self._block[ms.AXLE : ms.AXLE + 3],
             "goal_distance": values[ms.GOAL_DISTANCE],
             "fallen": fallen,
         }
-        if not self._spec.planar:
-            info["psi"] = values[ms.PSI]
-            info["psid"] = values[ms.PSID]
+        if self._planar:
+            if self._ee_site >= 0:
+                info["ee_error"] = values[ms.EE_ERROR]
+            return info
+        info["psi"] = values[ms.PSI]
+        info["psid"] = values[ms.PSID]
         if self._ee_site >= 0:
             info["ee_error"] = values[ms.EE_ERROR]
         return info
@@ -676,29 +675,36 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         """Add the tray task's info entries from ``_measure``'s ``values``; return whether the
         cup is kept (on the tray, and the tray on the hand)."""
         tilt, upright, on_plate, tray_tilt, _, _, _, on_hand, use = values[ms.CUP_TILT_DEG :]
-        out = self._measures
+        block = self._block
         upright, on_plate, on_hand = upright != 0.0, on_plate != 0.0, on_hand != 0.0
-        info["tray_tilt_deg"] = tray_tilt
-        info["cup_offset"] = out[ms.CUP_POSE : ms.CUP_POSE + 3].copy()
-        info["cup_tilt_deg"] = tilt
-        info["cup_upright"] = upright
-        info["cup_on_plate"] = on_plate
-        info["cup_on_tray"] = on_tray = on_plate and upright
-        info["cup_friction_use"] = use
-        info["tray_offset"] = out[ms.TRAY_OFFSET : ms.TRAY_OFFSET + 3].copy()
-        info["tray_on_hand"] = on_hand
+        on_tray = on_plate and upright
+        info.update(
+            tray_tilt_deg=tray_tilt,
+            cup_offset=block[ms.CUP_POSE : ms.CUP_POSE + 3],
+            cup_tilt_deg=tilt,
+            cup_upright=upright,
+            cup_on_plate=on_plate,
+            cup_on_tray=on_tray,
+            cup_friction_use=use,
+            tray_offset=block[ms.TRAY_OFFSET : ms.TRAY_OFFSET + 3],
+            tray_on_hand=on_hand,
+        )
         return on_tray and on_hand
 
     def _get_obs(self) -> dict[str, NDArray[np.float64]]:
-        """The observation at the last ``_measure``."""
-        obs = {
+        """The observation at the last ``_measure`` (fresh arrays, none shared with the info)."""
+        if self._tray:
+            return {
+                "qpos": self._view_robot_qpos.copy(),
+                "qvel": self._view_robot_qvel.copy(),
+                "goal": self._goal.copy(),
+                "cup_pose": self._block[ms.CUP_POSE : ms.CUP_POSE + 7].copy(),
+            }
+        return {
             "qpos": self._view_robot_qpos.copy(),
             "qvel": self._view_robot_qvel.copy(),
             "goal": self._goal.copy(),
         }
-        if self._tray:
-            obs["cup_pose"] = self._measures[ms.CUP_POSE : ms.CUP_POSE + 7].copy()
-        return obs
 
     # ------------------------------------------------------------- rendering
     # (wip_gym.camera frames the robot; wip_gym.overlay draws the task's numbers when asked)

@@ -99,7 +99,7 @@ _COMMON = """
     | `tray_friction` | 0.3 | tray tasks: friction of the free tray's contact pairs with its supports (the authors' 0.3) |
     | `payload_mass` | 0.0 | kg welded to the hand (`ee` site) |
     | `payload_time` | 0.0 | s at which the payload appears (0: from the start) |
-    | `push_force` | 0.0 | N along the heading at the torso's CoM (sign = direction) |
+    | `push_force` | 0.0 | N along the heading at the torso's CoM (sign = direction); with a push the env owns that body's `data.xfrc_applied` (zeroed outside the push), without one it never writes it |
     | `push_time`, `push_duration` | 1.0, 0.1 | s |
     | `reset_noise_scale` | 0.01 | rad and rad/s |
     | `mass_randomization` | 0.0 | each link's mass and inertia scaled by `1 + U(-f, f)` per reset |
