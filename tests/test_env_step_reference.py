@@ -47,6 +47,8 @@ CASES: list[tuple[str, dict[str, Any]]] = [
     ),
     ("wip_gym/Krang-v0", {"push_force": 3000.0, "push_time": 0.05, "push_duration": 0.2}),
     ("wip_gym/Planar-v0", {"push_force": -2000.0, "push_time": 0.05, "push_duration": 0.2}),
+    # a payload without a push (the step's events end when it is in the hand)
+    ("wip_gym/Krang-v0", {"payload_mass": 1.0, "payload_time": 0.1}),
 ]
 #: (case index, step): the cup is thrown (its velocity set in both envs) before that step
 CUP_THROWS = {4: 150, 5: 300, 6: 200}

@@ -193,6 +193,14 @@ def test_payload_changes_the_mass_when_it_appears() -> None:
     assert jumps.max() < 1e-2
 
 
+def test_a_payload_time_without_a_payload_mass_is_no_payload() -> None:
+    env = gym.make("wip_gym/Krang-v0", payload_time=0.05)
+    env.reset(seed=0)
+    for _ in range(100):  # past payload_time: nothing to put in the hand
+        env.step(np.zeros(env.action_space.shape))
+    assert not env.unwrapped.payload_visible
+
+
 def test_mass_randomization_is_seeded() -> None:
     env = gym.make("wip_gym/Krang-v0", mass_randomization=0.1)
     env.reset(seed=3)

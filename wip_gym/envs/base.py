@@ -331,6 +331,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             floats[ms.F_CUP_FRICTION] = self._cup_friction
         self._measure_ints, self._measure_floats = ints, floats
         self._measures = np.zeros(ms.N_OUT)
+        self._measures[ms.COS_PSI] = 1.0  # heading 0 until the first measure
         self._block = self._measures.copy()
         self._values = self._measures.tolist()
         self._action_shape = self.action_space.shape
@@ -416,7 +417,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             )
             m.body_mass[self._robot_bodies] *= scale
             m.body_inertia[self._robot_bodies] *= scale[:, None]
-        self._payload_attached = self._payload_time <= 0.0
+        self._payload_attached = self._payload_mass <= 0 or self._payload_time <= 0.0
         self._events_due = self._push[0] != 0.0 or not self._payload_attached
         if self._payload_mass > 0 and not self._payload_attached:
             m.body_mass[self._payload_body] = 0.0
@@ -459,7 +460,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         self._prev_distance = values[ms.GOAL_DISTANCE]
         self._set_ee_reference(self._ee_in_axle_frame())
         # _measure found ee_error from the previous reference: from this one it is 0
-        self._measures[ms.EE_ERROR] = values[ms.EE_ERROR] = 0.0
+        self._measures[ms.EE_ERROR] = self._block[ms.EE_ERROR] = values[ms.EE_ERROR] = 0.0
         self._cup_lost = False
         return self._get_obs()
 
