@@ -364,13 +364,9 @@ class HierarchicalController(PolicyBase):
 
     def _set_references(self, robot: RobotModel) -> None:
         ref = self.high_level.reference(robot)
-        self.theta_task.theta_d = ref.theta
-        self.theta_task.thetad_d = ref.thetad
-        self.theta_task.thdd_d = ref.thdd
+        self.theta_task.set_desired(ref.theta, ref.thetad, ref.thdd)
         if self.spin_task is not None:
-            self.spin_task.psi_d = ref.psi
-            self.spin_task.psid_d = ref.psid
-            self.spin_task.psidd_d = ref.psidd
+            self.spin_task.set_desired(ref.psi, ref.psid, ref.psidd)
         if self.config.tray_mode == "specific_force" and self.orientation_tasks:
             # the tilt depends on the MPC solution only: made when a new one is in use
             solution = self.high_level.last_solution

@@ -45,10 +45,12 @@ def _change(tasks: list[Task], step: int) -> None:
     theta.theta_d += 0.01
     theta.kp = 40.0 + step
     theta.weight = 5.0 + step
+    theta.set_desired(theta.theta_d, 0.03 * step, -0.2 * step)
     for spin in _of(tasks, SpinTask):
         spin.psi_d = 0.02 * step
         spin.psidd_d = -0.1
         spin.kv = 15.0
+        spin.set_desired(spin.psi_d, 0.1 + step, spin.psidd_d)
     positions = _of(tasks, FramePositionTask)
     positions[0].target[0] += 0.01  # in place
     positions[-1].target = positions[-1].target + np.array([0.0, 0.005, -0.01])
@@ -122,6 +124,31 @@ def test_a_copied_task_holds_its_own_values() -> None:
     # the original still writes into its stack
     _of(tasks, ThetaTask)[0].theta_d = 0.123
     assert stack.params[0, 2] == 0.123
+
+
+def test_set_desired_is_three_assignments() -> None:
+    """``set_desired`` on a theta and a spin task, stored or not, leaves the task and its
+    stack's row as assigning the three attributes does."""
+    robot = RobotModel(_load("krang"))
+    robot.update(*robot.full_state(*random_minimal_state(robot, np.random.default_rng(5))))
+    for stored in (False, True):
+        tasks, twins = _task_set(robot, False), _task_set(robot, False)
+        stacks = (
+            [CompiledTaskStack(robot, MotionProbe(robot), group) for group in (tasks, twins)]
+            if stored
+            else []
+        )
+        for kind in (ThetaTask, SpinTask):
+            task, twin = _of(tasks, kind)[0], _of(twins, kind)[0]
+            task.set_desired(0.1, -0.2, 0.3)
+            for name, value in zip(kind.desired_names, (0.1, -0.2, 0.3), strict=True):
+                setattr(twin, name, value)
+            assert dataclasses.asdict(task) == dataclasses.asdict(twin)
+            assert [getattr(task, name) for name in kind.desired_names] == [0.1, -0.2, 0.3]
+        if stored:
+            np.testing.assert_array_equal(stacks[0].params, stacks[1].params)
+            row = stacks[0].params[[type(t) is ThetaTask for t in tasks].index(True)]
+            np.testing.assert_array_equal(row[2:5], (0.1, -0.2, 0.3))
 
 
 def test_two_stacks_sharing_tasks_both_read_them_right() -> None:

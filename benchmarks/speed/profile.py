@@ -15,8 +15,10 @@ over the time of ``policy(obs)`` plus ``env.step(action)`` summed over the steps
 
 The parts are timed with ``time.perf_counter`` around methods of the policy's own objects,
 wrapped on the instance for this run only (the controller's code is not changed; a wrapper
-costs well under a microsecond): ``robot.update`` (the robot model), ``qp.assemble`` and
-``qp.solve`` (the task QP; ``qp_solve`` is ``solve`` minus ``assemble``) and
+costs well under a microsecond): ``robot.update`` (the robot model), ``qp._run_kernel`` (the
+task rows, ``H``, ``g``, the constraint rows and the unconstrained minimiser, which both
+``qp.assemble`` and ``qp.solve`` run) and ``qp.solve`` (the task QP; ``qp_solve`` is ``solve``
+minus ``_run_kernel``) and
 ``high_level.reference`` (the MPC and the reference it hands the low level, amortised: it runs
 every 10 ms), and the env's ``do_simulation`` (``env_physics``: its ``mj_step`` in the loop). A
 part the controller lacks is ``null``. The floor, ``mujoco_step``, is a bare
@@ -62,7 +64,7 @@ JSON schema (``--json PATH``; times per control step in microseconds unless name
       "per_step_us": {                    # each {"mean": float, "median": float} or null
         "mujoco_step": ...,               # the floor: bare mj_step for one control period
         "robot_model": ...,               # RobotModel.update in the policy
-        "qp_assembly": ...,               # TaskQP.assemble (tasks, Jdot nu, iso3, H, g, C, ...)
+        "qp_assembly": ...,               # TaskQP._run_kernel (tasks, Jdot nu, iso3, H, g, C, ...)
         "qp_solve": ...,                  # TaskQP.solve minus assembly (ProxQP + torques)
         "high_level": ...,                # MPC + references (mean = amortised)
         "python_overhead": ...,           # control minus the four parts above
@@ -171,10 +173,10 @@ def _instrument(policy: Any) -> dict[str, _Timer]:
         timers["robot_model"] = _Timer()
         robot.update = timers["robot_model"].wrap(robot.update)
     qp = getattr(policy, "qp", None)
-    if qp is not None and hasattr(qp, "assemble") and hasattr(qp, "solve"):
+    if qp is not None and hasattr(qp, "_run_kernel") and hasattr(qp, "solve"):
         timers["qp_assembly"] = _Timer()
         timers["qp_solve_total"] = _Timer()
-        qp.assemble = timers["qp_assembly"].wrap(qp.assemble)
+        qp._run_kernel = timers["qp_assembly"].wrap(qp._run_kernel)
         qp.solve = timers["qp_solve_total"].wrap(qp.solve)
     high_level = getattr(policy, "high_level", None)
     if high_level is not None and hasattr(high_level, "reference"):

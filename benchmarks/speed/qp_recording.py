@@ -6,9 +6,10 @@ The QP is the one ``controllers.low_level.task_qp.TaskQP.solve`` hands ProxQP,
 
 ``H = T'T + eps I``, ``g = -T'b`` (the stacked weighted tasks; paper eq. ``iso3`` and the task
 rows of ``controllers.low_level.tasks``), ``C`` the actuator-torque rows and the joint-limit rows.
-It is captured from the benchmark side by wrapping the controller's ``qp.assemble`` on the instance
-(the controller's code is not touched): every control step's arrays are copied as they are
-handed to ProxQP.
+It is captured from the benchmark side by wrapping the controller's ``qp.solve`` on the instance
+(the controller's code is not touched): after every control step's solve, the QP kernel's
+buffers hold that step's arrays (whichever path the solve took: ProxQP's or the feasible
+unconstrained minimiser's), and they are copied.
 """
 
 from __future__ import annotations
@@ -67,14 +68,16 @@ def record_qps(env_id: str, seconds: float, seed: int = 0) -> Recording:
         policy.reset(observation, info)
         qp = policy.qp
         recorded: list[RecordedQP] = []
-        original = qp.assemble
+        original = qp.solve
 
-        def assemble(*args: object) -> tuple[FloatArray, ...]:
-            arrays = original(*args)
+        def solve(*args: object) -> object:
+            solution = original(*args)
+            k = qp.kernel  # this step's QP, as ProxQP is (or would be) handed it
+            arrays = (k.H, k.g, k.C, k.lower, k.upper)
             recorded.append(RecordedQP(*(np.array(a, dtype=np.float64) for a in arrays)))
-            return arrays
+            return solution
 
-        qp.assemble = assemble  # an instance attribute: shadows the method for this object only
+        qp.solve = solve  # an instance attribute: shadows the method for this object only
         steps = int(round(seconds / env.unwrapped.dt))
         try:
             for _ in tqdm(range(steps), desc=f"record {env_id}", leave=False, disable=None):
@@ -83,7 +86,7 @@ def record_qps(env_id: str, seconds: float, seed: int = 0) -> Recording:
                 if terminated or truncated:
                     break
         finally:
-            del qp.assemble
+            del qp.solve
         failures = policy.diagnostics.get("qp_failures", np.zeros(1))
         return Recording(env_id, seconds, tuple(recorded), int(np.max(failures, initial=0)))
     finally:

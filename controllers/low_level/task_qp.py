@@ -292,21 +292,43 @@ class TaskQP:
             self._table, self._table_for = table, (stack, self.kernel)
         return table
 
+    def _one_call(self, robot: RobotModel, tasks: Sequence[Task]) -> bool | None:
+        """The rows and the kernel in one compiled call (``controllers.low_level.compiled_step``):
+        whether the unconstrained minimiser is feasible (its solution terms then computed), or
+        None when the settings or a task's kind ask for the two-call path. The control step's
+        common case: kept to what it needs (docs/performance.md §22)."""
+        settings = self.settings
+        if not (settings.one_call and settings.compiled_tasks):
+            return None
+        stack = self._stack
+        if stack is None or not stack.matches(tasks):
+            stack = self._compiled_stack(robot, tasks)
+            if stack is None:
+                return None
+        if not robot.has_dynamics:
+            raise RuntimeError("the last robot update had dynamics=False: no A, h")
+        self.compiled = True
+        self._ensure_buffers(stack.rows, robot.layout.n_min)
+        table = self._table
+        stack_for, kernel_for = self._table_for
+        if table is None or stack_for is not stack or kernel_for is not self.kernel:
+            table = self._one_call_table(stack, robot)
+        stack.prepare_parameters(robot, self._w)
+        feasible = rows_and_kernel(table.rows)
+        stack.memoise_observers(robot, self._target)
+        self._terms_ready = feasible
+        return feasible
+
     def _run_kernel(
         self, robot: RobotModel, iso: IsolatedDynamics | None, tasks: Sequence[Task]
     ) -> bool:
-        if iso is None and self.settings.one_call:
-            stack = self._compiled_stack(robot, tasks)
-            if stack is not None:
-                if not robot.has_dynamics:
-                    raise RuntimeError("the last robot update had dynamics=False: no A, h")
-                self.compiled = True
-                self._ensure_buffers(stack.rows, robot.layout.n_min)
-                table = self._one_call_table(stack, robot)
-                stack.prepare_parameters(robot, self._w)
-                feasible = rows_and_kernel(table.rows)
-                stack.memoise_observers(robot, self._target)
-                self._terms_ready = feasible
+        """This state's rows, ``H``, ``g``, constraint rows and unconstrained minimiser into
+        the kernel's buffers, by whichever path applies; whether the minimiser is feasible
+        (what ``assemble`` and ``solve`` share; ``wip-bench profile`` times it as
+        ``qp_assembly``)."""
+        if iso is None:
+            feasible = self._one_call(robot, tasks)
+            if feasible is not None:
                 return feasible
         self._terms_ready = False
         self._snapshot(robot, tasks)
@@ -355,13 +377,23 @@ class TaskQP:
     ) -> QPSolution:
         """The task QP of this state (``iso`` None: eq. iso3 computed in the kernel from
         ``robot``). ``proxqp_calls`` counts the steps ProxQP solved."""
-        H, g, C, lower, upper = self.assemble(robot, iso, tasks)
-        if self._proxqp_ready and self.settings.unconstrained_first and self._feasible:
+        if iso is None and self._proxqp_ready and self.settings.unconstrained_first:
+            # the common case first: one compiled call, its minimiser feasible
+            self._feasible = feasible = self._run_kernel(robot, None, tasks)
+            if feasible:
+                k = self.kernel
+                if self._terms_ready:  # the one-call step computed what x implies
+                    self._last_actuators = actuators = k.actuators.copy()
+                    return QPSolution(
+                        k.x.copy(), k.nu_dot.copy(), k.generalized.copy(), actuators, True, 0
+                    )
+                return self._solution(k.x.copy(), iterations=0)
             k = self.kernel
-            if self._terms_ready:  # the one-call step computed what x implies
-                terms = (k.generalized.copy(), k.actuators.copy(), k.nu_dot.copy())
-                return self._solution(k.x.copy(), iterations=0, terms=terms)
-            return self._solution(k.x.copy(), iterations=0)
+            H, g, C, lower, upper = k.H, k.g, k.C, k.lower, k.upper
+        else:
+            H, g, C, lower, upper = self.assemble(robot, iso, tasks)
+            if self._proxqp_ready and self.settings.unconstrained_first and self._feasible:
+                return self._solution(self.kernel.x.copy(), iterations=0)
         self.proxqp_calls += 1
         if self._qp is None:
             self._qp = start_proxqp(H, g, C, lower, upper, self.settings)

@@ -263,8 +263,8 @@ _KINDS: dict[type, int] = {
 
 
 _DESIRED: dict[int, tuple[str, str, str]] = {
-    ct.THETA: ("theta_d", "thetad_d", "thdd_d"),
-    ct.SPIN: ("psi_d", "psid_d", "psidd_d"),
+    ct.THETA: ThetaTask.desired_names,
+    ct.SPIN: SpinTask.desired_names,
 }
 """A theta or spin task's desired value, rate and acceleration: columns 2 to 4 of its
 ``params`` row (``compiled_tasks.PARAMETERS``)."""

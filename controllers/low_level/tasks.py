@@ -16,7 +16,7 @@ docs/DESIGN.md §4, docs/ERRATA.md §5).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import mujoco
 import numpy as np
@@ -132,6 +132,29 @@ class StoredParameters:
         }
 
 
+class DesiredMotion(StoredParameters):
+    """A task that tracks a scalar's desired value, rate and acceleration (``desired_names``),
+    set together every control step by :meth:`set_desired`."""
+
+    desired_names: ClassVar[tuple[str, str, str]]
+
+    def set_desired(self, value: float, rate: float, acceleration: float) -> None:
+        """Set the desired value, rate and acceleration (floats): the same as assigning the
+        three attributes, written straight into a compiled stack's arrays when one holds
+        them (``StoredParameters``), without three passes through ``__setattr__``."""
+        state = self.__dict__
+        first, second, third = self.desired_names
+        state[first], state[second], state[third] = value, rate, acceleration
+        slots = state.get("_stored_slots")
+        if slots is not None:
+            array, index = slots[first]
+            array[index] = value
+            array, index = slots[second]
+            array[index] = rate
+            array, index = slots[third]
+            array[index] = acceleration
+
+
 def _skew(v: Array) -> Array:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
@@ -198,7 +221,7 @@ def site_in_axle_frame(robot: RobotModel, site: int) -> tuple[Array, Array, Arra
 
 
 @dataclass
-class ThetaTask(StoredParameters):
+class ThetaTask(DesiredMotion):
     """Track the CoM pitch ``theta`` (the MPC's prediction, its ``thdd`` as feed-forward).
     Gains: the authors' COMAngleControl mode, KpCOM 50, KvCOM 100, weight 10."""
 
@@ -209,6 +232,8 @@ class ThetaTask(StoredParameters):
     thetad_d: float = 0.0
     thdd_d: float = 0.0
     name: str = "theta"
+
+    desired_names: ClassVar[tuple[str, str, str]] = ("theta_d", "thetad_d", "thdd_d")
 
     def jacobian(self, robot: RobotModel) -> Array:
         return robot.J_theta[None, :]
@@ -243,7 +268,7 @@ class ThetaTask(StoredParameters):
 
 
 @dataclass
-class SpinTask(StoredParameters):
+class SpinTask(DesiredMotion):
     """Track the heading ``psi`` of the MPC's prediction (3-D)."""
 
     weight: float = 10.0
@@ -253,6 +278,8 @@ class SpinTask(StoredParameters):
     psid_d: float = 0.0
     psidd_d: float = 0.0
     name: str = "spin"
+
+    desired_names: ClassVar[tuple[str, str, str]] = ("psi_d", "psid_d", "psidd_d")
 
     def jacobian(self, robot: RobotModel) -> Array:
         row = np.zeros((1, robot.layout.n_min))
