@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from dynamics_reference import random_minimal_state
 from test_compiled_tasks import _task_set
-from test_wbc import _load, _realistic_tasks
+from test_wbc import _limits, _load, _realistic_tasks
 
 from controllers.low_level.compiled_step import ENTRIES
 from controllers.low_level.task_qp import QPSettings, TaskQP
@@ -87,6 +87,37 @@ def test_one_call_equals_the_two_calls_to_the_bit(name: str, observed: bool) -> 
                 np.testing.assert_allclose(
                     getattr(a, field), getattr(b, field), rtol=0, atol=1e-9 * scale
                 )
+
+
+@pytest.mark.parametrize("name", ["krang", "planar7"])
+def test_solve_alone_takes_the_common_case_and_equals_the_two_calls(name: str) -> None:
+    """``solve`` without an ``assemble`` before it, step after step (the control loop's use):
+    once ProxQP is warm, its common case (one compiled call, the solution from the kernel's
+    buffers) returns what the two-call path returns, to the bit, with the same bookkeeping."""
+    robot = RobotModel(_load(name))
+    low, high = _limits(robot)
+    one = TaskQP(robot, low, high, QPSettings())
+    two = TaskQP(robot, low.copy(), high.copy(), QPSettings(one_call=False))
+    # a still state where no constraint binds (test_task_qp_shortcut), then small moves
+    q, nu = random_minimal_state(robot, np.random.default_rng(500))
+    nu[:] = 0.0
+    robot.update(*robot.full_state(q, nu))
+    tasks_one, tasks_two = _realistic_tasks(robot), _realistic_tasks(robot)
+    drift = 1e-3 * np.random.default_rng(7).standard_normal(len(q))
+    shortcuts = 0
+    for step in range(8):
+        robot.update(*robot.full_state(q + step * drift, drift))
+        a, b = one.solve(robot, None, tasks_one), two.solve(robot, None, tasks_two)
+        assert one.compiled and one._table is not None and two._table is None
+        _assert_same_step(one, two)
+        assert one._terms_ready == one._feasible and one.proxqp_calls == two.proxqp_calls
+        assert (a.solved, a.iterations == 0) == (b.solved, b.iterations == 0)
+        if a.iterations == 0:
+            shortcuts += 1
+            for field in ("qdd", "nu_dot", "generalized", "actuators"):
+                np.testing.assert_array_equal(getattr(a, field), getattr(b, field), field)
+            assert one._last_actuators is a.actuators
+    assert shortcuts >= 5  # the first step goes to ProxQP; the rest take the common case
 
 
 def test_the_table_follows_new_torque_limits_row_buffers_and_tasks() -> None:

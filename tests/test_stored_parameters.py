@@ -149,6 +149,13 @@ def test_set_desired_is_three_assignments() -> None:
             np.testing.assert_array_equal(stacks[0].params, stacks[1].params)
             row = stacks[0].params[[type(t) is ThetaTask for t in tasks].index(True)]
             np.testing.assert_array_equal(row[2:5], (0.1, -0.2, 0.3))
+            # a value the stack's array refuses changes neither the attribute nor the array,
+            # as a refused assignment does (the entries before it are set)
+            theta = _of(tasks, ThetaTask)[0]
+            with pytest.raises((TypeError, ValueError)):
+                theta.set_desired(0.4, np.zeros(2), 0.6)  # type: ignore[arg-type]
+            assert (theta.theta_d, theta.thetad_d, theta.thdd_d) == (0.4, -0.2, 0.3)
+            np.testing.assert_array_equal(row[2:5], (0.4, -0.2, 0.3))
 
 
 def test_two_stacks_sharing_tasks_both_read_them_right() -> None:

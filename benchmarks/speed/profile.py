@@ -65,7 +65,7 @@ JSON schema (``--json PATH``; times per control step in microseconds unless name
         "mujoco_step": ...,               # the floor: bare mj_step for one control period
         "robot_model": ...,               # RobotModel.update in the policy
         "qp_assembly": ...,               # TaskQP._run_kernel (tasks, Jdot nu, iso3, H, g, C, ...)
-        "qp_solve": ...,                  # TaskQP.solve minus assembly (ProxQP + torques)
+        "qp_solve": ...,                  # TaskQP.solve minus _run_kernel (ProxQP, copies)
         "high_level": ...,                # MPC + references (mean = amortised)
         "python_overhead": ...,           # control minus the four parts above
         "control": ...,                   # the policy's __call__

@@ -143,16 +143,14 @@ class DesiredMotion(StoredParameters):
         three attributes, written straight into a compiled stack's arrays when one holds
         them (``StoredParameters``), without three passes through ``__setattr__``."""
         state = self.__dict__
-        first, second, third = self.desired_names
-        state[first], state[second], state[third] = value, rate, acceleration
         slots = state.get("_stored_slots")
-        if slots is not None:
-            array, index = slots[first]
-            array[index] = value
-            array, index = slots[second]
-            array[index] = rate
-            array, index = slots[third]
-            array[index] = acceleration
+        # per entry the stack's array first, then the attribute, as an assignment does (a
+        # value the array refuses leaves both as they were)
+        for name, number in zip(self.desired_names, (value, rate, acceleration), strict=True):
+            if slots is not None:
+                array, index = slots[name]
+                array[index] = number
+            state[name] = number
 
 
 def _skew(v: Array) -> Array:
