@@ -255,23 +255,24 @@ class HighLevel:
         states, controls = self._last_rows
         s0, s1 = states[interval], states[interval + 1]
         control = controls[interval]
+        # positional: a NamedTuple made from keywords costs twice as much, every control step
         if robot.layout.planar:
             return HighLevelSetpoint(
-                theta=(1 - fraction) * s0[0] + fraction * s1[0],
-                thetad=(1 - fraction) * s0[1] + fraction * s1[1],
-                thdd=control[0],
-                tau_0=0.0,
-                mpc_index=index,
+                (1 - fraction) * s0[0] + fraction * s1[0],  # theta
+                (1 - fraction) * s0[1] + fraction * s1[1],  # thetad
+                control[0],  # thdd
+                0.0,  # tau_0
+                index,  # mpc_index
             )
         return HighLevelSetpoint(
-            theta=(1 - fraction) * s0[2] + fraction * s1[2],
-            thetad=(1 - fraction) * s0[5] + fraction * s1[5],
-            thdd=control[0],
-            tau_0=control[1],
-            mpc_index=index,
-            psi=(1 - fraction) * s0[1] + fraction * s1[1],
-            psid=(1 - fraction) * s0[4] + fraction * s1[4],
-            psidd=(s1[4] - s0[4]) / self.config.mpc.dt,
+            (1 - fraction) * s0[2] + fraction * s1[2],  # theta
+            (1 - fraction) * s0[5] + fraction * s1[5],  # thetad
+            control[0],  # thdd
+            control[1],  # tau_0
+            index,  # mpc_index
+            (1 - fraction) * s0[1] + fraction * s1[1],  # psi
+            (1 - fraction) * s0[4] + fraction * s1[4],  # psid
+            (s1[4] - s0[4]) / self.config.mpc.dt,  # psidd
         )
 
     @property
