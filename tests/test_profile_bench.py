@@ -22,7 +22,7 @@ import pytest
 import benchmarks.speed.profile as profile_module
 from benchmarks.cli import main
 from benchmarks.speed import mpc_inputs, mpc_phase
-from benchmarks.speed.closed_loop_table import MissingFigure
+from benchmarks.speed.closed_loop_table import MissingFigure, disturbed_rounds
 from benchmarks.speed.closed_loop_table import comparison as closed_loop_comparison
 from benchmarks.speed.closed_loop_table import figure as closed_loop_figure
 from benchmarks.speed.closed_loop_table import main as closed_loop_main
@@ -426,6 +426,38 @@ def test_closed_loop_comparison_shows_each_columns_rounds_before_and_after() -> 
     nulled["per_step_units"]["env_physics"] = None
     with pytest.raises(ValueError, match="null"):
         closed_loop_figure(nulled, ("per_step_units", "env_physics", "mean"))
+
+
+def test_closed_loop_rounds_on_a_disturbed_machine_are_flagged() -> None:
+    """A round whose physics in the loop, over the same steps warm, is over 1.1 times its
+    column's least is named, in its column and version; the others are not."""
+
+    def profile(physics: float, floor: float = 2.0) -> dict[str, Any]:
+        part = {"mean": 1.0, "median": 1.0}
+        parts = dict.fromkeys(
+            ("robot_model", "qp_assembly", "qp_solve", "high_level", "env_step"), part
+        )
+        parts |= dict.fromkeys(("env_overhead", "loop"), part)
+        parts["env_physics"] = {"mean": physics, "median": physics}
+        parts["mujoco_step"] = {"mean": floor, "median": floor}
+        return {
+            "control_time_units": {"mean": 5.0, "p99": 10.0},
+            "per_step_units": parts,
+            "real_time_factor": 2.0,
+            "reference_step_us": 7.0,
+        }
+
+    # two of three rounds disturbed: the least, not the median, is the reference
+    column = [profile(3.0), profile(3.2), profile(2.5)]
+    assert disturbed_rounds({"KrangTray, d = 5": column}, "after ") == [
+        "after KrangTray, d = 5: rounds 0, 1"
+    ]
+    # within 10 %, or the same ratio at another floor: nothing
+    assert disturbed_rounds({"KrangTray": [profile(2.5), profile(2.7), profile(5.0, 4.0)]}) == []
+    quiet = {"KrangTray": [profile(2.5), profile(2.6)]}
+    note = closed_loop_comparison(quiet, {"KrangTray": column[:2] + [profile(2.5)]})
+    assert note.splitlines()[-1].endswith("after KrangTray: rounds 0, 1")
+    assert "disturbed" not in closed_loop_comparison(quiet, quiet)
 
 
 def test_closed_loop_table_refuses_an_unknown_base(capsys: pytest.CaptureFixture[str]) -> None:

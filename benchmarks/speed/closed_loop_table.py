@@ -13,6 +13,10 @@ figure is in units of a bare, warm ``mj_step`` of Krang-v0 timed in the same pro
 (``benchmarks.speed.yardstick``), so the table compares across machines; the rows are the
 issue's targets (docs/performance.md §7 to §9, §12).
 
+Below the table it names the rounds run on a disturbed machine (:func:`disturbed_rounds`: the
+env's physics in the loop, over the same steps replayed warm, more than 1.1 times its column's
+least), whose every figure is off; rerun, or read the table without them.
+
 ``--base REV`` measures a change: the git revision ``REV`` is checked out into a temporary
 worktree, and every round runs each column once at ``REV`` and once in this checkout; the table
 shows, per column, the median [min, max] over the rounds before and after. The revision's runs
@@ -90,6 +94,47 @@ def figure(result: dict[str, Any], path: Sequence[str]) -> float:
     return float(value)
 
 
+#: a round whose physics in the loop, over the same steps replayed warm, is this many times its
+#: column's least is flagged as run on a disturbed machine (:func:`disturbed_rounds`)
+DISTURBED_RATIO = 1.1
+
+
+def disturbed_rounds(results: dict[str, list[dict[str, Any]]], label: str = "") -> list[str]:
+    """The rounds of each column (a list of profile JSONs) whose env physics in the loop, as a
+    ratio to the same steps' bare ``mj_step`` replayed warm, exceeds :data:`DISTURBED_RATIO`
+    times the column's least ratio: the controller's code moves that ratio little, a busy
+    machine (another process, the MPC thread's core taken) moves it up, and with it every
+    figure of the round. (The least, not the median: in a column of three rounds two may be
+    disturbed.) One line per such column, e.g. ``"after KrangTray, d = 5: rounds 0, 1"``;
+    profiles without the figures are skipped."""
+    lines = []
+    for title, runs in results.items():
+        ratios = []
+        for run in runs:
+            parts = run.get("per_step_units", {})
+            physics, floor = parts.get("env_physics"), parts.get("mujoco_step")
+            if not physics or not floor or floor["mean"] <= 0:
+                ratios = []
+                break
+            ratios.append(physics["mean"] / floor["mean"])
+        if len(ratios) < 2:
+            continue
+        least = min(ratios)
+        off = [str(i) for i, ratio in enumerate(ratios) if ratio > DISTURBED_RATIO * least]
+        if off:
+            lines.append(f"{label}{title}: rounds {', '.join(off)}")
+    return lines
+
+
+def _disturbed_note(lines: list[str]) -> list[str]:
+    if not lines:
+        return []
+    return [
+        f"rounds run on a disturbed machine (the env's physics in the loop over the same steps "
+        f"warm over {DISTURBED_RATIO:g} times its column's least): {'; '.join(lines)}"
+    ]
+
+
 def table(results: dict[str, list[dict[str, Any]]], summary: bool = False) -> str:
     """The markdown table: a row per :data:`ROWS` entry, a column per key of ``results`` (each
     a list of profile JSONs, one per round), and the targets. A cell lists its rounds' figures,
@@ -111,6 +156,7 @@ def table(results: dict[str, list[dict[str, Any]]], summary: bool = False) -> st
     units = [f"{r['reference_step_us']:.1f}" for t in titles for r in results[t]]
     lines.append("")
     lines.append(f"unit (bare mj_step of Krang-v0, us) per run: {', '.join(units)}")
+    lines += _disturbed_note(disturbed_rounds(results))
     return "\n".join(lines)
 
 
@@ -189,6 +235,8 @@ def comparison(
     units = [r["reference_step_us"] for runs in (before, after) for t in titles for r in runs[t]]
     lines.append("")
     lines.append(f"unit (bare mj_step of Krang-v0): {min(units):.1f} to {max(units):.1f} us")
+    disturbed = disturbed_rounds(before, "before ") + disturbed_rounds(after, "after ")
+    lines += _disturbed_note(disturbed)
     if any("env_physics" not in r["per_step_units"] for t in titles for r in before[t]):
         lines.append(
             "the base's profiles predate the warm yardstick (docs/performance.md §12): their "
