@@ -563,3 +563,13 @@ def test_qp_paths_counts_the_steps_proxqp_solved() -> None:
     payload = {"env.payload_mass": 3.0, "env.payload_time": 0.1}
     solved, steps = proxqp_steps(env_id, "unified", None, payload, 0, 1.0)
     assert steps == 1000 and 0 < solved <= 900
+
+
+def test_thread_wake_times_the_three_moments_of_a_job() -> None:
+    from benchmarks.speed.thread_wake import wake_costs  # noqa: PLC0415
+
+    costs = wake_costs(0.0, jobs=3)
+    assert set(costs) == {"submit", "after", "result"}
+    assert all(0.0 < median <= p90 for median, p90 in costs.values())
+    with pytest.raises(ValueError, match="jobs"):
+        wake_costs(0.001, jobs=0)
