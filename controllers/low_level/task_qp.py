@@ -420,15 +420,12 @@ class TaskQP:
             iterations=iterations,
         )
 
-    def _solution(
-        self, qdd: Array, iterations: int, terms: tuple[Array, Array, Array] | None = None
-    ) -> QPSolution:
+    def _solution(self, qdd: Array, iterations: int) -> QPSolution:
         """The solved QP's answer for ``qdd``, with its ``(generalized, actuators, nu_dot)``
-        (``kernel.solution_terms``, computed here unless given)."""
-        if terms is None:
-            k = self.kernel
-            terms = solution_terms(k.calA, k.Ph, self.M_act, k.E, k.e, qdd)
-        generalized, actuators, nu_dot = terms
+        (``kernel.solution_terms``; the common case of ``solve`` takes them from the one
+        compiled call instead)."""
+        k = self.kernel
+        generalized, actuators, nu_dot = solution_terms(k.calA, k.Ph, self.M_act, k.E, k.e, qdd)
         self._last_actuators = actuators
         return QPSolution(
             qdd=qdd,
