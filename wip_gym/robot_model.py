@@ -295,7 +295,6 @@ class RobotModel:
         # the caller passes (read-only or strided arrays would each compile it again)
         self._qpos_in = np.zeros(lay.nq)
         self._qvel_in = np.zeros(lay.nv)
-        self._state_shapes = ((lay.nq,), (lay.nv,))
         self._body_ids = np.array(lay.body_bodies, dtype=np.int64)
         self._layout_ints, self._body_qpos, self._body_dof = lay.kernel_arrays()
         self._bodies = np.array([lay.base_body, *lay.wheel_bodies], dtype=np.int64)
@@ -447,8 +446,7 @@ class RobotModel:
         lay = self.layout
         qpos = np.asarray(qpos, dtype=float)
         qvel = np.asarray(qvel, dtype=float)
-        qpos_shape, qvel_shape = self._state_shapes
-        if qpos.shape != qpos_shape or qvel.shape != qvel_shape:
+        if qpos.shape != self._qpos_in.shape or qvel.shape != self._qvel_in.shape:
             raise ValueError(
                 f"expected qpos of shape ({lay.nq},) and qvel ({lay.nv},), "
                 f"got {qpos.shape}, {qvel.shape}"

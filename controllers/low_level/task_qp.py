@@ -295,24 +295,18 @@ class TaskQP:
     def _one_call(self, robot: RobotModel, tasks: Sequence[Task]) -> bool | None:
         """The rows and the kernel in one compiled call (``controllers.low_level.compiled_step``):
         whether the unconstrained minimiser is feasible (its solution terms then computed), or
-        None when the settings or a task's kind ask for the two-call path. The control step's
-        common case: kept to what it needs (docs/performance.md §22)."""
-        settings = self.settings
-        if not (settings.one_call and settings.compiled_tasks):
+        None when the settings or a task's kind ask for the two-call path (the control step's
+        common case, docs/performance.md §22)."""
+        if not self.settings.one_call:
             return None
-        stack = self._stack
-        if stack is None or not stack.matches(tasks):
-            stack = self._compiled_stack(robot, tasks)
-            if stack is None:
-                return None
+        stack = self._compiled_stack(robot, tasks)
+        if stack is None:
+            return None
         if not robot.has_dynamics:
             raise RuntimeError("the last robot update had dynamics=False: no A, h")
         self.compiled = True
         self._ensure_buffers(stack.rows, robot.layout.n_min)
-        table = self._table
-        stack_for, kernel_for = self._table_for
-        if table is None or stack_for is not stack or kernel_for is not self.kernel:
-            table = self._one_call_table(stack, robot)
+        table = self._one_call_table(stack, robot)
         stack.prepare_parameters(robot, self._w)
         feasible = rows_and_kernel(table.rows)
         stack.memoise_observers(robot, self._target)

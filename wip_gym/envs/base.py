@@ -662,12 +662,9 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             "goal_distance": values[ms.GOAL_DISTANCE],
             "fallen": fallen,
         }
-        if self._planar:
-            if self._ee_site >= 0:
-                info["ee_error"] = values[ms.EE_ERROR]
-            return info
-        info["psi"] = values[ms.PSI]
-        info["psid"] = values[ms.PSID]
+        if not self._planar:
+            info["psi"] = values[ms.PSI]
+            info["psid"] = values[ms.PSID]
         if self._ee_site >= 0:
             info["ee_error"] = values[ms.EE_ERROR]
         return info
@@ -694,18 +691,14 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
 
     def _get_obs(self) -> dict[str, NDArray[np.float64]]:
         """The observation at the last ``_measure`` (fresh arrays, none shared with the info)."""
-        if self._tray:
-            return {
-                "qpos": self._view_robot_qpos.copy(),
-                "qvel": self._view_robot_qvel.copy(),
-                "goal": self._goal.copy(),
-                "cup_pose": self._block[ms.CUP_POSE : ms.CUP_POSE + 7].copy(),
-            }
-        return {
+        obs = {
             "qpos": self._view_robot_qpos.copy(),
             "qvel": self._view_robot_qvel.copy(),
             "goal": self._goal.copy(),
         }
+        if self._tray:
+            obs["cup_pose"] = self._block[ms.CUP_POSE : ms.CUP_POSE + 7].copy()
+        return obs
 
     # ------------------------------------------------------------- rendering
     # (wip_gym.camera frames the robot; wip_gym.overlay draws the task's numbers when asked)
