@@ -12,6 +12,13 @@ from test_wbc import _limits, _load, _realistic_tasks, _set_state
 from controllers.low_level.isolated_dynamics import isolated_dynamics
 from controllers.low_level.task_qp import QPSettings, TaskQP
 from wip_gym.robot_model import RobotModel
+from wip_gym.small_linalg import (
+    gram_into,
+    matmul_into,
+    matvec_into,
+    matvec_transposed_into,
+    row_dot,
+)
 
 
 def _close(actual: np.ndarray, expected: np.ndarray, tol: float = 1e-12) -> None:
@@ -71,6 +78,38 @@ def test_kernel_equals_the_plain_computation(name: str) -> None:
         _close(H2, T.T @ T + settings.regularization * np.eye(len(T.T)))
         _close(g2, -T.T @ b)
     assert feasible_seen[True] > 0
+
+
+def test_zero_skipping_products_equal_numpy() -> None:
+    """The kernel's products (``wip_gym.small_linalg``: loops that skip zero entries, into the
+    caller's buffer) against NumPy on operands shaped as KrangTray-v0's: a task matrix whose
+    last rows have one entry each (posture rows), an actuator map of one or two entries per
+    row. The buffers start as garbage (every entry is written), and a NaN in ``T`` reaches the
+    diagonal of ``T^T T`` (so the kernel's Cholesky refuses it)."""
+    rng = np.random.default_rng(11)
+    T = rng.normal(size=(30, 18))
+    T[:14] *= rng.random((14, 18)) < 0.6
+    T[14:] = 0.0
+    T[np.arange(14, 30), rng.integers(0, 18, 16)] = rng.normal(size=16)
+    M = np.zeros((18, 18))
+    M[np.arange(18), rng.permutation(18)] = rng.normal(size=18)
+    M[0, 1] = M[1, 0] = 0.5
+    B, b, x = rng.normal(size=(18, 18)), rng.normal(size=30), rng.normal(size=18)
+    H, C = np.full((18, 18), 7.0), np.full((18, 18), 7.0)
+    gram_into(T, H)
+    matmul_into(M, B, C)
+    _close(H, T.T @ T, 1e-14)
+    _close(C, M @ B, 1e-14)
+    v, u = np.full(18, 7.0), np.full(18, 7.0)
+    matvec_into(M, x, v)
+    matvec_transposed_into(T, b, u)
+    _close(v, M @ x, 1e-14)
+    _close(u, T.T @ b, 1e-14)
+    assert row_dot(T, 3, x) == pytest.approx(T[3] @ x, abs=1e-13)
+    T[20, np.flatnonzero(T[20])[0]] = np.nan
+    gram_into(T, H)
+    column = np.flatnonzero(np.isnan(T[20]))[0]
+    assert np.isnan(H[column, column])
 
 
 def test_a_task_without_an_exact_jdot_nu_is_an_error() -> None:

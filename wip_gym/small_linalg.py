@@ -1,17 +1,25 @@
 """Matrix products for the compiled (numba) arithmetic of the robot model and the low level.
 
-numba's ``@`` calls BLAS and wants contiguous operands; these wrappers make transposes and
-slices contiguous so that call sites read as the maths. Plain compiled loops were tried first
-and measured slower at these sizes: ``T^T T`` (31 x 18), ``M_act calA`` (20 x 18 by 18 x 18)
-and ``jac J_tf`` (6 x 30 by 30 x 19) took 20.7 us as loops against 4.2 us through BLAS, and the
-QP kernel's arithmetic 29.5 us against 7.2 us (this 2-core machine, 2026-11-26).
+At these sizes (tens of rows and columns) a call's overhead and the operands' zeros decide,
+not the flops: numba's ``@`` calls BLAS (about 0.35 us per call here, plus a contiguous copy
+of a transposed operand and a new array for the result), and the low level's operands are
+mostly zeros in a pattern fixed for a run.
 
-Two exceptions. Operands of a few hundred entries (a 6 x 24 Jacobian times a velocity, 3 x 3
-rotations) cost less as loops: a BLAS call's overhead is about 0.35 us here, the loops' 0.15 to
-0.25 us (``small_matvec``, ``small_matmul``). And the products with ``J_tf``: it is mostly
-zeros in a pattern fixed by the robot's layout (27 of 30 x 19 entries on KrangTray-v0's model),
-and the ``*_pattern`` loops below visit only those entries. ``A = J_tf^T M J_tf`` took 6.2 to
-10.4 us through BLAS and 2.8 us over the pattern (``minimal_dynamics``, same machine).
+* The products with ``J_tf``: it is mostly zeros in a pattern fixed by the robot's layout (27
+  of 30 x 19 entries on KrangTray-v0's model), and the ``*_pattern`` loops below visit only
+  those entries. ``A = J_tf^T M J_tf`` took 6.2 to 10.4 us through BLAS and 2.8 us over the
+  pattern (``minimal_dynamics``, 2026-11-26).
+* The QP kernel's (``controllers.low_level.kernel``): the task matrix ``T`` has a posture row
+  of one entry per joint (16 of KrangTray-v0's 30 rows), the actuator map one or two entries
+  per row. Loops in the operands' memory order that skip zero entries (``gram_into``,
+  ``matmul_into``) took 0.53 us for ``T^T T`` against 1.03 through BLAS and 0.19 against 0.66
+  for ``M_act calA``, and the matrix-vector loops (``row_dot``, ``matvec_into``,
+  ``matvec_transposed_into``) 0.09 to 0.15 us against 0.17 to 0.37; they write into the
+  caller's buffers (docs/performance.md §23). Dense loops in the textbook order (a dot product
+  per entry, a strided inner loop) were slower than BLAS: 20.7 us against 4.2 for the
+  kernel's three products (2026-11-26).
+* Operands of a few hundred entries (a 6 x 24 Jacobian times a velocity, 3 x 3 rotations):
+  ``small_matvec``, ``small_matmul`` (0.15 to 0.25 us against BLAS's 0.35).
 """
 
 from __future__ import annotations
@@ -21,33 +29,55 @@ from numba import njit
 
 
 @njit(cache=True)
-def matmul(A: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """``A @ B``."""
-    return np.ascontiguousarray(A) @ np.ascontiguousarray(B)
+def gram_into(T: np.ndarray, out: np.ndarray) -> None:
+    """``out = T^T T``, row by row of ``T``, skipping its zero entries (a row of one entry
+    adds to one row of ``out``)."""
+    out[:] = 0.0
+    rows, n = T.shape
+    for k in range(rows):
+        for i in range(n):
+            t = T[k, i]
+            if t != 0.0:
+                for j in range(n):
+                    out[i, j] += t * T[k, j]
 
 
 @njit(cache=True)
-def matvec(A: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """``A @ x``."""
-    return np.ascontiguousarray(A) @ np.ascontiguousarray(x)
+def matmul_into(A: np.ndarray, B: np.ndarray, out: np.ndarray) -> None:
+    """``out = A @ B``, skipping the zero entries of ``A``."""
+    out[:] = 0.0
+    for i in range(A.shape[0]):
+        for k in range(A.shape[1]):
+            a = A[i, k]
+            if a != 0.0:
+                for j in range(B.shape[1]):
+                    out[i, j] += a * B[k, j]
 
 
 @njit(cache=True)
-def gram(T: np.ndarray) -> np.ndarray:
-    """``T^T T``."""
-    return np.ascontiguousarray(T.T) @ T
+def row_dot(A: np.ndarray, i: int, x: np.ndarray) -> float:
+    """``A[i] @ x``."""
+    total = 0.0
+    for k in range(A.shape[1]):
+        total += A[i, k] * x[k]
+    return total
 
 
 @njit(cache=True)
-def matvec_transposed(A: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """``A^T @ x``."""
-    return np.ascontiguousarray(A.T) @ np.ascontiguousarray(x)
+def matvec_into(A: np.ndarray, x: np.ndarray, out: np.ndarray) -> None:
+    """``out = A @ x`` (``out`` not ``x``)."""
+    for i in range(A.shape[0]):
+        out[i] = row_dot(A, i, x)
 
 
 @njit(cache=True)
-def matmul_transposed(A: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """``A^T @ B``."""
-    return np.ascontiguousarray(A.T) @ np.ascontiguousarray(B)
+def matvec_transposed_into(A: np.ndarray, x: np.ndarray, out: np.ndarray) -> None:
+    """``out = A^T @ x`` over ``A``'s rows, its memory order (``out`` not ``x``)."""
+    out[:] = 0.0
+    for i in range(A.shape[0]):
+        xi = x[i]
+        for j in range(A.shape[1]):
+            out[j] += A[i, j] * xi
 
 
 @njit(cache=True)

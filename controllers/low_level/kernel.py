@@ -31,7 +31,13 @@ from numba import njit
 from numpy.typing import NDArray
 
 from controllers.low_level.isolated_dynamics import IsolatedDynamics
-from wip_gym.small_linalg import gram, matmul, matvec, matvec_transposed
+from wip_gym.small_linalg import (
+    gram_into,
+    matmul_into,
+    matvec_into,
+    matvec_transposed_into,
+    row_dot,
+)
 
 Array = NDArray[np.float64]
 
@@ -234,17 +240,19 @@ def kernel_step(
             T[i, j] = (column * E0[j] + J[i, 1 + j]) * w[i]
         b[i] = (target[i] - jdot_nu[i] - column * e0) * w[i]
     # 3. the cost
-    H[:] = gram(T)
+    gram_into(T, H)
     for i in range(n):
         H[i, i] += regularization
-    g[:] = -matvec_transposed(T, b)
+    matvec_transposed_into(T, b, g)
+    for j in range(n):
+        g[j] = -g[j]
     # 4. constraints
     m = actuator_map.shape[0]
-    C[:m] = matmul(actuator_map, calA)
-    offset = matvec(actuator_map, Ph)
+    matmul_into(actuator_map, calA, C[:m])
     for i in range(m):
-        lower[i] = torque_low[i] - offset[i]
-        upper[i] = torque_high[i] - offset[i]
+        offset = row_dot(actuator_map, i, Ph)
+        lower[i] = torque_low[i] - offset
+        upper[i] = torque_high[i] - offset
     square = horizon * horizon
     for i in range(len(limit_indices)):
         index = limit_indices[i]
@@ -254,9 +262,12 @@ def kernel_step(
     # 5. the unconstrained minimiser and its feasibility
     if not _cholesky_solve(H, -g, x):
         return False
-    Cx = matvec(C, x)
-    for i in range(len(Cx)):  # noqa: SIM110 (a generator in all() does not compile)
-        if not (np.isfinite(Cx[i]) and lower[i] <= Cx[i] <= upper[i]):
+    for i in range(n):  # noqa: SIM110 (a generator in all() does not compile)
+        if not np.isfinite(x[i]):
+            return False
+    for i in range(C.shape[0]):
+        Cx = row_dot(C, i, x)
+        if not (np.isfinite(Cx) and lower[i] <= Cx <= upper[i]):
             return False
     return True
 
@@ -341,9 +352,11 @@ def solution_terms_into(
     """What a solution ``qdd`` implies, into ``generalized``, ``actuators`` and ``nu_dot``: the
     generalised forces ``Gamma = calA qdd + Ph`` (eq. ``iso3``), the actuator torques
     ``M_act Gamma`` and ``nu_dot = E qdd + e``."""
-    generalized[:] = matvec(calA, qdd) + Ph
-    actuators[:] = matvec(actuator_map, generalized)
-    nu_dot[:] = matvec(E, qdd) + e
+    for i in range(len(Ph)):
+        generalized[i] = row_dot(calA, i, qdd) + Ph[i]
+    matvec_into(actuator_map, generalized, actuators)
+    for i in range(len(e)):
+        nu_dot[i] = row_dot(E, i, qdd) + e[i]
 
 
 @njit(cache=True)
