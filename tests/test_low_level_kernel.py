@@ -5,11 +5,14 @@ row, the unconstrained minimiser by ``numpy.linalg.solve``; on random states of 
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from test_wbc import _limits, _load, _realistic_tasks, _set_state
 
 from controllers.low_level.isolated_dynamics import isolated_dynamics
+from controllers.low_level.kernel import LowLevelKernel
 from controllers.low_level.task_qp import QPSettings, TaskQP
 from wip_gym.robot_model import RobotModel
 from wip_gym.small_linalg import (
@@ -84,23 +87,25 @@ def test_zero_skipping_products_equal_numpy() -> None:
     """The kernel's products (``wip_gym.small_linalg``: loops that skip zero entries, into the
     caller's buffer) against NumPy on operands shaped as KrangTray-v0's: a task matrix whose
     last rows have one entry each (posture rows), an actuator map of one or two entries per
-    row. The buffers start as garbage (every entry is written), and a NaN in ``T`` reaches the
-    diagonal of ``T^T T`` (so the kernel's Cholesky refuses it)."""
+    row (not square). The buffers start as garbage (every entry is written), an output may be
+    a view of a larger buffer (written alone), and a NaN in ``T`` reaches the diagonal of
+    ``T^T T``."""
     rng = np.random.default_rng(11)
     T = rng.normal(size=(30, 18))
     T[:14] *= rng.random((14, 18)) < 0.6
     T[14:] = 0.0
     T[np.arange(14, 30), rng.integers(0, 18, 16)] = rng.normal(size=16)
-    M = np.zeros((18, 18))
+    M = np.zeros((20, 18))
     M[np.arange(18), rng.permutation(18)] = rng.normal(size=18)
-    M[0, 1] = M[1, 0] = 0.5
+    M[18, 3] = M[19, 5] = M[0, 1] = 0.5
     B, b, x = rng.normal(size=(18, 18)), rng.normal(size=30), rng.normal(size=18)
-    H, C = np.full((18, 18), 7.0), np.full((18, 18), 7.0)
+    H, C = np.full((18, 18), 7.0), np.full((24, 18), 7.0)
     gram_into(T, H)
-    matmul_into(M, B, C)
+    matmul_into(M, B, C[:20])
     _close(H, T.T @ T, 1e-14)
-    _close(C, M @ B, 1e-14)
-    v, u = np.full(18, 7.0), np.full(18, 7.0)
+    _close(C[:20], M @ B, 1e-14)
+    assert np.all(C[20:] == 7.0)
+    v, u = np.full(20, 7.0), np.full(18, 7.0)
     matvec_into(M, x, v)
     matvec_transposed_into(T, b, u)
     _close(v, M @ x, 1e-14)
@@ -110,6 +115,49 @@ def test_zero_skipping_products_equal_numpy() -> None:
     gram_into(T, H)
     column = np.flatnonzero(np.isnan(T[20]))[0]
     assert np.isnan(H[column, column])
+
+
+def test_a_nonfinite_row_is_never_feasible() -> None:
+    """On a state whose unconstrained minimiser is feasible, a NaN target, or an inf in a
+    one-entry (posture) row in the first QP variable's column (where the Cholesky
+    factorisation of the zero-skipping ``T^T T`` goes through and leaves the minimiser NaN),
+    makes the kernel answer "not feasible": the QP solver runs, never a nonfinite shortcut."""
+    robot = RobotModel(_load("planar7"))
+    low, high = _limits(robot)
+    qp = TaskQP(robot, low, high, QPSettings())
+    for seed in range(20):
+        _set_state(robot, 900 + seed, still=True)
+        tasks = _realistic_tasks(robot)
+        J = np.vstack([task.jacobian(robot) for task in tasks])
+        target = np.concatenate([task.reference_acceleration(robot) for task in tasks])
+        w = np.concatenate([task.weights() for task in tasks])
+        jdot_nu = qp._jdot_nu(robot, tasks)
+        qp.assemble(robot, None, tasks)
+        if qp.kernel.run(robot.A, robot.h, J, target, jdot_nu, w, robot.q, robot.nu):
+            break
+    else:
+        pytest.fail("no feasible state among the seeds")
+    kernel = qp.kernel
+
+    def run(J: np.ndarray, target: np.ndarray) -> bool:
+        return kernel.run(robot.A, robot.h, J, target, jdot_nu, w, robot.q, robot.nu)
+
+    assert np.all(np.isfinite(kernel.x))
+    bad = target.copy()
+    bad[0] = np.nan
+    assert not run(J, bad)
+    posture = int(np.flatnonzero((J != 0).sum(axis=1) == 1)[-1])
+    J_inf = J.copy()
+    J_inf[posture] = 0.0
+    J_inf[posture, 1] = np.inf  # T's column 0 (x is not a QP variable)
+    assert not run(J_inf, target)
+    assert run(J, target)  # the same state again: feasible
+    # a QP variable no actuator reaches would keep a nonfinite calA row out of the constraint
+    # rows (their product skips zero entries): refused when the kernel is made
+    unreached = kernel.layout.actuator_map.copy()
+    unreached[:, 2] = 0.0
+    with pytest.raises(ValueError, match="reach an actuator"):
+        LowLevelKernel(dataclasses.replace(kernel.layout, actuator_map=unreached))
 
 
 def test_a_task_without_an_exact_jdot_nu_is_an_error() -> None:

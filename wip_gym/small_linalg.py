@@ -15,9 +15,8 @@ mostly zeros in a pattern fixed for a run.
   ``matmul_into``) took 0.53 us for ``T^T T`` against 1.03 through BLAS and 0.19 against 0.66
   for ``M_act calA``, and the matrix-vector loops (``row_dot``, ``matvec_into``,
   ``matvec_transposed_into``) 0.09 to 0.15 us against 0.17 to 0.37; they write into the
-  caller's buffers (docs/performance.md §23). Dense loops in the textbook order (a dot product
-  per entry, a strided inner loop) were slower than BLAS: 20.7 us against 4.2 for the
-  kernel's three products (2026-11-26).
+  caller's buffers (docs/performance.md §23). Plain loops tried first were slower than BLAS:
+  20.7 us against 4.2 for ``T^T T``, ``M_act calA`` and ``jac J_tf`` (2026-11-26).
 * Operands of a few hundred entries (a 6 x 24 Jacobian times a velocity, 3 x 3 rotations):
   ``small_matvec``, ``small_matmul`` (0.15 to 0.25 us against BLAS's 0.35).
 """
@@ -31,7 +30,9 @@ from numba import njit
 @njit(cache=True)
 def gram_into(T: np.ndarray, out: np.ndarray) -> None:
     """``out = T^T T``, row by row of ``T``, skipping its zero entries (a row of one entry
-    adds to one row of ``out``)."""
+    adds to one row of ``out``). A NaN in ``T`` reaches the diagonal of ``out``; with an inf,
+    ``out`` may not be symmetric (``0 * inf`` terms are skipped): callers test the result for
+    finiteness, as the kernel does its minimiser."""
     out[:] = 0.0
     rows, n = T.shape
     for k in range(rows):
@@ -44,7 +45,8 @@ def gram_into(T: np.ndarray, out: np.ndarray) -> None:
 
 @njit(cache=True)
 def matmul_into(A: np.ndarray, B: np.ndarray, out: np.ndarray) -> None:
-    """``out = A @ B``, skipping the zero entries of ``A``."""
+    """``out = A @ B``, skipping the zero entries of ``A`` (so a NaN or inf in a row of ``B``
+    that no entry of ``A`` reaches stays out of ``out``, where ``A @ B`` would give NaN)."""
     out[:] = 0.0
     for i in range(A.shape[0]):
         for k in range(A.shape[1]):

@@ -13,8 +13,8 @@ matrix product); 3. ``H = T^T T + eps I``, ``g = -T^T b``;
 4. the constraint rows: actuator torques ``tau_min - M_act Ph <= M_act calA qdd <= tau_max -
    M_act Ph`` and the joint-limit acceleration bounds ``2 (q_lim - q - qd h) / h^2``;
 5. the unconstrained minimiser ``H qdd = -g`` (a Cholesky factorisation and two triangular
-   solves) and whether it meets every constraint (then it is the convex QP's optimum and no QP
-   solver is needed).
+   solves) and whether it is finite and meets every constraint (then it is the convex QP's
+   optimum and no QP solver is needed).
 
 Compiled by numba, one call for the five steps. For these sizes (Krang: 18 variables, 31
 task rows, 34 constraint rows) the arithmetic costs less than one call of a jitted JAX
@@ -82,6 +82,10 @@ class LowLevelKernel:
         n = n_min - 1
         m = len(layout.actuator_map)
         n_limit = len(layout.limit_columns)
+        if not (np.asarray(layout.actuator_map) != 0.0).any(axis=0).all():
+            # the constraint rows M_act calA skip zero entries (small_linalg.matmul_into): a
+            # variable no actuator reaches would keep a nonfinite calA row out of them
+            raise ValueError("every QP variable must reach an actuator (a column of zeros)")
         self.n = n
         self.calA = np.zeros((n, n))
         self.Ph = np.zeros(n)
@@ -351,7 +355,8 @@ def solution_terms_into(
 ) -> None:
     """What a solution ``qdd`` implies, into ``generalized``, ``actuators`` and ``nu_dot``: the
     generalised forces ``Gamma = calA qdd + Ph`` (eq. ``iso3``), the actuator torques
-    ``M_act Gamma`` and ``nu_dot = E qdd + e``."""
+    ``M_act Gamma`` and ``nu_dot = E qdd + e``. The outputs must not be ``qdd`` (each is
+    written while ``qdd`` is read)."""
     for i in range(len(Ph)):
         generalized[i] = row_dot(calA, i, qdd) + Ph[i]
     matvec_into(actuator_map, generalized, actuators)
