@@ -321,6 +321,31 @@ def test_compiled_arithmetic_equals_numpy(robot: RobotModel) -> None:
         assert robot.thetad == pytest.approx(float(J_theta @ robot.nu), abs=1e-12)
 
 
+def test_dynamics_in_place_equal_the_pattern_products_to_the_bit(robot: RobotModel) -> None:
+    """``minimal_dynamics_into`` (rows of ``J^T M`` by the mass matrix's symmetry, the
+    nonzero entries of ``Jdot_tf nu`` only, into the update's buffers) adds the same terms in
+    the same order as ``small_linalg``'s pattern products it replaced: ``A``, ``h``, ``B``
+    equal to the bit, on random states on and off the rolling manifold. (``_M``, ``_bias``,
+    ``_S``: the update's own mass matrix, bias and actuator map buffers.)"""
+    d, lay = robot.data, robot.layout
+    rng = np.random.default_rng(23)
+    for k in range(6):
+        qpos, qvel = robot.full_state(*random_minimal_state(robot, rng))
+        if k % 2:
+            qpos = qpos + 1e-4 * rng.normal(size=qpos.shape)
+            qvel = qvel + 1e-2 * rng.normal(size=qvel.shape)
+            if not lay.planar:
+                qpos[3:7] /= np.linalg.norm(qpos[3:7])
+        robot.update(qpos, qvel)
+        M, J, pattern = robot._M, robot.J_tf, robot.J_tf_pattern
+        assert np.array_equal(M, M.T)  # what the rows of J^T M rely on
+        A = matmul_transposed_pattern(J, pattern, matmul_pattern(M, J, pattern))
+        y = small_matvec(M, robot.Jdot_tf_nu) + robot._bias - d.qfrc_passive
+        np.testing.assert_array_equal(robot.A, A)
+        np.testing.assert_array_equal(robot.h, matvec_transposed_pattern(J, pattern, y))
+        np.testing.assert_array_equal(robot.B, matmul_transposed_pattern(J, pattern, robot._S))
+
+
 @pytest.mark.parametrize("source", [*ROBOTS, "wip_gym/KrangTray-v0", "wip_gym/PlanarTray-v0"])
 def test_transform_jacobian_is_nonzero_only_in_its_pattern(source: str) -> None:
     """``J_tf_pattern``, which the compiled products with ``J_tf`` visit, holds every nonzero

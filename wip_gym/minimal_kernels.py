@@ -1,7 +1,7 @@
 """The arithmetic of ``RobotModel.update`` after its MuJoCo calls, compiled by numba.
 
-Four functions of arrays, :func:`all_finite` (the update's input check), and
-:func:`robot_update`, which makes ``RobotModel.update``'s MuJoCo
+Four functions of arrays (the last two write into the caller's buffers), :func:`all_finite`
+(the update's input check), and :func:`robot_update`, which makes ``RobotModel.update``'s MuJoCo
 calls (``wip_gym.mujoco_c``) and runs them in one compiled call (called from Python as
 :func:`robot_update_at`, its arrays in one ``wip_gym.array_table.ArrayTable``):
 
@@ -9,9 +9,9 @@ calls (``wip_gym.mujoco_c``) and runs them in one compiled call (called from Pyt
   wheels on the floor (``RobotModel.full_state``);
 * :func:`minimal_state`: the minimal coordinates ``q``, ``nu`` from MuJoCo's ``qpos``, ``qvel``
   and the base's rotation, and the state-dependent entries of ``J_tf`` and ``Jdot_tf nu``;
-* :func:`minimal_dynamics`: paper eq. ``dyn``, ``A = J_tf^T M J_tf``,
+* :func:`minimal_dynamics_into`: paper eq. ``dyn``, ``A = J_tf^T M J_tf``,
   ``h = J_tf^T (M Jdot_tf nu + c - f_passive)``, ``B = J_tf^T S``;
-* :func:`body_com`: the body's CoM (wheels excluded) in the axle frame, its Jacobian over
+* :func:`body_com_into`: the body's CoM (wheels excluded) in the axle frame, its Jacobian over
   ``nu``, ``theta = atan2(X, Z)`` and ``J_theta``, ``thetad = J_theta nu``.
 
 and, outside the update, :func:`wipm_values`: the WIPM's parameters ``lambda(q)`` (paper section
@@ -34,13 +34,7 @@ from numba import njit
 
 from wip_gym import mujoco_c as mjc
 from wip_gym.array_table import float_cube, float_matrix, float_vector, int_matrix, int_vector
-from wip_gym.small_linalg import (
-    matmul_pattern,
-    matmul_transposed_pattern,
-    matvec_transposed_pattern,
-    small_matmul,
-    small_matvec,
-)
+from wip_gym.small_linalg import small_matmul
 
 
 @njit(cache=True)
@@ -174,7 +168,7 @@ def minimal_state(
 
 
 @njit(cache=True)
-def minimal_dynamics(
+def minimal_dynamics_into(
     M: np.ndarray,
     J: np.ndarray,
     J_pattern: np.ndarray,
@@ -182,23 +176,58 @@ def minimal_dynamics(
     bias: np.ndarray,
     passive: np.ndarray,
     S: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(A, h, B)`` of paper eq. ``dyn`` (new arrays), the products with ``J = J_tf`` over its
-    nonzero pattern ``J_pattern`` (``RobotModel.J_tf_pattern``)."""
-    A = matmul_transposed_pattern(J, J_pattern, matmul_pattern(M, J, J_pattern))
-    h = matvec_transposed_pattern(J, J_pattern, small_matvec(M, Jdot_nu) + bias - passive)
-    B = matmul_transposed_pattern(J, J_pattern, S)
-    return A, h, B
+    A_out: np.ndarray,
+    h_out: np.ndarray,
+    B_out: np.ndarray,
+) -> None:
+    """``A``, ``h``, ``B`` of paper eq. ``dyn`` into ``A_out``, ``h_out``, ``B_out``, the
+    products with ``J = J_tf`` over its nonzero pattern ``J_pattern``
+    (``RobotModel.J_tf_pattern``). ``M J`` is made transposed, ``J^T M`` (``M`` is symmetric:
+    MuJoCo's full mass matrix), so that every loop reads and writes rows; and ``M Jdot_tf nu``
+    visits the nonzero entries of ``Jdot_tf nu`` only (the free joint's, a few of ``nv``). Each
+    sum adds the same terms in the same order as ``small_linalg``'s ``matmul_pattern``,
+    ``matmul_transposed_pattern`` and ``small_matvec`` would (tested: equal to the bit)."""
+    nv, n = J.shape
+    JtM = np.zeros((n, nv))
+    for e in range(J_pattern.shape[1]):
+        r, c = J_pattern[0, e], J_pattern[1, e]
+        value = J[r, c]
+        for i in range(nv):
+            JtM[c, i] += value * M[r, i]
+    A_out[:] = 0.0
+    for e in range(J_pattern.shape[1]):
+        r, c = J_pattern[0, e], J_pattern[1, e]
+        value = J[r, c]
+        for j in range(n):
+            A_out[c, j] += value * JtM[j, r]
+    # M Jdot_tf nu + c - f_passive (the nonzero entries of Jdot_tf nu, rows of M)
+    y = np.zeros(nv)
+    for k in range(nv):
+        d = Jdot_nu[k]
+        if d != 0.0:
+            for i in range(nv):
+                y[i] += M[k, i] * d
+    for i in range(nv):
+        y[i] = y[i] + bias[i] - passive[i]
+    h_out[:] = 0.0
+    B_out[:] = 0.0
+    for e in range(J_pattern.shape[1]):
+        r, c = J_pattern[0, e], J_pattern[1, e]
+        value = J[r, c]
+        h_out[c] += value * y[r]
+        for j in range(S.shape[1]):
+            B_out[c, j] += value * S[r, j]
 
 
 @njit(cache=True)
-def body_com(
-    masses: np.ndarray,
-    positions: np.ndarray,
+def body_com_into(
+    body_mass: np.ndarray,
+    xipos: np.ndarray,
+    body_ids: np.ndarray,
     origin: np.ndarray,
     jac_subtree: np.ndarray,
     subtree_mass: float,
-    wheel_masses: np.ndarray,
+    wheels: np.ndarray,
     jac_wheels: np.ndarray,
     jac_origin: np.ndarray,
     J: np.ndarray,
@@ -207,52 +236,63 @@ def body_com(
     c: float,
     s: float,
     planar: bool,
-) -> tuple[float, np.ndarray, np.ndarray, float, float, np.ndarray]:
-    """``(mass, com, J_com, theta, thetad, J_theta)`` of the body (every robot body but the
-    wheels: ``masses``, ``positions`` their CoMs in world) about the axle ``origin``, in the
-    axle frame (``Rz(psi)``, ``c``, ``s``; the world's when planar). ``J_com`` from the base
-    subtree's CoM Jacobian less the wheels', relative to the origin's, over ``nu`` (``J``, nonzero
-    only in ``J_pattern``);
-    in 3-D the frame's turning adds ``-psid e_z x com`` (column 1, ``psi``)."""
+    com_out: np.ndarray,
+    J_com_out: np.ndarray,
+    J_theta_out: np.ndarray,
+) -> tuple[float, float, float]:
+    """The body's (every robot body but the wheels: ``body_ids``, their masses and CoMs
+    ``xipos`` in world) CoM about the axle ``origin`` in the axle frame (``Rz(psi)``, ``c``,
+    ``s``; the world's when planar) into ``com_out``, its Jacobian over ``nu`` into
+    ``J_com_out`` (the base subtree's CoM Jacobian less the ``wheels``', relative to the
+    origin's, times ``J``, nonzero only in ``J_pattern``; in 3-D the frame's turning adds
+    ``-psid e_z x com`` in column 1, ``psi``) and ``J_theta`` into ``J_theta_out``; returns
+    ``(mass, theta, thetad)``."""
     mass = 0.0
-    for i in range(len(masses)):
-        mass += masses[i]
-    world = np.zeros(3)
-    for i in range(len(masses)):
+    for i in range(len(body_ids)):
+        mass += body_mass[body_ids[i]]
+    w0 = w1 = w2 = 0.0
+    for i in range(len(body_ids)):
+        b, m = body_ids[i], body_mass[body_ids[i]]
+        w0 += m * xipos[b, 0]
+        w1 += m * xipos[b, 1]
+        w2 += m * xipos[b, 2]
+    d0, d1, d2 = w0 / mass - origin[0], w1 / mass - origin[1], w2 / mass - origin[2]
+    m_l, m_r = body_mass[wheels[0]], body_mass[wheels[1]]
+    nv = jac_subtree.shape[1]
+    rel = np.empty((3, nv))
+    for a in range(3):
+        for k in range(nv):
+            value = jac_subtree[a, k] * subtree_mass
+            value -= m_l * jac_wheels[0, a, k]
+            value -= m_r * jac_wheels[1, a, k]
+            rel[a, k] = value / mass - jac_origin[a, k]
+    J_com_out[:] = 0.0
+    for e in range(J_pattern.shape[1]):
+        r, col = J_pattern[0, e], J_pattern[1, e]
+        value = J[r, col]
         for a in range(3):
-            world[a] += masses[i] * positions[i, a]
-    world /= mass
-    offset = world - origin
-    Jc = jac_subtree * subtree_mass
-    for w in range(len(wheel_masses)):
-        Jc -= wheel_masses[w] * jac_wheels[w]
-    Jc /= mass
-    J_rel = matmul_pattern(Jc - jac_origin, J, J_pattern)
+            J_com_out[a, col] += rel[a, r] * value
     if planar:
-        com = offset
+        com_out[0], com_out[1], com_out[2] = d0, d1, d2
     else:
-        com = np.empty(3)
-        com[0] = c * offset[0] + s * offset[1]
-        com[1] = -s * offset[0] + c * offset[1]
-        com[2] = offset[2]
-        rotated = np.empty_like(J_rel)
-        rotated[0] = c * J_rel[0] + s * J_rel[1]
-        rotated[1] = -s * J_rel[0] + c * J_rel[1]
-        rotated[2] = J_rel[2]
-        J_rel = rotated
-        J_rel[0, 1] += com[1]
-        J_rel[1, 1] -= com[0]
-    X, Z = com[0], com[2]
+        com_out[0], com_out[1], com_out[2] = c * d0 + s * d1, -s * d0 + c * d1, d2
+        for k in range(J_com_out.shape[1]):
+            a0, a1 = J_com_out[0, k], J_com_out[1, k]
+            J_com_out[0, k] = c * a0 + s * a1
+            J_com_out[1, k] = -s * a0 + c * a1
+        J_com_out[0, 1] += com_out[1]
+        J_com_out[1, 1] -= com_out[0]
+    X, Z = com_out[0], com_out[2]
     theta = math.atan2(X, Z)
     distance_sq = X * X + Z * Z
-    if distance_sq > 1e-18:
-        J_theta = (Z * J_rel[0] - X * J_rel[2]) / distance_sq
-    else:
-        J_theta = np.zeros(J_rel.shape[1])
     thetad = 0.0
-    for i in range(len(nu)):
-        thetad += J_theta[i] * nu[i]
-    return mass, com, J_rel, theta, thetad, J_theta
+    for k in range(J_theta_out.shape[0]):
+        if distance_sq > 1e-18:
+            J_theta_out[k] = (Z * J_com_out[0, k] - X * J_com_out[2, k]) / distance_sq
+        else:
+            J_theta_out[k] = 0.0
+        thetad += J_theta_out[k] * nu[k]
+    return mass, theta, thetad
 
 
 @njit(cache=True)
@@ -467,9 +507,9 @@ def robot_update(
     """``RobotModel.update`` for the state ``(qpos, qvel)`` (the robot's own entries) on the
     MuJoCo ``model``, ``data`` (addresses; ``data_*``, ``xmat``, ... are views on its arrays):
     kinematics and ``mj_comPos``, :func:`minimal_state`, the Jacobians of the base subtree's
-    CoM, of the wheels' CoMs and of the base origin, :func:`body_com`; with ``dynamics`` also
+    CoM, of the wheels' CoMs and of the base origin, :func:`body_com_into`; with ``dynamics`` also
     ``mj_crb``, the full mass matrix, ``mj_comVel``, ``mj_passive``, ``mj_rne`` and
-    :func:`minimal_dynamics` (else ``A_out``, ``h_out``, ``B_out`` are left as they are).
+    :func:`minimal_dynamics_into` (else ``A_out``, ``h_out``, ``B_out`` are left as they are).
     ``bodies``: ``(base, wheel_left, wheel_right)``; ``J_pattern``: where ``J`` (``J_tf``) may
     be nonzero. Written into the ``*_out`` buffers, and ``(psi, psid, cos psi, sin psi, mass,
     theta, thetad, x, xd, axle_x, axle_y)`` into ``scalars`` (:data:`UPDATE_SCALARS`):
@@ -497,14 +537,14 @@ def robot_update(
         wheel = bodies[1 + k]
         mjc.mj_jac(model, data, jac_wheels[k].ctypes.data, 0, xipos[wheel].ctypes.data, wheel)
     mjc.mj_jac(model, data, jac_origin.ctypes.data, 0, xpos[base].ctypes.data, base)
-    wheels = bodies[1:]
-    mass, com, J_com, theta, thetad, J_theta = body_com(
-        body_mass[body_ids],
-        xipos[body_ids],
+    mass, theta, thetad = body_com_into(
+        body_mass,
+        xipos,
+        body_ids,
         xpos[base],
         jac_subtree,
         subtree_mass[base],
-        body_mass[wheels],
+        bodies[1:],
         jac_wheels,
         jac_origin,
         J,
@@ -513,24 +553,21 @@ def robot_update(
         c,
         s,
         layout[0] != 0,
+        com_out,
+        J_com_out,
+        J_theta_out,
     )
     scalars[0], scalars[1], scalars[2], scalars[3] = psi, psid, c, s
     scalars[4], scalars[5], scalars[6] = mass, theta, thetad
     scalars[7], scalars[8] = q[0], nu[0]
     scalars[9], scalars[10] = xpos[base, 0], xpos[base, 1]
-    com_out[:] = com
-    J_com_out[:] = J_com
-    J_theta_out[:] = J_theta
     if dynamics:
         mjc.mj_crb(model, data)
         mjc.mj_fullM(model, data, M.ctypes.data)
         mjc.mj_comVel(model, data)
         mjc.mj_passive(model, data)
         mjc.mj_rne(model, data, 0, bias.ctypes.data)
-        A, h, B = minimal_dynamics(M, J, J_pattern, Jdot_nu, bias, qfrc_passive, S)
-        A_out[:] = A
-        h_out[:] = h
-        B_out[:] = B
+        minimal_dynamics_into(M, J, J_pattern, Jdot_nu, bias, qfrc_passive, S, A_out, h_out, B_out)
 
 
 UPDATE_ENTRIES = (
