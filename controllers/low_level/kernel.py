@@ -4,8 +4,9 @@ From the robot's minimal dynamics ``(A, h)`` (paper eq. ``dyn``), the stacked ta
 Jacobians ``J`` over ``nu``, reference accelerations ``xdd*``, ``Jdot nu`` and weights ``w``)
 and the joint state, one call of :meth:`LowLevelKernel.run` computes, into preallocated buffers:
 
-1. the isolated dynamics, eq. ``iso3`` (``controllers.low_level.isolated_dynamics``, same
-   arithmetic): ``calA``, ``Ph`` and ``nu_dot = E qdd + e``;
+1. the isolated dynamics, eq. ``iso3`` (``controllers.low_level.isolated_dynamics``'s
+   formulas, with products by ``1 / a_xx`` for its divisions): ``calA``, ``Ph`` and
+   ``nu_dot = E qdd + e``;
 2. the task QP's rows ``T = w (J E)``, ``b = w (xdd* - Jdot nu - J e)``
    (``controllers.low_level.task_qp``): with ``x`` the first minimal coordinate, ``E``'s rows below
    ``x`` are the identity, so ``J E = J[:, 1:] + J[:, :1] E[0]`` and ``J e = J[:, 0] e[0]`` (no
@@ -287,27 +288,35 @@ def isolated_dynamics_into(
     E: Array,
     e: Array,
 ) -> None:
-    """Step 1: eq. iso3 (``controllers.low_level.isolated_dynamics``, operation for
-    operation) into ``calA``, ``Ph`` and the first rows of ``E``, ``e``."""
+    """Step 1: eq. iso3 (``controllers.low_level.isolated_dynamics``: the same formulas, each
+    division by ``a_xx`` a product with its reciprocal, and ``a_xq`` copied to a contiguous
+    array first; equal to rounding) into ``calA``, ``Ph`` and the first rows of ``E``, ``e``."""
+    n = A.shape[0] - 1
     a_xx = A[0, 0]
-    a_xq = A[1:, 0]
-    h_x, h_q = h[0], h[1:]
-    n = len(a_xq)
+    inverse = 1.0 / a_xx
+    h_x = h[0]
+    work = np.empty(2 * n)  # a_xq, then calA's row k before its update
+    a_xq, row_k = work[:n], work[n:]
     for i in range(n):
+        a_xq[i] = A[1 + i, 0]
+    for i in range(n):
+        a_i = a_xq[i] * inverse
         for j in range(n):
-            calA[i, j] = A[1 + i, 1 + j] - a_xq[i] * a_xq[j] / a_xx
-    beta = 1.0 / (1.0 + a_xq[k] / (r * a_xx))
-    scale = beta / (r * a_xx)
-    row_k = calA[k].copy()
-    for i in range(n):
-        for j in range(n):
-            calA[i, j] -= a_xq[i] * row_k[j] * scale
-    h_star = h_q - a_xq * h_x / a_xx
-    for i in range(n):
-        Ph[i] = h_star[i] - scale * a_xq[i] * h_star[k]
+            calA[i, j] = A[1 + i, 1 + j] - a_i * a_xq[j]
+    beta = 1.0 / (1.0 + a_xq[k] * inverse / r)
+    scale = beta * inverse / r
     for j in range(n):
-        E[0, j] = (-calA[k, j] / r - a_xq[j]) / a_xx
-    e[0] = (-Ph[k] / r - h_x) / a_xx
+        row_k[j] = calA[k, j]
+    for i in range(n):
+        a_i = a_xq[i] * scale
+        for j in range(n):
+            calA[i, j] -= a_i * row_k[j]
+    h_k = h[1 + k] - a_xq[k] * h_x * inverse
+    for i in range(n):
+        Ph[i] = h[1 + i] - a_xq[i] * h_x * inverse - scale * a_xq[i] * h_k
+    for j in range(n):
+        E[0, j] = (-calA[k, j] / r - a_xq[j]) * inverse
+    e[0] = (-Ph[k] / r - h_x) * inverse
 
 
 @njit(cache=True)
@@ -315,7 +324,8 @@ def _cholesky_solve(H: Array, rhs: Array, x: Array) -> bool:
     """``x = H^-1 rhs`` by Cholesky (``H = L L^T``); False when ``H`` is not positive
     definite."""
     n = len(rhs)
-    L = np.zeros((n, n))
+    L = np.empty((n, n))  # its lower triangle only is written and read
+    inverse = np.empty(n)  # 1 / L[j, j]: products instead of divisions
     for j in range(n):
         d = H[j, j]
         for p in range(j):
@@ -323,21 +333,22 @@ def _cholesky_solve(H: Array, rhs: Array, x: Array) -> bool:
         if not d > 0.0:
             return False
         L[j, j] = np.sqrt(d)
+        inverse[j] = 1.0 / L[j, j]
         for i in range(j + 1, n):
             v = H[i, j]
             for p in range(j):
                 v -= L[i, p] * L[j, p]
-            L[i, j] = v / L[j, j]
+            L[i, j] = v * inverse[j]
     for i in range(n):
         v = rhs[i]
         for p in range(i):
             v -= L[i, p] * x[p]
-        x[i] = v / L[i, i]
+        x[i] = v * inverse[i]
     for i in range(n - 1, -1, -1):
         v = x[i]
         for p in range(i + 1, n):
             v -= L[p, i] * x[p]
-        x[i] = v / L[i, i]
+        x[i] = v * inverse[i]
     return True
 
 
