@@ -8,7 +8,9 @@ mostly zeros in a pattern fixed for a run.
 * The products with ``J_tf``: it is mostly zeros in a pattern fixed by the robot's layout (27
   of 30 x 19 entries on KrangTray-v0's model), and the ``*_pattern`` loops below visit only
   those entries. ``A = J_tf^T M J_tf`` took 6.2 to 10.4 us through BLAS and 2.8 us over the
-  pattern (``minimal_dynamics``, 2026-11-26).
+  pattern (2026-11-26); the robot update now runs the same sums in its own loops, in place
+  (``wip_gym.minimal_kernels.minimal_dynamics_into``), and the tests use these as its
+  reference.
 * The QP kernel's (``controllers.low_level.kernel``): the task matrix ``T`` has a posture row
   of one entry per joint (16 of KrangTray-v0's 30 rows), the actuator map one or two entries
   per row. Loops in the operands' memory order that skip zero entries (``gram_into``,
