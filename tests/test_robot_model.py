@@ -7,6 +7,8 @@ rolling on the floor through MuJoCo's soft contacts: the contact's softness.
 
 from __future__ import annotations
 
+import math
+
 import gymnasium as gym
 import mujoco
 import numpy as np
@@ -324,9 +326,11 @@ def test_compiled_arithmetic_equals_numpy(robot: RobotModel) -> None:
 def test_dynamics_in_place_equal_the_pattern_products_to_the_bit(robot: RobotModel) -> None:
     """``minimal_dynamics_into`` (rows of ``J^T M`` by the mass matrix's symmetry, the
     nonzero entries of ``Jdot_tf nu`` only, into the update's buffers) adds the same terms in
-    the same order as ``small_linalg``'s pattern products it replaced: ``A``, ``h``, ``B``
-    equal to the bit, on random states on and off the rolling manifold. (``_M``, ``_bias``,
-    ``_S``: the update's own mass matrix, bias and actuator map buffers.)"""
+    the same order as ``small_linalg``'s pattern products it replaced, and ``body_com_into``
+    the same operations as the update's arithmetic before it wrote in place: ``A``, ``h``,
+    ``B``, the CoM, its Jacobian, ``J_theta``, the mass, ``theta`` and ``thetad`` equal to the
+    bit, on random states on and off the rolling manifold. (``_M``, ``_bias``, ``_S``: the
+    update's own mass matrix, bias and actuator map buffers.)"""
     d, lay = robot.data, robot.layout
     rng = np.random.default_rng(23)
     for k in range(6):
@@ -344,6 +348,46 @@ def test_dynamics_in_place_equal_the_pattern_products_to_the_bit(robot: RobotMod
         np.testing.assert_array_equal(robot.A, A)
         np.testing.assert_array_equal(robot.h, matvec_transposed_pattern(J, pattern, y))
         np.testing.assert_array_equal(robot.B, matmul_transposed_pattern(J, pattern, robot._S))
+        # the body's CoM as the update computed it before writing in place, operation for
+        # operation (NumPy's elementwise arithmetic is the same IEEE arithmetic)
+        m, base = robot.model, lay.base_body
+        ids = np.array(lay.body_bodies)
+        mass = 0.0
+        for i in ids:
+            mass += float(m.body_mass[i])
+        world = np.zeros(3)
+        for i in ids:
+            for a in range(3):
+                world[a] += m.body_mass[i] * d.xipos[i, a]
+        world /= mass
+        offset = world - d.xpos[base]
+        jacp, jac_wheel, jac_origin = (np.zeros((3, m.nv)) for _ in range(3))
+        mujoco.mj_jacSubtreeCom(m, d, jacp, base)
+        Jc = jacp * m.body_subtreemass[base]
+        for w in lay.wheel_bodies:
+            mujoco.mj_jac(m, d, jac_wheel, None, d.xipos[w], w)
+            Jc -= m.body_mass[w] * jac_wheel
+        Jc /= mass
+        mujoco.mj_jac(m, d, jac_origin, None, d.xpos[base], base)
+        J_rel = matmul_pattern(Jc - jac_origin, J, pattern)
+        if lay.planar:
+            com = offset
+        else:
+            c, s = robot.heading_rotation[0, 0], robot.heading_rotation[1, 0]
+            x, y = offset[0], offset[1]
+            com = np.array([c * x + s * y, -s * x + c * y, offset[2]])
+            J_rel = np.array([c * J_rel[0] + s * J_rel[1], -s * J_rel[0] + c * J_rel[1], J_rel[2]])
+            J_rel[0, 1] += com[1]
+            J_rel[1, 1] -= com[0]
+        X, Z = com[0], com[2]
+        J_theta = (Z * J_rel[0] - X * J_rel[2]) / (X * X + Z * Z)
+        thetad = 0.0
+        for i in range(len(J_theta)):
+            thetad += J_theta[i] * robot.nu[i]
+        np.testing.assert_array_equal(robot.com, com)
+        np.testing.assert_array_equal(robot.J_com, J_rel)
+        np.testing.assert_array_equal(robot.J_theta, J_theta)
+        assert (robot.body_mass, robot.theta, robot.thetad) == (mass, math.atan2(X, Z), thetad)
 
 
 @pytest.mark.parametrize("source", [*ROBOTS, "wip_gym/KrangTray-v0", "wip_gym/PlanarTray-v0"])

@@ -1,7 +1,7 @@
 """The arithmetic of ``RobotModel.update`` after its MuJoCo calls, compiled by numba.
 
-Four functions of arrays (the last two write into the caller's buffers), :func:`all_finite`
-(the update's input check), and :func:`robot_update`, which makes ``RobotModel.update``'s MuJoCo
+Four functions that write into the caller's buffers, :func:`all_finite` (the update's input
+check), and :func:`robot_update`, which makes ``RobotModel.update``'s MuJoCo
 calls (``wip_gym.mujoco_c``) and runs them in one compiled call (called from Python as
 :func:`robot_update_at`, its arrays in one ``wip_gym.array_table.ArrayTable``):
 
@@ -182,11 +182,14 @@ def minimal_dynamics_into(
 ) -> None:
     """``A``, ``h``, ``B`` of paper eq. ``dyn`` into ``A_out``, ``h_out``, ``B_out``, the
     products with ``J = J_tf`` over its nonzero pattern ``J_pattern``
-    (``RobotModel.J_tf_pattern``). ``M J`` is made transposed, ``J^T M`` (``M`` is symmetric:
-    MuJoCo's full mass matrix), so that every loop reads and writes rows; and ``M Jdot_tf nu``
-    visits the nonzero entries of ``Jdot_tf nu`` only (the free joint's, a few of ``nv``). Each
-    sum adds the same terms in the same order as ``small_linalg``'s ``matmul_pattern``,
-    ``matmul_transposed_pattern`` and ``small_matvec`` would (tested: equal to the bit)."""
+    (``RobotModel.J_tf_pattern``). ``M J`` is made transposed, as the rows of ``J^T M`` (``M``
+    is symmetric: MuJoCo's full mass matrix, whose entries ``mj_fullM`` mirrors), so that every
+    loop but ``A``'s (which reads a column of ``J^T M``) reads and writes rows; and ``M Jdot_tf
+    nu`` visits the nonzero entries of ``Jdot_tf nu`` only (four in 3-D, the free joint's;
+    none planar). Each sum adds the same nonzero terms in the same order as ``small_linalg``'s
+    ``matmul_pattern``, ``matmul_transposed_pattern`` and ``small_matvec`` would: the terms
+    skipped are ``M[i, k] * 0``, which leave a sum that starts at ``+0.0`` unchanged when ``M``
+    is finite (tested: equal to the bit)."""
     nv, n = J.shape
     JtM = np.zeros((n, nv))
     for e in range(J_pattern.shape[1]):
