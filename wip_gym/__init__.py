@@ -19,6 +19,13 @@ import os
 if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
     os.environ.setdefault("MUJOCO_GL", "egl")
 
+# numba's caches of this tree cleared if its sources changed since they were written (a caller
+# compiled with an edited callee of another file would load the old code): before anything
+# compiles
+from wip_gym.compiled_cache import drop_stale_caches  # noqa: E402
+
+drop_stale_caches()
+
 from wip_gym.registration import ENV_IDS, register_envs  # noqa: E402
 from wip_gym.robot_model import RobotModel, WIPMParameters  # noqa: E402
 from wip_gym.scene import SceneOptions, build_model  # noqa: E402
