@@ -39,10 +39,11 @@ demo: $(STAMP)
 clean:
 	rm -rf $(VENV) build dist *.egg-info
 
-# numba's on-disk cache checks only the file that defines a compiled function: after an edit
-# to a function it calls from another file, the caller's cached code (with the old callee
-# inlined) is still used. Run this after editing compiled code: it deletes the cache and
-# compiles again what `warm_caches` runs (the rest compiles on first use).
+# numba's on-disk cache checks only the file that defines a compiled function; `import wip_gym`
+# keys the packages' caches on all their compiled files (wip_gym/compiled_cache.py), so an edit
+# of compiled code takes effect by itself. Left to this target: a module-level constant of a
+# file without compiled code that compiled code reads. It deletes the caches and compiles again
+# what `warm_caches` runs (the rest compiles on first use).
 clean-caches: $(STAMP)
 	find wip_gym controllers benchmarks -name '*.nbi' -delete -o -name '*.nbc' -delete
 	cd $${WIP_GYM_NUMBA_CACHE:-$$HOME/.cache/wip-gym/numba} 2>/dev/null && \

@@ -1,20 +1,24 @@
-"""``wip_gym.compiled_cache``: numba's caches cleared when the compiled code's sources change.
+"""``wip_gym.compiled_cache``: numba's caches keyed on every compiled source file of a package
+set, so that a caller's cache goes stale with an edit of its callee's file.
 
-numba keys a cached function on its own file only; a caller compiled with a callee of another
-file keeps the callee's old code after an edit of that file. The first test shows it with real
-numba in fresh processes (the hazard, and that the guard removes it); the others hold the
-guard's bookkeeping: what it deletes, when, and what it leaves."""
+numba keys a cached function on its own file only: a caller compiled with a callee of another
+file keeps the callee's old code after an edit of that file. The first tests show it with real
+numba in fresh processes (the hazard, and that the fingerprint removes it, in the tree's cache
+and in ``NUMBA_CACHE_DIR``; a process started before the edit included); the others hold the
+fingerprint and the installation in this process."""
 
 from __future__ import annotations
 
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
+import numba
 import pytest
 
-from wip_gym.compiled_cache import STAMP, drop_stale_caches, source_fingerprint
+from wip_gym.compiled_cache import PACKAGES, install, source_fingerprint
 
 REPOSITORY = Path(__file__).resolve().parent.parent
 
@@ -23,117 +27,151 @@ CALLER = (
     "from numba import njit\n\nfrom pkg.b import g\n\n\n"
     "@njit(cache=True)\ndef f():\n    return g()\n"
 )
+# the caller's process: the fingerprint installed for pkg or not, then (optionally) a pause
+# between defining the functions and compiling them, for an edit in between
 RUN = """
-import sys
+import sys, time
+from pathlib import Path
 sys.path[:0] = [{root!r}, {repository!r}]
-if {guard}:
-    from pathlib import Path
-    from wip_gym.compiled_cache import drop_stale_caches
-    drop_stale_caches(Path({root!r}), ("pkg",))
+if {fingerprinted}:
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("compiled_cache", {module!r})
+    compiled_cache = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(compiled_cache)
+    compiled_cache.install(Path({root!r}), ("pkg",))
 from pkg.a import f
+if {pause}:
+    Path({root!r}, "ready").touch()
+    while not Path({root!r}, "go").exists():
+        time.sleep(0.01)
 print(f())
 """
 
 
 def _package(root: Path, value: int) -> None:
     package = root / "pkg"
-    package.mkdir(exist_ok=True)
+    package.mkdir(parents=True, exist_ok=True)
     (package / "__init__.py").write_text("")
     (package / "a.py").write_text(CALLER)
     (package / "b.py").write_text(CALLEE.format(value=value))
 
 
-def _run(root: Path, guard: bool) -> str:
-    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
-    script = RUN.format(root=str(root), repository=str(REPOSITORY), guard=guard)
-    done = subprocess.run(
-        [sys.executable, "-c", script], env=env, capture_output=True, text=True, check=True
+def _script(root: Path, fingerprinted: bool, pause: bool = False) -> list[str]:
+    module = str(REPOSITORY / "wip_gym" / "compiled_cache.py")  # not the package: no import
+    script = RUN.format(
+        root=str(root),
+        repository=str(REPOSITORY),
+        module=module,
+        fingerprinted=fingerprinted,
+        pause=pause,
     )
-    return done.stdout.strip()
+    return [sys.executable, "-c", script]
 
 
-def test_a_caller_sees_its_edited_callee_only_with_the_guard(tmp_path: Path) -> None:
-    unguarded, guarded = tmp_path / "unguarded", tmp_path / "guarded"
-    for root in (unguarded, guarded):
-        root.mkdir()
+def _env(cache_dir: Path | None) -> dict[str, str]:
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "NUMBA_DEBUG_CACHE")}
+    if cache_dir is not None:
+        env["NUMBA_CACHE_DIR"] = str(cache_dir)
+    env["NUMBA_DEBUG_CACHE"] = "1"  # numba prints its cache's loads and saves
+    return env
+
+
+def _run(root: Path, fingerprinted: bool, cache_dir: Path | None = None) -> tuple[str, str]:
+    done = subprocess.run(
+        _script(root, fingerprinted), env=_env(cache_dir), capture_output=True, text=True
+    )
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.strip().splitlines()
+    return lines[-1], "\n".join(lines[:-1])
+
+
+@pytest.mark.parametrize("where", ["tree", "NUMBA_CACHE_DIR"])
+def test_a_caller_sees_its_edited_callee_only_with_the_fingerprint(
+    tmp_path: Path, where: str
+) -> None:
+    cache_dir = tmp_path / "cache" if where == "NUMBA_CACHE_DIR" else None
+    plain, keyed = tmp_path / "plain", tmp_path / "keyed"
+    for root in (plain, keyed):
         _package(root, 1)
-        assert _run(root, guard=root == guarded) == "1"  # compiled and cached
+        value, log = _run(root, fingerprinted=root == keyed, cache_dir=cache_dir)
+        assert value == "1" and "data saved" in log  # compiled and cached
         (root / "pkg" / "b.py").write_text(CALLEE.format(value=2))  # the callee edited
-    # numba's own cache: the caller's file is unchanged, so its stale machine code loads
-    assert _run(unguarded, guard=False) == "1"
-    # the guard saw the edit and cleared the caches: compiled again from the sources
-    assert _run(guarded, guard=True) == "2"
-    assert _run(guarded, guard=True) == "2"  # and cached again
+    # numba's own key: the caller's file is unchanged, so its stale machine code loads
+    value, log = _run(plain, fingerprinted=False, cache_dir=cache_dir)
+    assert value == "1" and "data loaded" in log
+    # keyed on the package's compiled sources: stale, compiled again from the current ones
+    value, log = _run(keyed, fingerprinted=True, cache_dir=cache_dir)
+    assert value == "2" and "data loaded" not in log
+    value, log = _run(keyed, fingerprinted=True, cache_dir=cache_dir)
+    assert value == "2" and "data loaded" in log  # and cached again
 
 
-def _caches(root: Path) -> list[str]:
-    return sorted(p.name for p in root.rglob("*.nb[ic]"))
-
-
-def _fake_caches(root: Path) -> None:
-    for directory in (root / "pkg" / "__pycache__", root / "pkg" / "sub" / "__pycache__"):
-        directory.mkdir(parents=True, exist_ok=True)
-        (directory / "a.f-5.py311.nbi").write_text("index")
-        (directory / "a.f-5.py311.1.nbc").write_text("code")
-        (directory / "a.cpython-311.pyc").write_text("bytecode")
-
-
-def test_caches_are_cleared_once_per_change_of_the_sources(tmp_path: Path) -> None:
+def test_a_process_started_before_the_edit_leaves_no_stale_cache(tmp_path: Path) -> None:
+    """A process that defined its functions before the edit compiles them with the old callee
+    (its code is in memory) and caches them: under its own, old fingerprint, which later
+    processes do not take."""
     _package(tmp_path, 1)
-    (tmp_path / "pkg" / "sub").mkdir()
-    (tmp_path / "pkg" / "sub" / "c.py").write_text("x = 1\n")
-    _fake_caches(tmp_path)
-    # no fingerprint yet: caches of unknown sources are cleared, bytecode is not
-    assert drop_stale_caches(tmp_path, ("pkg",))
-    assert _caches(tmp_path) == []
-    assert len(list(tmp_path.rglob("*.pyc"))) == 2
-    stamp = tmp_path / "pkg" / "__pycache__" / STAMP
-    assert stamp.read_text() == source_fingerprint(tmp_path, ("pkg",))
-    # the same sources: caches written since are kept
-    _fake_caches(tmp_path)
-    assert not drop_stale_caches(tmp_path, ("pkg",))
-    assert len(_caches(tmp_path)) == 4
-    # an edit in a subpackage clears them again, once
-    (tmp_path / "pkg" / "sub" / "c.py").write_text("x = 2\n")
-    assert drop_stale_caches(tmp_path, ("pkg",))
-    assert _caches(tmp_path) == []
-    assert not drop_stale_caches(tmp_path, ("pkg",))
-    assert [p.name for p in stamp.parent.iterdir() if p.suffix == ".tmp"] == []
+    early = subprocess.Popen(
+        _script(tmp_path, fingerprinted=True, pause=True),
+        env=_env(None),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 60.0
+    while not (tmp_path / "ready").exists():
+        assert early.poll() is None and time.monotonic() < deadline, early.communicate()
+        time.sleep(0.01)
+    (tmp_path / "pkg" / "b.py").write_text(CALLEE.format(value=2))
+    (tmp_path / "go").touch()
+    out, err = early.communicate(timeout=60.0)
+    assert early.returncode == 0, err
+    assert out.strip().splitlines()[-1] == "1"  # its own, older code
+    assert "data saved" in out
+    (tmp_path / "ready").unlink()
+    value, log = _run(tmp_path, fingerprinted=True)
+    assert value == "2" and "data loaded" not in log
 
 
-def test_the_fingerprint_follows_contents_and_paths(tmp_path: Path) -> None:
+def test_the_fingerprint_covers_the_compiled_sources_only(tmp_path: Path) -> None:
     _package(tmp_path, 1)
     first = source_fingerprint(tmp_path, ("pkg",))
+    # a file without compiled code, a cache directory's file, an editor's dangling lock link
+    (tmp_path / "pkg" / "plain.py").write_text("x = 1\n")
     (tmp_path / "pkg" / "__pycache__").mkdir()
-    (tmp_path / "pkg" / "__pycache__" / "stale.py").write_text("ignored")
-    assert source_fingerprint(tmp_path, ("pkg",)) == first  # caches' directories are not sources
-    (tmp_path / "pkg" / "b.py").rename(tmp_path / "pkg" / "b2.py")
-    assert source_fingerprint(tmp_path, ("pkg",)) != first
+    (tmp_path / "pkg" / "__pycache__" / "old.py").write_text("import numba\n")
+    (tmp_path / "pkg" / ".#a.py").symlink_to(tmp_path / "nowhere")
+    assert source_fingerprint(tmp_path, ("pkg",)) == first
+    (tmp_path / "pkg" / "b.py").write_text(CALLEE.format(value=2))
+    second = source_fingerprint(tmp_path, ("pkg",))
+    assert second != first
+    (tmp_path / "pkg" / "b.py").rename(tmp_path / "pkg" / "c.py")
+    assert source_fingerprint(tmp_path, ("pkg",)) not in (first, second)
 
 
-def test_a_user_cache_directory_and_an_unwritable_tree_are_left_alone(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    _package(tmp_path, 1)
-    _fake_caches(tmp_path)
-    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "elsewhere"))
-    assert not drop_stale_caches(tmp_path, ("pkg",))
-    assert len(_caches(tmp_path)) == 4
-    monkeypatch.delenv("NUMBA_CACHE_DIR")
-    # where the fingerprint cannot be written (its directory is a file here: the same error
-    # as a read-only tree, whatever the user's permissions), nothing is reported cleared
-    other = tmp_path / "other"
-    other.mkdir()
-    _package(other, 1)
-    (other / "pkg" / "__pycache__").write_text("not a directory")
-    assert not drop_stale_caches(other, ("pkg",))
+def test_this_process_keys_the_packages_caches_on_their_fingerprint() -> None:
+    """``import wip_gym`` (this module's imports made it) installed the locators first in
+    numba's list; a compiled function of the packages carries the fingerprint of this tree's
+    compiled sources in its cache's key, and installing again changes nothing."""
+    from numba.core import caching
+
+    from wip_gym.small_linalg import gram_into
+
+    names = [cls.__name__ for cls in caching.CacheImpl._locator_classes]
+    assert names[:3] == [
+        "FingerprintedUserProvidedCacheLocator",
+        "FingerprintedInTreeCacheLocator",
+        "FingerprintedUserWideCacheLocator",
+    ]
+    _, fingerprint = gram_into._cache._cache_file._source_stamp
+    assert fingerprint == source_fingerprint(REPOSITORY, PACKAGES)
+    assert install()
+    assert [cls.__name__ for cls in caching.CacheImpl._locator_classes] == names
+    # a function of a file outside the packages keeps numba's own locator and key
+    assert type(_outside._cache._impl.locator).__name__ == "InTreeCacheLocator"
+    assert isinstance(_outside._cache._cache_file._source_stamp, bytes)
 
 
-def test_this_tree_has_its_fingerprint_after_import() -> None:
-    """``import wip_gym`` (this module's imports made it) left the fingerprint of this tree's
-    sources beside its caches, unless a cache directory of the user's choosing is in use."""
-    if os.environ.get("NUMBA_CACHE_DIR"):
-        assert not drop_stale_caches()
-        return
-    stamp = REPOSITORY / "wip_gym" / "__pycache__" / STAMP
-    assert stamp.read_text() == source_fingerprint(REPOSITORY, ("wip_gym", "controllers"))
+@numba.njit(cache=True)
+def _outside() -> int:
+    return 1
