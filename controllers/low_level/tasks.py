@@ -144,13 +144,21 @@ class DesiredMotion(StoredParameters):
         them (``StoredParameters``), without three passes through ``__setattr__``."""
         state = self.__dict__
         slots = state.get("_stored_slots")
+        first, second, third = self.desired_names
+        if slots is None:
+            state[first], state[second], state[third] = value, rate, acceleration
+            return
         # per entry the stack's array first, then the attribute, as an assignment does (a
-        # value the array refuses leaves both as they were)
-        for name, number in zip(self.desired_names, (value, rate, acceleration), strict=True):
-            if slots is not None:
-                array, index = slots[name]
-                array[index] = number
-            state[name] = number
+        # value the array refuses leaves both as they were); written out, not looped
+        array, index = slots[first]
+        array[index] = value
+        state[first] = value
+        array, index = slots[second]
+        array[index] = rate
+        state[second] = rate
+        array, index = slots[third]
+        array[index] = acceleration
+        state[third] = acceleration
 
 
 def _skew(v: Array) -> Array:
