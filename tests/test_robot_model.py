@@ -8,6 +8,7 @@ rolling on the floor through MuJoCo's soft contacts: the contact's softness.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 
 import gymnasium as gym
 import mujoco
@@ -267,19 +268,28 @@ def test_bad_state_raises(robot: RobotModel) -> None:
         np.testing.assert_array_equal(array, value)
 
 
+def _states_on_and_off_the_manifold(
+    robot: RobotModel, seed: int, count: int = 6
+) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """Random full states: every other one on the rolling manifold (``full_state``), the rest
+    moved off it (position by 1e-4, velocity by 1e-2, the base quaternion normalised)."""
+    rng = np.random.default_rng(seed)
+    for k in range(count):
+        qpos, qvel = robot.full_state(*random_minimal_state(robot, rng))
+        if k % 2:
+            qpos = qpos + 1e-4 * rng.normal(size=qpos.shape)
+            qvel = qvel + 1e-2 * rng.normal(size=qvel.shape)
+            if not robot.layout.planar:
+                qpos[3:7] /= np.linalg.norm(qpos[3:7])
+        yield qpos, qvel
+
+
 def test_compiled_arithmetic_equals_numpy(robot: RobotModel) -> None:
     """``wip_gym.minimal_kernels`` against the NumPy expressions it replaced, on random
     states on and off the rolling manifold: ``A``, ``h``, ``B`` of eq. ``dyn``, the body CoM in
     the axle frame, its Jacobian, ``theta``, ``thetad`` and ``J_theta``."""
     m, d, lay = robot.model, robot.data, robot.layout
-    rng = np.random.default_rng(17)
-    for k in range(6):
-        qpos, qvel = robot.full_state(*random_minimal_state(robot, rng))
-        if k % 2:
-            qpos = qpos + 1e-4 * rng.normal(size=qpos.shape)
-            qvel = qvel + 1e-2 * rng.normal(size=qvel.shape)
-            if not lay.planar:
-                qpos[3:7] /= np.linalg.norm(qpos[3:7])
+    for qpos, qvel in _states_on_and_off_the_manifold(robot, seed=17):
         robot.update(qpos, qvel)
         J = robot.J_tf
         M = np.zeros((m.nv, m.nv))
@@ -332,14 +342,7 @@ def test_dynamics_in_place_equal_the_pattern_products_to_the_bit(robot: RobotMod
     bit, on random states on and off the rolling manifold. (``_M``, ``_bias``, ``_S``: the
     update's own mass matrix, bias and actuator map buffers.)"""
     d, lay = robot.data, robot.layout
-    rng = np.random.default_rng(23)
-    for k in range(6):
-        qpos, qvel = robot.full_state(*random_minimal_state(robot, rng))
-        if k % 2:
-            qpos = qpos + 1e-4 * rng.normal(size=qpos.shape)
-            qvel = qvel + 1e-2 * rng.normal(size=qvel.shape)
-            if not lay.planar:
-                qpos[3:7] /= np.linalg.norm(qpos[3:7])
+    for qpos, qvel in _states_on_and_off_the_manifold(robot, seed=23):
         robot.update(qpos, qvel)
         M, J, pattern = robot._M, robot.J_tf, robot.J_tf_pattern
         assert np.array_equal(M, M.T)  # what the rows of J^T M rely on
