@@ -18,7 +18,7 @@ from pathlib import Path
 import numba
 import pytest
 
-from wip_gym.compiled_cache import PACKAGES, install, source_fingerprint
+from wip_gym.compiled_cache import PACKAGES, fingerprint_of, install, source_fingerprint
 
 REPOSITORY = Path(__file__).resolve().parent.parent
 
@@ -78,7 +78,11 @@ def _env(cache_dir: Path | None) -> dict[str, str]:
 
 def _run(root: Path, fingerprinted: bool, cache_dir: Path | None = None) -> tuple[str, str]:
     done = subprocess.run(
-        _script(root, fingerprinted), env=_env(cache_dir), capture_output=True, text=True
+        _script(root, fingerprinted),
+        env=_env(cache_dir),
+        capture_output=True,
+        text=True,
+        timeout=120.0,
     )
     assert done.returncode == 0, done.stderr
     lines = done.stdout.strip().splitlines()
@@ -118,13 +122,15 @@ def test_a_process_started_before_the_edit_leaves_no_stale_cache(tmp_path: Path)
         stderr=subprocess.PIPE,
         text=True,
     )
-    deadline = time.monotonic() + 60.0
+    deadline = time.monotonic() + 120.0
     while not (tmp_path / "ready").exists():
-        assert early.poll() is None and time.monotonic() < deadline, early.communicate()
+        if early.poll() is not None or time.monotonic() > deadline:
+            early.kill()
+            pytest.fail(f"the early process did not get ready: {early.communicate()}")
         time.sleep(0.01)
     (tmp_path / "pkg" / "b.py").write_text(CALLEE.format(value=2))
     (tmp_path / "go").touch()
-    out, err = early.communicate(timeout=60.0)
+    out, err = early.communicate(timeout=120.0)
     assert early.returncode == 0, err
     assert out.strip().splitlines()[-1] == "1"  # its own, older code
     assert "data saved" in out
@@ -134,10 +140,12 @@ def test_a_process_started_before_the_edit_leaves_no_stale_cache(tmp_path: Path)
 
 
 def test_the_fingerprint_covers_the_compiled_sources_only(tmp_path: Path) -> None:
+    """Files that import numba count; a file that only names it, a cache directory's file and
+    an editor's dangling lock link do not (and do not break it); a file seen through a
+    symbolic link to the package gets the package's fingerprint."""
     _package(tmp_path, 1)
     first = source_fingerprint(tmp_path, ("pkg",))
-    # a file without compiled code, a cache directory's file, an editor's dangling lock link
-    (tmp_path / "pkg" / "plain.py").write_text("x = 1\n")
+    (tmp_path / "pkg" / "plain.py").write_text('"""numba is not imported here."""\nx = 1\n')
     (tmp_path / "pkg" / "__pycache__").mkdir()
     (tmp_path / "pkg" / "__pycache__" / "old.py").write_text("import numba\n")
     (tmp_path / "pkg" / ".#a.py").symlink_to(tmp_path / "nowhere")
@@ -147,6 +155,11 @@ def test_the_fingerprint_covers_the_compiled_sources_only(tmp_path: Path) -> Non
     assert second != first
     (tmp_path / "pkg" / "b.py").rename(tmp_path / "pkg" / "c.py")
     assert source_fingerprint(tmp_path, ("pkg",)) not in (first, second)
+    link = tmp_path.parent / f"{tmp_path.name}-link"
+    link.symlink_to(tmp_path, target_is_directory=True)
+    install(tmp_path, ("pkg",))
+    assert fingerprint_of(str(link / "pkg" / "a.py")) == source_fingerprint(tmp_path, ("pkg",))
+    assert fingerprint_of(str(tmp_path / "elsewhere.py")) is None
 
 
 def test_this_process_keys_the_packages_caches_on_their_fingerprint() -> None:

@@ -85,11 +85,11 @@ def test_kernel_equals_the_plain_computation(name: str) -> None:
 
 def test_zero_skipping_products_equal_numpy() -> None:
     """The kernel's products (``wip_gym.small_linalg``: loops that skip zero entries, into the
-    caller's buffer) against NumPy on operands shaped as KrangTray-v0's: a task matrix whose
-    last rows have one entry each (posture rows), an actuator map of one or two entries per
-    row (not square). The buffers start as garbage (every entry is written), an output may be
-    a view of a larger buffer (written alone), and a NaN in ``T`` reaches the diagonal of
-    ``T^T T``."""
+    caller's buffer) against NumPy on operands like KrangTray-v0's: a task matrix whose last
+    rows have one entry each (posture rows), an actuator map of one or two entries per row
+    (made non-square here, to catch swapped bounds). The buffers start as garbage (every
+    entry is written), an output may be a view of a larger buffer (written alone), and a NaN
+    in ``T`` reaches the diagonal of ``T^T T``."""
     rng = np.random.default_rng(11)
     T = rng.normal(size=(30, 18))
     T[:14] *= rng.random((14, 18)) < 0.6

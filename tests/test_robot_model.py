@@ -284,6 +284,24 @@ def _states_on_and_off_the_manifold(
         yield qpos, qvel
 
 
+def _com_jacobian_less_origin(robot: RobotModel, mass: float) -> np.ndarray:
+    """The body CoM's (wheels excluded, of ``mass``) world Jacobian less the base origin's,
+    over MuJoCo's dofs, at the robot's last update, as ``RobotModel`` computed it before the
+    compiled kernel: the base subtree's CoM Jacobian times its mass, less each wheel's,
+    divided by ``mass`` (NumPy's elementwise operations, in that order)."""
+    m, d, lay = robot.model, robot.data, robot.layout
+    base = lay.base_body
+    jacp, jac_wheel, jac_origin = (np.zeros((3, m.nv)) for _ in range(3))
+    mujoco.mj_jacSubtreeCom(m, d, jacp, base)
+    Jc = jacp * m.body_subtreemass[base]
+    for w in lay.wheel_bodies:
+        mujoco.mj_jac(m, d, jac_wheel, None, d.xipos[w], w)
+        Jc -= m.body_mass[w] * jac_wheel
+    Jc /= mass
+    mujoco.mj_jac(m, d, jac_origin, None, d.xpos[base], base)
+    return Jc - jac_origin
+
+
 def test_compiled_arithmetic_equals_numpy(robot: RobotModel) -> None:
     """``wip_gym.minimal_kernels`` against the NumPy expressions it replaced, on random
     states on and off the rolling manifold: ``A``, ``h``, ``B`` of eq. ``dyn``, the body CoM in
@@ -311,15 +329,7 @@ def test_compiled_arithmetic_equals_numpy(robot: RobotModel) -> None:
         origin = d.xpos[lay.base_body]
         Rt = robot.heading_rotation.T
         rel = Rt @ (masses @ d.xipos[ids] / mass - origin)
-        jacp, jac_wheel, jac_origin = (np.zeros((3, m.nv)) for _ in range(3))
-        mujoco.mj_jacSubtreeCom(m, d, jacp, lay.base_body)
-        Jc = jacp * m.body_subtreemass[lay.base_body]
-        for w in lay.wheel_bodies:
-            mujoco.mj_jac(m, d, jac_wheel, None, d.xipos[w], w)
-            Jc -= m.body_mass[w] * jac_wheel
-        Jc /= mass
-        mujoco.mj_jac(m, d, jac_origin, None, origin, lay.base_body)
-        J_rel = Rt @ ((Jc - jac_origin) @ J)
+        J_rel = Rt @ (_com_jacobian_less_origin(robot, mass) @ J)
         if not lay.planar:
             J_rel[0, 1] += rel[1]
             J_rel[1, 1] -= rel[0]
@@ -364,21 +374,13 @@ def test_dynamics_in_place_equal_the_pattern_products_to_the_bit(robot: RobotMod
                 world[a] += m.body_mass[i] * d.xipos[i, a]
         world /= mass
         offset = world - d.xpos[base]
-        jacp, jac_wheel, jac_origin = (np.zeros((3, m.nv)) for _ in range(3))
-        mujoco.mj_jacSubtreeCom(m, d, jacp, base)
-        Jc = jacp * m.body_subtreemass[base]
-        for w in lay.wheel_bodies:
-            mujoco.mj_jac(m, d, jac_wheel, None, d.xipos[w], w)
-            Jc -= m.body_mass[w] * jac_wheel
-        Jc /= mass
-        mujoco.mj_jac(m, d, jac_origin, None, d.xpos[base], base)
-        J_rel = matmul_pattern(Jc - jac_origin, J, pattern)
+        J_rel = matmul_pattern(_com_jacobian_less_origin(robot, mass), J, pattern)
         if lay.planar:
             com = offset
         else:
             c, s = robot.heading_rotation[0, 0], robot.heading_rotation[1, 0]
-            x, y = offset[0], offset[1]
-            com = np.array([c * x + s * y, -s * x + c * y, offset[2]])
+            ox, oy = offset[0], offset[1]
+            com = np.array([c * ox + s * oy, -s * ox + c * oy, offset[2]])
             J_rel = np.array([c * J_rel[0] + s * J_rel[1], -s * J_rel[0] + c * J_rel[1], J_rel[2]])
             J_rel[0, 1] += com[1]
             J_rel[1, 1] -= com[0]

@@ -4,19 +4,22 @@ numba caches a compiled function beside its source file (or in ``NUMBA_CACHE_DIR
 the cache on that one file's contents. A compiled function that calls a compiled function of
 another file has the callee compiled into its own machine code: the low level's one-call step
 (``controllers.low_level.compiled_step``) holds the task rows, the motion probe and the QP
-kernel of four other modules, the robot update holds ``wip_gym.small_linalg``'s products. After
+kernel of four other modules, the QP kernel holds ``wip_gym.small_linalg``'s products. After
 an edit of a callee's file, the caller's cache still loads the old code, and nothing says so
 (two benchmarks measured stale code: docs/performance.md §14 and docs/performance.md §23).
 
 :func:`install` makes numba key the caches of :data:`PACKAGES`' files on one fingerprint of all
-their compiled source files (every ``.py`` file that mentions numba) besides the file's own
+their compiled source files (every ``.py`` file that imports numba) besides the file's own
 contents: numba's cache locators for those files are subclassed so that their source stamp is
 the pair, and an edit of any compiled file makes every cache of the packages stale, which numba
 then treats as no cache and overwrites. Nothing is deleted, so processes never race over
 files; a process started before an edit keeps the fingerprint it started with, and the caches
 it writes afterwards are stale for every later process. ``import wip_gym`` installs it, before
-any compiled function of the packages is defined (every module whose compiled functions call
-another module's imports ``wip_gym``).
+the compiled functions of every module that imports ``wip_gym`` are defined: every module
+whose compiled functions call another module's does. Two modules of leaf functions do not
+(``controllers.low_level.compiled_tasks``, ``controllers.optimizer.scalar_codegen``): imported
+before ``wip_gym``, theirs keep numba's own key, which is safe for functions that call no
+other file's (a process that imports them in the other order compiles them once more).
 
 Not covered: a module-level constant of a file without compiled code that a compiled function
 reads (numba freezes it into the machine code, and numba's own cache does not see it either):
@@ -28,6 +31,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import re
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
@@ -43,9 +47,13 @@ ROOT = Path(__file__).resolve().parent.parent
 _FINGERPRINTS: list[tuple[str, str]] = []
 
 
+#: a line that imports numba: what makes a source file a compiled one here
+_IMPORTS_NUMBA = re.compile(rb"^\s*(?:import numba\b|from numba\b)", re.MULTILINE)
+
+
 def source_fingerprint(root: Path, packages: Sequence[str]) -> str:
     """SHA-256 of the compiled source files under ``root / package`` (the ``.py`` files that
-    mention numba: each one's path relative to ``root`` and its bytes, in sorted order). Files
+    import numba: each one's path relative to ``root`` and its bytes, in sorted order). Files
     that are not regular files or cannot be read (an editor's lock link, a file deleted
     meanwhile) are left out."""
     digest = hashlib.sha256()
@@ -62,7 +70,7 @@ def source_fingerprint(root: Path, packages: Sequence[str]) -> str:
             source = path.read_bytes()
         except OSError:
             continue
-        if b"numba" not in source:
+        if not _IMPORTS_NUMBA.search(source):
             continue
         digest.update(path.relative_to(root).as_posix().encode())
         digest.update(b"\0")
@@ -74,7 +82,7 @@ def source_fingerprint(root: Path, packages: Sequence[str]) -> str:
 def fingerprint_of(py_file: str) -> str | None:
     """The fingerprint that keys ``py_file``'s caches (None: not a file of an installed
     package set)."""
-    path = os.path.abspath(py_file)
+    path = os.path.realpath(py_file)  # the same file through a symbolic link too
     for prefix, fingerprint in _FINGERPRINTS:
         if path.startswith(prefix):
             return fingerprint
@@ -128,7 +136,7 @@ def install(root: Path = ROOT, packages: Sequence[str] = PACKAGES) -> bool:
     its fingerprint. False if numba's locators could not be extended."""
     fingerprint = source_fingerprint(root, packages)
     for package in packages:
-        prefix = os.path.join(os.path.abspath(root / package), "")
+        prefix = os.path.join(os.path.realpath(root / package), "")
         _FINGERPRINTS[:] = [(p, f) for p, f in _FINGERPRINTS if p != prefix]
         _FINGERPRINTS.append((prefix, fingerprint))
     from numba.core import caching

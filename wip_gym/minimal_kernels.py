@@ -249,7 +249,8 @@ def body_com_into(
     ``J_com_out`` (the base subtree's CoM Jacobian less the ``wheels``', relative to the
     origin's, times ``J``, nonzero only in ``J_pattern``; in 3-D the frame's turning adds
     ``-psid e_z x com`` in column 1, ``psi``) and ``J_theta`` into ``J_theta_out``; returns
-    ``(mass, theta, thetad)``."""
+    ``(mass, theta, thetad)``. ``wheels``: the two wheel bodies (left, right), whose CoM
+    Jacobians are ``jac_wheels``."""
     mass = 0.0
     for i in range(len(body_ids)):
         mass += body_mass[body_ids[i]]

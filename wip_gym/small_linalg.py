@@ -19,8 +19,11 @@ mostly zeros in a pattern fixed for a run.
   ``matvec_transposed_into``) 0.09 to 0.15 us against 0.17 to 0.37; they write into the
   caller's buffers (docs/performance.md §23). Plain loops tried first were slower than BLAS:
   20.7 us against 4.2 for ``T^T T``, ``M_act calA`` and ``jac J_tf`` (2026-11-26).
-* Operands of a few hundred entries (a 6 x 24 Jacobian times a velocity, 3 x 3 rotations):
-  ``small_matvec``, ``small_matmul`` (0.15 to 0.25 us against BLAS's 0.35).
+* Operands of a few hundred entries (3 x 3 rotations): ``small_matmul`` (0.15 to 0.25 us
+  against BLAS's 0.35).
+
+``small_matvec`` and the ``*_pattern`` products are the robot update's arithmetic before it
+wrote in place: the tests hold ``minimal_dynamics_into`` to them, to the bit.
 """
 
 from __future__ import annotations

@@ -17,8 +17,8 @@ matrix product); 3. ``H = T^T T + eps I``, ``g = -T^T b``;
    solves) and whether it is finite and meets every constraint (then it is the convex QP's
    optimum and no QP solver is needed).
 
-Compiled by numba, one call for the five steps. For these sizes (Krang: 18 variables, 31
-task rows, 34 constraint rows) the arithmetic costs less than one call of a jitted JAX
+Compiled by numba, one call for the five steps. For these sizes (KrangTray-v0: 18 variables,
+30 task rows, 34 constraint rows) the arithmetic costs less than one call of a jitted JAX
 function, and NumPy spends more in its per-call overhead than in arithmetic:
 ``benchmarks/speed/low_level_kernel_bench.py`` measures the three.
 """
@@ -83,10 +83,14 @@ class LowLevelKernel:
         n = n_min - 1
         m = len(layout.actuator_map)
         n_limit = len(layout.limit_columns)
-        if not (np.asarray(layout.actuator_map) != 0.0).any(axis=0).all():
+        unreached = np.flatnonzero(~(np.asarray(layout.actuator_map) != 0.0).any(axis=0))
+        if len(unreached):
             # the constraint rows M_act calA skip zero entries (small_linalg.matmul_into): a
             # variable no actuator reaches would keep a nonfinite calA row out of them
-            raise ValueError("every QP variable must reach an actuator (a column of zeros)")
+            raise ValueError(
+                f"the actuator map's columns {unreached.tolist()} are all zeros: every QP "
+                "variable must reach an actuator"
+            )
         self.n = n
         self.calA = np.zeros((n, n))
         self.Ph = np.zeros(n)
@@ -267,6 +271,9 @@ def kernel_step(
     # 5. the unconstrained minimiser and its feasibility
     if not _cholesky_solve(H, -g, x):
         return False
+    # a nonfinite x would make every constraint row nonfinite too (their products do not skip
+    # zeros); tested here as well, cheaply, so that no later change of those rows can let it
+    # through
     for i in range(n):  # noqa: SIM110 (a generator in all() does not compile)
         if not np.isfinite(x[i]):
             return False
