@@ -157,9 +157,10 @@ def _clip_and_measure(
     tolerance: NDArray[np.float64],
     clipped: NDArray[np.float64],
 ) -> tuple[bool, float, bool]:
-    """``clipped`` = ``action`` inside ``[low, high]``; returns (every entry finite, the
-    largest excess over a bound (0 inside), any clipped entry within ``tolerance`` of a
-    bound). One compiled call for what were eight NumPy calls per step."""
+    """``clipped`` = ``action`` inside ``[low, high]`` (``clipped`` may be ``action``: each
+    entry is read before it is written); returns (every entry finite, the largest excess over
+    a bound (0 inside), any clipped entry within ``tolerance`` of a bound). One compiled call
+    for what were eight NumPy calls per step."""
     finite, excess, at_limit = True, 0.0, False
     for i in range(len(action)):
         value = action[i]
@@ -197,17 +198,18 @@ class ClipCounter:
         self.last_excess = 0.0
 
     def clip(self, action: NDArray[np.float64]) -> NDArray[np.float64]:
-        # a copy: the compiled check sees one array type (a read-only or strided action, a
-        # JAX array's view, would compile it again)
-        action = np.array(action, dtype=np.float64)
-        if action.shape != self.low.shape:
-            raise ValueError(f"action must have shape {self.low.shape}, got {action.shape}")
-        clipped = np.empty_like(action)
+        # a copy, clipped in place and returned: the compiled check sees one array type (a
+        # read-only or strided action, a JAX array's view, would compile it again), and the
+        # caller's array is left as it was
+        given = action
+        clipped = np.array(action, dtype=np.float64)
+        if clipped.shape != self.low.shape:
+            raise ValueError(f"action must have shape {self.low.shape}, got {clipped.shape}")
         finite, excess, at_limit = _clip_and_measure(
-            action, self.low, self.high, self._at_limit_tolerance, clipped
+            clipped, self.low, self.high, self._at_limit_tolerance, clipped
         )
         if not finite:
-            raise ValueError(f"the controller produced a non-finite action: {action}")
+            raise ValueError(f"the controller produced a non-finite action: {given}")
         self.last_excess = excess
         if excess > 0.0:
             self.clipped_steps += 1

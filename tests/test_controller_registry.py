@@ -209,14 +209,18 @@ def test_register_refuses_unknown_fields() -> None:
 def test_clip_counter_counts_and_refuses_non_finite_actions() -> None:
     counter = ClipCounter(np.array([-1.0, -2.0]), np.array([1.0, 2.0]))
     np.testing.assert_array_equal(counter.clip(np.array([0.5, -1.0])), [0.5, -1.0])
-    np.testing.assert_array_equal(counter.clip(np.array([1.25, -2.5])), [1.0, -2.0])
+    given = np.array([1.25, -2.5])
+    clipped = counter.clip(given)
+    np.testing.assert_array_equal(clipped, [1.0, -2.0])
+    np.testing.assert_array_equal(given, [1.25, -2.5])  # clipped in a copy
+    assert clipped is not given
     assert counter.counters == {
         "clipped_steps": 1.0,
         "max_clip_excess": 0.5,
         "actuator_limit_steps": 1.0,
     }
-    with pytest.raises(ValueError, match="non-finite"):
-        counter.clip(np.array([np.nan, 0.0]))
+    with pytest.raises(ValueError, match=r"non-finite action: \[nan +5\.\]"):
+        counter.clip(np.array([np.nan, 5.0]))  # the values given, not the clipped copy
     with pytest.raises(ValueError, match="shape"):
         counter.clip(np.zeros(3))
 
