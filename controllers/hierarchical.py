@@ -44,7 +44,6 @@ from controllers.low_level.tasks import (
     site_in_axle_frame,
 )
 from controllers.policy import ModelChoice, PolicyBase, TaskInfo, plan_counters
-from controllers.simplified.wipm_problem import wipm_state
 from wip_gym.robot_model import RobotModel
 from wip_gym.wheel_torques import generalized_to_wheel_matrix
 
@@ -222,7 +221,9 @@ def tilt_toward(acceleration: Array, max_tilt_deg: float) -> Array:
     return R.reshape(3, 3)
 
 
-# the per-step diagnostics, in the order __call__ records them (DiagnosticsRecorder.record_row)
+# the per-step diagnostics, in the order __call__ records them (DiagnosticsRecorder.record_row);
+# the first two are stored as the robot update's scalars and the MPC index, and made into the
+# WIPM state and the plan's state when the diagnostics are read (cheaper per step)
 _SIGNALS = (
     "t",
     "wipm_state",
@@ -394,7 +395,6 @@ class HierarchicalController(PolicyBase):
     def __call__(self, observation: dict[str, Array]) -> Array:
         if self.plan is None:
             raise RuntimeError(f"{type(self).__name__}: reset() before the first step")
-        plan = self.plan
         start = time.perf_counter()
         robot = self.robot
         robot.update(observation["qpos"], observation["qvel"])
@@ -422,8 +422,8 @@ class HierarchicalController(PolicyBase):
             _SIGNALS,
             (
                 self._step * self.task.control_dt,
-                wipm_state(robot),
-                plan.state(ref.mpc_index).copy(),
+                robot.update_scalars(),  # -> wipm_state (diagnostics)
+                ref.mpc_index,  # -> wipm_reference (diagnostics)
                 ref.theta,
                 ref.thetad,
                 ref.thdd,
@@ -451,7 +451,15 @@ class HierarchicalController(PolicyBase):
         ``qp_solved``, ``qp_iterations``, ``qp_failures`` and ``mpc_rejected`` (running
         counts), ``theta_error``, and the timings ``mpc_time``, ``qp_time``,
         ``compute_time``."""
-        return self._recorder.as_arrays()
+        arrays = self._recorder.as_arrays()
+        plan = self.plan  # rows are recorded only after reset made it
+        if "wipm_state" in arrays and plan is not None:
+            arrays["wipm_state"] = self.robot.wipm_states(arrays["wipm_state"])
+            index = arrays["wipm_reference"].astype(np.intp)
+            states = plan.states  # past its end: the goal state (Plan.state)
+            padded = np.vstack([states, plan.goal_state[None, :]])
+            arrays["wipm_reference"] = padded[np.minimum(index, len(states))]
+        return arrays
 
     def controller_counters(self) -> dict[str, float]:
         """``qp_fallbacks`` (steps that applied the previous step's torques because the QP was

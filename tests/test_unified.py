@@ -143,3 +143,38 @@ def test_the_waiters_tray_target_made_once_per_mpc_solution_is_the_per_step_one(
         policy.high_level.close()
     np.testing.assert_array_equal(np.array(actions[False]), np.array(actions[True]))
     assert made == {False: solutions, True: 60}  # one MPC solution per 10 ms, 60 steps of 1 ms
+
+
+@pytest.mark.parametrize("env_id", ["wip_gym/PlanarTray-v0", "wip_gym/KrangTray-v0"])
+def test_diagnostics_wipm_state_and_reference_are_the_per_step_ones(env_id: str) -> None:
+    """The diagnostics keep the robot update's scalars and the MPC index per step and make the
+    WIPM state and the plan's state of them when read: equal, to the bit, to the robot's
+    ``wipm_state()`` and the plan's ``state(index)`` taken at each step (past the plan's end
+    too: the goal state); a second episode's diagnostics start empty."""
+    import gymnasium as gym
+
+    from controllers.registry import make_policy
+
+    env = gym.make(env_id, goal=0.05 if env_id.startswith("wip_gym/Planar") else (0.05, 0.0))
+    observation, info = env.reset(seed=1)
+    policy = make_policy("unified", env)
+    policy.reset(observation, info)
+    states, references, indices = [], [], []
+    past_end = len(policy.plan.states) + 5
+    for step in range(120):
+        if step == 60:  # past the plan's end from here (the goal state)
+            policy.high_level._step = past_end * policy.high_level.steps_per_mpc
+        action = policy(observation)
+        states.append(policy.robot.wipm_state())
+        indices.append(policy._ref.mpc_index)
+        references.append(policy.plan.state(policy._ref.mpc_index).copy())
+        observation, *_ = env.step(action)
+    diagnostics = policy.diagnostics
+    assert indices[-1] >= len(policy.plan.states)  # some steps past the end
+    np.testing.assert_array_equal(diagnostics["wipm_state"], np.array(states))
+    np.testing.assert_array_equal(diagnostics["wipm_reference"], np.array(references))
+    assert list(diagnostics)[:3] == ["t", "wipm_state", "wipm_reference"]
+    with pytest.raises(ValueError, match="update scalars"):
+        policy.robot.wipm_states(np.zeros((2, 3)))
+    policy.reset(*env.reset(seed=2))
+    assert policy.diagnostics == {}

@@ -453,13 +453,13 @@ def wipm_inputs_into(
         table, heading, com, scalars[_BODY_MASS], scalars[_THETA], wheel_radius, wheel_separation
     )
     if planar:
-        n = len(_PLANAR_STATE)
+        n = len(PLANAR_STATE)
         for k in range(n):
-            out[k] = scalars[_PLANAR_STATE[k]]
+            out[k] = scalars[PLANAR_STATE[k]]
     else:
-        n = len(_SPATIAL_STATE)
+        n = len(SPATIAL_STATE)
         for k in range(n):
-            out[k] = scalars[_SPATIAL_STATE[k]]
+            out[k] = scalars[SPATIAL_STATE[k]]
     out[n], out[n + 1], out[n + 2] = values[0], values[1], values[2]
     for a in range(3):
         for b in range(3):
@@ -627,17 +627,18 @@ UPDATE_SCALARS = (
     "axle_x",
     "axle_y",
 )
+"""The entries of :func:`robot_update`'s ``scalars``, in order (``x``, ``xd``: the first
+minimal coordinate and its rate; ``axle_x``, ``axle_y``: the base origin's world position)."""
 _COS_PSI, _SIN_PSI, _BODY_MASS, _THETA = (
     UPDATE_SCALARS.index(name) for name in ("cos_psi", "sin_psi", "body_mass", "theta")
 )
-#: the WIPM state (``RobotModel.wipm_state``) as indices into :data:`UPDATE_SCALARS`
-_PLANAR_STATE = tuple(UPDATE_SCALARS.index(name) for name in ("theta", "thetad", "x", "xd"))
-_SPATIAL_STATE = tuple(
+#: the WIPM state (``RobotModel.wipm_state``) as indices into :data:`UPDATE_SCALARS`: planar
+#: ``[theta, thetad, x, xd]``, 3-D ``[x, psi, theta, xd, psid, thetad, X0, Y0]``
+PLANAR_STATE = tuple(UPDATE_SCALARS.index(name) for name in ("theta", "thetad", "x", "xd"))
+SPATIAL_STATE = tuple(
     UPDATE_SCALARS.index(name)
     for name in ("x", "psi", "theta", "xd", "psid", "thetad", "axle_x", "axle_y")
 )
-"""The entries of :func:`robot_update`'s ``scalars``, in order (``x``, ``xd``: the first
-minimal coordinate and its rate; ``axle_x``, ``axle_y``: the base origin's world position)."""
 
 
 @njit(cache=True, nogil=True)

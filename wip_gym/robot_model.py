@@ -588,6 +588,25 @@ class RobotModel:
             self._heading = _read_only(heading)
         return self._heading
 
+    def update_scalars(self) -> Array:
+        """A copy of the last update's scalars (``minimal_kernels.UPDATE_SCALARS``: ``psi``,
+        ``psid``, the heading's cosine and sine, the body mass, ``theta``, ``thetad``, ``x``,
+        ``xd``, the axle's ``X0, Y0``): what a per-step record keeps, one small copy, mapped to
+        WIPM states afterwards by :meth:`wipm_states`."""
+        self._require()
+        return self._scalars.copy()
+
+    def wipm_states(self, scalars: ArrayLike) -> Array:
+        """The WIPM states (:meth:`wipm_state`'s order) of ``scalars``: one or rows of
+        :meth:`update_scalars`. ``ValueError`` for another last axis."""
+        scalars = np.asarray(scalars, dtype=float)
+        if scalars.shape[-1:] != self._scalars.shape:
+            raise ValueError(
+                f"expected rows of {len(self._scalars)} update scalars, got shape {scalars.shape}"
+            )
+        columns = kernels.PLANAR_STATE if self.layout.planar else kernels.SPATIAL_STATE
+        return scalars[..., list(columns)]
+
     def wipm_state(self) -> Array:
         """The WIPM state of the robot (its ``lambda(q)`` part) at the last update, from the
         update's scalars: planar ``[theta, thetad, x, xd]``, 3-D ``[x, psi, theta, xd, psid,
