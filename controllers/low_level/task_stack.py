@@ -39,6 +39,7 @@ from controllers.low_level.tasks import (
     FramePositionTask,
     PostureTask,
     SpinTask,
+    StoredParameters,
     ThetaTask,
 )
 from wip_gym import mujoco_c as mjc
@@ -367,6 +368,7 @@ class CompiledTaskStack:
                 self.observers[k] = slot
                 slot += 1
         self._observer_keys = [key for key, _, _ in self._observer_rows]
+        self._observer_key_set = frozenset(self._observer_keys)
         self.params = np.zeros((len(tasks), ct.PARAMETERS))
         self.targets = np.zeros((len(tasks), 9))
         self.row_column = np.zeros(self.rows, dtype=np.int64)
@@ -382,6 +384,8 @@ class CompiledTaskStack:
         self._stored = [(task, self._parameter_slots(k)) for k, task in enumerate(self._inner)]
         for task, slots in self._stored:
             task.store_parameters(self._owner, slots)  # type: ignore[attr-defined]
+        # StoredParameters.store_events when every task was last seen stored here
+        self._store_events_seen = StoredParameters.store_events
         n_sites, nv = len(sites), m.nv
         self.scalars = np.zeros(6)
         self.scalars[5] = -1 if lay.index_psi is None else lay.index_psi
@@ -468,13 +472,19 @@ class CompiledTaskStack:
         if robot is not self._robot:
             raise ValueError("a compiled task stack serves the robot model it was built for")
         cache = robot.cache
-        advance = self.observer_advance
-        for slot, key in enumerate(self._observer_keys):
-            advance[slot] = key not in cache
-        owner = self._owner
-        for task, slots in self._stored:
-            if task._stored_by is not owner:  # type: ignore[attr-defined]
-                task.store_parameters(owner, slots)  # another stack took it since: take it back
+        if self._observer_key_set.isdisjoint(cache):
+            self.observer_advance.fill(1)  # the common case: none has advanced at this state
+        else:
+            advance = self.observer_advance
+            for slot, key in enumerate(self._observer_keys):
+                advance[slot] = key not in cache
+        if StoredParameters.store_events != self._store_events_seen:
+            # a task was stored somewhere or left its stack since: look which
+            owner = self._owner
+            for task, slots in self._stored:
+                if task._stored_by is not owner:  # type: ignore[attr-defined]
+                    task.store_parameters(owner, slots)  # another stack took it: take it back
+            self._store_events_seen = StoredParameters.store_events
         w[:] = self.weights
 
     def prepare(self, robot: RobotModel, w: Array) -> None:

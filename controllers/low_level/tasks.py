@@ -64,6 +64,9 @@ class StoredParameters:
 
     _stored_slots: dict[str, tuple[Array, Any]] | None = None  # set by store_parameters
     _stored_by: object | None = None
+    #: how many times any task was stored or left its stack's arrays (class-wide): a stack
+    #: that saw this count unchanged since it last checked its tasks owns them all still
+    store_events: ClassVar[int] = 0
 
     def __post_init__(self) -> None:
         state = self.__dict__
@@ -91,6 +94,7 @@ class StoredParameters:
                         # cannot hold), or is built anew if the task's structure changed
                         state = self.__dict__
                         state["_stored_slots"] = state["_stored_by"] = None
+                        StoredParameters.store_events += 1
             object.__setattr__(self, name, value)
 
     def store_parameters(self, owner: object, slots: dict[str, tuple[Array, Any]]) -> None:
@@ -119,6 +123,7 @@ class StoredParameters:
                 state[name] = view
         state["_stored_slots"] = slots
         state["_stored_by"] = owner
+        StoredParameters.store_events += 1
 
     def stored_by(self) -> object | None:
         """The owner of the arrays that hold this task's parameters (None: the object)."""
