@@ -1,0 +1,73 @@
+"""The two speed diagnostics that take MuJoCo's step apart and the loop's eviction cost:
+what they time is what they say (no bounds on times: they depend on the machine).
+
+- ``benchmarks.speed.physics_stages``: its stages, run in order, are ``mj_forward`` to the bit
+  (so the per-stage figures add up the real forward pass, nothing left out or run twice), and
+  its option table compares every option against the model's own step.
+- ``benchmarks.speed.loop_eviction``: its core is the one-call low level, and each case's work
+  runs once before every timed call."""
+
+from __future__ import annotations
+
+import math
+
+import mujoco
+import numpy as np
+import pytest
+
+from benchmarks.speed import loop_eviction, physics_stages
+from benchmarks.speed.yardstick import ReferenceStep
+
+
+@pytest.fixture(scope="module")
+def planar_states() -> tuple[mujoco.MjModel, list[mujoco.MjData]]:
+    return physics_stages.controlled_states("wip_gym/PlanarTray-v0", 3, warmup=20, spacing=5)
+
+
+def test_the_stages_in_order_are_mj_forward_to_the_bit(planar_states) -> None:
+    model, states = planar_states
+    assert min(state.ncon for state in states) > 0  # contacts: the constraint stages work
+    for state in states:
+        by_stages, forward = mujoco.MjData(model), mujoco.MjData(model)
+        mujoco.mj_copyData(by_stages, model, state)
+        mujoco.mj_copyData(forward, model, state)
+        for _, stage in physics_stages.STAGES:
+            stage(model, by_stages)
+        mujoco.mj_forward(model, forward)
+        for name in ("qacc", "qfrc_constraint", "qfrc_bias", "actuator_force", "xpos", "cvel"):
+            np.testing.assert_array_equal(getattr(by_stages, name), getattr(forward, name), name)
+        np.testing.assert_array_equal(by_stages.efc_force, forward.efc_force)
+
+
+def test_the_tables_have_every_row_and_the_own_step_changes_nothing(planar_states) -> None:
+    model, states = planar_states
+    reference = ReferenceStep()
+    stages = physics_stages.stage_costs(model, states[:1], 2, reference)
+    expected = [name for name, _ in physics_stages.STAGES] + ["mj_forward", "mj_step"]
+    assert list(stages) == [*expected, "integration"]
+    assert all(math.isfinite(us) and math.isfinite(units) for us, units in stages.values())
+    options = physics_stages.option_costs(model, states[:1], 2, reference)
+    assert list(options) == ["as built", *physics_stages.OPTIONS]
+    assert options["as built"][2] == 0.0
+    # PGS is a different solver: its stepped state differs (the table would show 0 otherwise)
+    assert options["solver PGS"][2] > 0.0
+
+
+def test_loop_eviction_times_the_one_call_core_after_each_work() -> None:
+    core, before = loop_eviction.cases("wip_gym/PlanarTray-v0")
+    core()  # raises if the task QP left its one-call path
+    runs = dict.fromkeys(before, 0)
+
+    def counted(name: str) -> object:
+        def work() -> None:
+            runs[name] += 1
+
+        return work
+
+    figures = loop_eviction.measure(
+        lambda: None, {name: counted(name) for name in before}, rounds=2, calls=3
+    )
+    assert runs == dict.fromkeys(before, 6)
+    assert all(len(values) == 2 for values in figures.values())
+    with pytest.raises(ValueError, match="rounds and calls"):
+        loop_eviction.measure(core, before, rounds=0, calls=3)
