@@ -471,22 +471,28 @@ class RobotModel:
             self._axle_x,
             self._axle_y,
         ) = self._scalars.tolist()
-        self._forget_copies()
+        self._copies = {}  # _forget_copies, inline
+        if not lay.planar:
+            self._heading = None
         # the base origin's linear Jacobian, kept for the tasks (site_in_axle_frame)
         self.cache["origin_jacobian"] = self._jac_origin
         self._updated = True
         self._has_dynamics = dynamics
 
     def _forget_copies(self) -> None:
-        """The properties' copies of the update's outputs, made again at their next read."""
-        self._com: Array | None = None
-        self._J_com: Array | None = None
-        self._J_theta: Array | None = None
-        self._A: Array | None = None
-        self._h: Array | None = None
-        self._B: Array | None = None
+        """The properties' copies of the update's outputs, made again at their next read
+        (:meth:`_kept_copy`; ``update`` does the same inline)."""
+        self._copies: dict[str, Array] = {}
         if not self.layout.planar:
             self._heading = None  # Rz(psi), made at its first read
+
+    def _kept_copy(self, name: str, buffer: Array) -> Array:
+        """This update's copy of ``buffer``, made at its first read (then the same array)."""
+        copies = self._copies
+        kept = copies.get(name)
+        if kept is None:
+            kept = copies[name] = buffer.copy()
+        return kept
 
     def update_buffers(self) -> dict[str, Array]:
         """The compiled update's outputs that compiled callers read (the task QP's one-call
@@ -553,25 +559,19 @@ class RobotModel:
         and ``heading_rotation``; ``q``, ``nu``, ``J_tf`` and ``Jdot_tf_nu`` are buffers that
         every update writes in place (copy them to keep a state's values)."""
         self._require_dynamics()
-        if self._A is None:
-            self._A = self._A_buffer.copy()
-        return self._A
+        return self._kept_copy("A", self._A_buffer)
 
     @property
     def h(self) -> Array:
         """Bias ``J_tf^T (M Jdot_tf nu + c - f_passive)``: Coriolis, gravity, friction."""
         self._require_dynamics()
-        if self._h is None:
-            self._h = self._h_buffer.copy()
-        return self._h
+        return self._kept_copy("h", self._h_buffer)
 
     @property
     def B(self) -> Array:
         """Actuation ``J_tf^T S`` (``n_min x nu``): ``A nu_dot + h = B ctrl``."""
         self._require_dynamics()
-        if self._B is None:
-            self._B = self._B_buffer.copy()
-        return self._B
+        return self._kept_copy("B", self._B_buffer)
 
     @property
     def psi(self) -> float:
@@ -642,17 +642,13 @@ class RobotModel:
     def com(self) -> Array:
         """Body CoM (wheels excluded) in the axle frame."""
         self._require()
-        if self._com is None:
-            self._com = self._com_buffer.copy()
-        return self._com
+        return self._kept_copy("com", self._com_buffer)
 
     @property
     def J_com(self) -> Array:
         """Jacobian of :attr:`com` with respect to ``nu`` (``3 x n_min``)."""
         self._require()
-        if self._J_com is None:
-            self._J_com = self._J_com_buffer.copy()
-        return self._J_com
+        return self._kept_copy("J_com", self._J_com_buffer)
 
     @property
     def theta(self) -> float:
@@ -670,9 +666,7 @@ class RobotModel:
     def J_theta(self) -> Array:
         """Row Jacobian of ``theta`` with respect to ``nu``."""
         self._require()
-        if self._J_theta is None:
-            self._J_theta = self._J_theta_buffer.copy()
-        return self._J_theta
+        return self._kept_copy("J_theta", self._J_theta_buffer)
 
     # ---------------------------------------------------------- derived
     def accelerations(self, ctrl: ArrayLike) -> Array:
