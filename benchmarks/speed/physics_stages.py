@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import argparse
 import copy
-import time
 from collections.abc import Callable
 
 import gymnasium as gym
@@ -29,7 +28,7 @@ import mujoco
 import numpy as np
 
 import wip_gym  # noqa: F401  (registers the envs)
-from benchmarks.speed.yardstick import ReferenceStep
+from benchmarks.speed.yardstick import ReferenceStep, median_call_us
 from controllers.optimizer import jax_setup
 from controllers.registry import make_policy
 
@@ -97,16 +96,6 @@ def controlled_states(
     return model, states
 
 
-def _median_us(function: Callable[[], object], repeats: int) -> float:
-    times = np.empty(repeats)
-    function()
-    for i in range(repeats):
-        start = time.perf_counter()
-        function()
-        times[i] = time.perf_counter() - start
-    return float(np.median(times) * 1e6)
-
-
 def stage_costs(
     model: mujoco.MjModel,
     states: list[mujoco.MjData],
@@ -124,7 +113,7 @@ def stage_costs(
         def restore(state: mujoco.MjData = state) -> None:
             mujoco.mj_copyData(work, model, state)
 
-        base = _median_us(restore, repeats)
+        base = median_call_us(restore, repeats)
         previous = 0.0
         for k, (name, _) in enumerate(STAGES):
 
@@ -133,7 +122,7 @@ def stage_costs(
                 for _, stage in STAGES[:upto]:
                     stage(model, work)
 
-            cumulative = _median_us(run, repeats) - base
+            cumulative = median_call_us(run, repeats) - base
             rows[name].append(cumulative - previous)
             previous = cumulative
 
@@ -145,8 +134,8 @@ def stage_costs(
             mujoco.mj_copyData(work, model, state)
             mujoco.mj_step(model, work)
 
-        rows["mj_forward"].append(_median_us(forward, repeats) - base)
-        rows["mj_step"].append(_median_us(step, repeats) - base)
+        rows["mj_forward"].append(median_call_us(forward, repeats) - base)
+        rows["mj_step"].append(median_call_us(step, repeats) - base)
         rows["integration"].append(rows["mj_step"][-1] - rows["mj_forward"][-1])
         units.append(1e6 * float(np.median(reference.burst())))
     unit = np.asarray(units)
@@ -189,7 +178,8 @@ def option_costs(
                 mujoco.mj_copyData(work, model, state)
                 mujoco.mj_step(variant, work)
 
-            ratios[name].append((_median_us(step, repeats) - _median_us(restore, repeats)) / unit)
+            cost = median_call_us(step, repeats) - median_call_us(restore, repeats)
+            ratios[name].append(cost / unit)
             step()  # the timing ended on a restore: the stepped state is read after this step
             iterations[name].append(int(work.solver_niter[0]))
             stepped[name].append(np.concatenate([work.qpos, work.qvel]))
