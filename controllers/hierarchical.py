@@ -452,8 +452,10 @@ class HierarchicalController(PolicyBase):
         counts), ``theta_error``, and the timings ``mpc_time``, ``qp_time``,
         ``compute_time``."""
         arrays = self._recorder.as_arrays()
-        plan = self.plan  # rows are recorded only after reset made it
-        if "wipm_state" in arrays and plan is not None:
+        if "wipm_state" in arrays:
+            plan = self.plan
+            if plan is None:  # rows are recorded only after reset made one
+                raise RuntimeError("the diagnostics' plan is gone (policy.plan was set to None)")
             arrays["wipm_state"] = self.robot.wipm_states(arrays["wipm_state"])
             index = arrays["wipm_reference"].astype(np.intp)
             states = plan.states  # past its end: the goal state (Plan.state)

@@ -176,5 +176,9 @@ def test_diagnostics_wipm_state_and_reference_are_the_per_step_ones(env_id: str)
     assert list(diagnostics)[:3] == ["t", "wipm_state", "wipm_reference"]
     with pytest.raises(ValueError, match="update scalars"):
         policy.robot.wipm_states(np.zeros((2, 3)))
+    plan, policy.plan = policy.plan, None
+    with pytest.raises(RuntimeError, match="plan is gone"):
+        policy.diagnostics  # noqa: B018  (the property raises)
+    policy.plan = plan
     policy.reset(*env.reset(seed=2))
     assert policy.diagnostics == {}

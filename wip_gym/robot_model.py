@@ -471,7 +471,7 @@ class RobotModel:
             self._axle_x,
             self._axle_y,
         ) = self._scalars.tolist()
-        self._copies = {}  # _forget_copies, inline
+        self._copies: dict[str, Array] = {}  # _forget_copies, inline
         if not lay.planar:
             self._heading = None
         # the base origin's linear Jacobian, kept for the tasks (site_in_axle_frame)
@@ -482,7 +482,7 @@ class RobotModel:
     def _forget_copies(self) -> None:
         """The properties' copies of the update's outputs, made again at their next read
         (:meth:`_kept_copy`; ``update`` does the same inline)."""
-        self._copies: dict[str, Array] = {}
+        self._copies = {}
         if not self.layout.planar:
             self._heading = None  # Rz(psi), made at its first read
 

@@ -45,6 +45,7 @@ STAGES: tuple[tuple[str, Stage], ...] = (
     ("mj_factorM", mujoco.mj_factorM),
     ("mj_collision", mujoco.mj_collision),
     ("mj_makeConstraint", mujoco.mj_makeConstraint),
+    ("mj_island", mujoco.mj_island),  # nothing when the model disables islands
     ("mj_transmission", mujoco.mj_transmission),
     ("mj_projectConstraint", mujoco.mj_projectConstraint),
     ("mj_fwdVelocity", mujoco.mj_fwdVelocity),
@@ -61,8 +62,14 @@ def _set(field: str, value: int) -> Callable[[mujoco.MjModel], None]:
     return apply
 
 
-#: one option changed each (the model's own: implicitfast, dense Jacobians, Newton)
+def _toggle_islands(model: mujoco.MjModel) -> None:
+    model.opt.disableflags ^= int(mujoco.mjtDisableBit.mjDSBL_ISLAND)
+
+
+#: one option changed each (the model's own: implicitfast, dense Jacobians, Newton, islands as
+#: the model has them)
 OPTIONS: dict[str, Callable[[mujoco.MjModel], None]] = {
+    "islands toggled": _toggle_islands,
     "integrator Euler": _set("integrator", int(mujoco.mjtIntegrator.mjINT_EULER)),
     "sparse Jacobians": _set("jacobian", int(mujoco.mjtJacobian.mjJAC_SPARSE)),
     "solver CG": _set("solver", int(mujoco.mjtSolver.mjSOL_CG)),
