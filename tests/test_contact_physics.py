@@ -6,6 +6,9 @@
   ``atan(mu)`` and slides just above it.
 - The tray-cup friction of a task model is the explicit pair's value, not MuJoCo's default
   combination (the larger of the two geoms' friction).
+- Constraint islands are off: while the cup rides the tray a tray scene is one island, where
+  the solve by islands gives the same bits; with the cup on the floor (two islands) the joint
+  solve differs from theirs by no more than the solver's tolerance makes visible.
 
 The small test models are built with ``MjSpec`` and take every number they share with the robots
 (simulation options, wheel contact parameters, wheel mass and inertia, tray and cup sizes, the
@@ -15,6 +18,7 @@ wip_gym/scene.py if those change.
 
 from __future__ import annotations
 
+import copy
 import math
 
 import mujoco
@@ -346,3 +350,77 @@ def test_tray_cup_friction_is_the_pair_value() -> None:
     for c in contacts:
         assert c.friction[0] == mu and c.friction[1] == mu
         assert c.dim == 3
+
+
+def _islands_on(model: mujoco.MjModel) -> mujoco.MjModel:
+    """A copy of ``model`` with MuJoCo's default: constraint islands on."""
+    on = copy.copy(model)
+    on.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_ISLAND)
+    return on
+
+
+@pytest.mark.parametrize("env_id", ["wip_gym/KrangTray-v0", "wip_gym/PlanarTray-v0"])
+def test_islands_off_change_no_bit_while_the_cup_rides_the_tray(env_id: str) -> None:
+    """Every 10th state of a controlled episode (``unified``, 0.4 s): one step with islands off
+    (the model as built) and on (MuJoCo's default) gives the same ``qpos``, ``qvel`` and
+    contact forces to the bit, and with islands on the scene is one island (the robot and the
+    cup, two kinematic trees, joined by the cup's contacts)."""
+    import gymnasium as gym
+
+    from controllers.registry import make_policy
+
+    env = gym.make(env_id)
+    observation, info = env.reset(seed=3)
+    policy = make_policy("unified", env)
+    policy.reset(observation, info)
+    model, data = env.unwrapped.model, env.unwrapped.data
+    assert model.opt.disableflags & int(mujoco.mjtDisableBit.mjDSBL_ISLAND)
+    on = _islands_on(model)
+    compared = 0
+    for step in range(400):
+        observation, *_ = env.step(policy(observation))
+        if step % 10:
+            continue
+        off_data, on_data = mujoco.MjData(model), mujoco.MjData(on)
+        mujoco.mj_copyData(off_data, model, data)
+        mujoco.mj_copyData(on_data, model, data)
+        mujoco.mj_step(model, off_data)
+        mujoco.mj_step(on, on_data)
+        assert on_data.nisland == 1 and off_data.nisland == 0
+        np.testing.assert_array_equal(off_data.qpos, on_data.qpos)
+        np.testing.assert_array_equal(off_data.qvel, on_data.qvel)
+        np.testing.assert_array_equal(off_data.efc_force, on_data.efc_force)
+        compared += 1
+    assert compared == 40 and info["cup_on_tray"]
+
+
+def test_with_the_cup_on_the_floor_islands_move_a_step_by_rounding_only() -> None:
+    """The cup put on the floor beside Krang (two islands with them on): one step with islands
+    off and on, from 50 successive states, differs by under 1e-9 in ``qpos`` and ``qvel``
+    (against speeds of tens of rad/s as the uncontrolled robot falls): the same problem,
+    solved jointly or by islands to the solver's tolerance of 1e-12."""
+    import gymnasium as gym
+
+    env = gym.make("wip_gym/KrangTray-v0")
+    env.reset(seed=0)
+    model, data = env.unwrapped.model, env.unwrapped.data
+    on = _islands_on(model)
+    joint = model.body("cup").jntadr[0]
+    qpos, dof = model.jnt_qposadr[joint], model.jnt_dofadr[joint]
+    data.qpos[qpos : qpos + 3] = data.qpos[0:3] + (0.6, 0.3, 0.0)
+    data.qpos[qpos + 2] = CUP_HALF_HEIGHT + 0.005
+    data.qvel[dof : dof + 6] = 0.0
+    for _ in range(300):  # the cup settles on the floor
+        mujoco.mj_step(on, data)
+    worst = 0.0
+    for _ in range(50):
+        off_data, on_data = mujoco.MjData(model), mujoco.MjData(on)
+        mujoco.mj_copyData(off_data, model, data)
+        mujoco.mj_copyData(on_data, model, data)
+        mujoco.mj_step(model, off_data)
+        mujoco.mj_step(on, on_data)
+        assert on_data.nisland == 2
+        change = np.r_[off_data.qpos - on_data.qpos, off_data.qvel - on_data.qvel]
+        worst = max(worst, float(np.abs(change).max()))
+        mujoco.mj_step(on, data)
+    assert 0.0 < worst < 1e-9
