@@ -453,13 +453,13 @@ def wipm_inputs_into(
         table, heading, com, scalars[_BODY_MASS], scalars[_THETA], wheel_radius, wheel_separation
     )
     if planar:
-        n = len(PLANAR_STATE)
+        n = len(PLANAR_STATE_SCALARS)
         for k in range(n):
-            out[k] = scalars[PLANAR_STATE[k]]
+            out[k] = scalars[PLANAR_STATE_SCALARS[k]]
     else:
-        n = len(SPATIAL_STATE)
+        n = len(SPATIAL_STATE_SCALARS)
         for k in range(n):
-            out[k] = scalars[SPATIAL_STATE[k]]
+            out[k] = scalars[SPATIAL_STATE_SCALARS[k]]
     out[n], out[n + 1], out[n + 2] = values[0], values[1], values[2]
     for a in range(3):
         for b in range(3):
@@ -634,8 +634,8 @@ _COS_PSI, _SIN_PSI, _BODY_MASS, _THETA = (
 )
 #: the WIPM state (``RobotModel.wipm_state``) as indices into :data:`UPDATE_SCALARS`: planar
 #: ``[theta, thetad, x, xd]``, 3-D ``[x, psi, theta, xd, psid, thetad, X0, Y0]``
-PLANAR_STATE = tuple(UPDATE_SCALARS.index(name) for name in ("theta", "thetad", "x", "xd"))
-SPATIAL_STATE = tuple(
+PLANAR_STATE_SCALARS = tuple(UPDATE_SCALARS.index(name) for name in ("theta", "thetad", "x", "xd"))
+SPATIAL_STATE_SCALARS = tuple(
     UPDATE_SCALARS.index(name)
     for name in ("x", "psi", "theta", "xd", "psid", "thetad", "axle_x", "axle_y")
 )

@@ -604,7 +604,9 @@ class RobotModel:
             raise ValueError(
                 f"expected rows of {len(self._scalars)} update scalars, got shape {scalars.shape}"
             )
-        columns = kernels.PLANAR_STATE if self.layout.planar else kernels.SPATIAL_STATE
+        columns = (
+            kernels.PLANAR_STATE_SCALARS if self.layout.planar else kernels.SPATIAL_STATE_SCALARS
+        )
         return scalars[..., list(columns)]
 
     def wipm_state(self) -> Array:
