@@ -290,6 +290,12 @@ def reference_step(
         kept = state[1] and state[2] and tray_state[1]
     newly_lost = env._tray and not kept and not env._cup_lost
     env._cup_lost = env._cup_lost or not kept
+    island = int(mujoco.mjtDisableBit.mjDSBL_ISLAND)
+    if newly_lost and m.opt.disableflags & island:
+        # added since 61c923a: islands on from a cup's loss to the next reset (the models are
+        # built with them off; WIPEnv._solve_by_islands, docs/performance.md §24)
+        m.opt.disableflags &= ~island
+        env._islands_switched_on = True
     distance = goal_distance(env)
     progress_w, ctrl_w, fall_pen, cup_pen = env._weights
     scaled = action / env._action_scale

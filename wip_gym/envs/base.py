@@ -303,6 +303,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         self._prev_distance = 0.0
         self._ee_reference = np.zeros(3)
         self._cup_lost = False
+        self._islands_switched_on = False  # by a cup's loss, until the next reset
         self._payload_attached = True
         # made once for step(): plain Python numbers and the views of the arrays it reads
         self._goal_xy = (float(self._goal[0]), float(self._goal[1]))
@@ -409,6 +410,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
     def reset_model(self) -> dict[str, NDArray[np.float64]]:  # type: ignore[override]
         m, d, lay = self.model, self.data, self.robot.layout
         rng = self.np_random
+        self._solve_by_islands(False)  # as built again, before any of the reset's physics
         m.body_mass[:] = self._nominal_mass
         m.body_inertia[:] = self._nominal_inertia
         if self._mass_randomization > 0:
@@ -534,6 +536,8 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             kept = self._tray_entries(info, values)
             newly_lost = not kept and not self._cup_lost
             self._cup_lost = self._cup_lost or not kept
+            if newly_lost:
+                self._solve_by_islands(True)
         distance = values[ms.GOAL_DISTANCE]
         progress_w, ctrl_w, fall_pen, cup_pen = self._weights
         info["reward_progress"] = progress = progress_w * (self._prev_distance - distance)
@@ -545,6 +549,24 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         if self.render_mode == "human":
             self.render()
         return self._get_obs(), float(progress + ctrl + fall + cup_loss), terminated, False, info
+
+    def _solve_by_islands(self, cup_lost: bool) -> None:
+        """Constraint islands, off in the models (assets/mjcf/README.md: while the cup rides the
+        tray a scene is one island, where solving by islands gives the same bits for more
+        work), are switched on from a cup's loss to the next reset: the cup (or the free tray)
+        on the floor is an island of its own, and one joint solve stops when the robot's
+        forces have converged, leaving the cup's up to 1e-4 m/s off where the solve by islands
+        converges each (docs/performance.md §24). Only the island flag is touched, and only
+        if the model was built with it set; ``model.opt`` shows the change."""
+        bit = int(mujoco.mjtDisableBit.mjDSBL_ISLAND)
+        opt = self.model.opt
+        if cup_lost:
+            if opt.disableflags & bit:
+                opt.disableflags &= ~bit
+                self._islands_switched_on = True
+        elif self._islands_switched_on:
+            opt.disableflags |= bit
+            self._islands_switched_on = False
 
     def _apply_events(self) -> None:
         """Before a step: the push on (its force along the heading at the step's start) or off

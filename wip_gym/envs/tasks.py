@@ -85,7 +85,10 @@ _COMMON = """
     `fall_angle`) and, in tray tasks with `terminate_on_cup_loss`, when the cup is lost: not
     `cup_on_tray` (off the plate, or tilted beyond 30 deg) or, with a free tray, not
     `tray_on_hand` (`reward_cup_loss` is paid on that step). Truncated after 25 s
-    (`max_episode_steps` = 25000 at the 1 ms step).
+    (`max_episode_steps` = 25000 at the 1 ms step). Without `terminate_on_cup_loss`, the
+    episode goes on with MuJoCo's constraint islands switched on from the loss to the next
+    reset (the models have them off: one island while the cup rides the tray; the cup on the
+    floor is an island of its own, which they solve to its own convergence).
 
     ## Arguments (`gymnasium.make(id, **kwargs)`)
 
