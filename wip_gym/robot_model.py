@@ -471,9 +471,7 @@ class RobotModel:
             self._axle_x,
             self._axle_y,
         ) = self._scalars.tolist()
-        self._copies: dict[str, Array] = {}  # _forget_copies, inline
-        if not lay.planar:
-            self._heading = None
+        self._forget_copies()
         # the base origin's linear Jacobian, kept for the tasks (site_in_axle_frame)
         self.cache["origin_jacobian"] = self._jac_origin
         self._updated = True
@@ -481,8 +479,8 @@ class RobotModel:
 
     def _forget_copies(self) -> None:
         """The properties' copies of the update's outputs, made again at their next read
-        (:meth:`_kept_copy`; ``update`` does the same inline)."""
-        self._copies = {}
+        (:meth:`_kept_copy`)."""
+        self._copies: dict[str, Array] = {}
         if not self.layout.planar:
             self._heading = None  # Rz(psi), made at its first read
 
