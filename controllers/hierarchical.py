@@ -457,10 +457,7 @@ class HierarchicalController(PolicyBase):
             if plan is None:  # rows are recorded only after reset made one
                 raise RuntimeError("the diagnostics' plan is gone (policy.plan was set to None)")
             arrays["wipm_state"] = self.robot.wipm_states(arrays["wipm_state"])
-            index = arrays["wipm_reference"].astype(np.intp)
-            states = plan.states  # past its end: the goal state (Plan.state)
-            padded = np.vstack([states, plan.goal_state[None, :]])
-            arrays["wipm_reference"] = padded[np.minimum(index, len(states))]
+            arrays["wipm_reference"] = plan.states_at(arrays["wipm_reference"])
         return arrays
 
     def controller_counters(self) -> dict[str, float]:

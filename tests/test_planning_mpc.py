@@ -40,8 +40,12 @@ def test_planar_plan_arrives_within_bounds() -> None:
     final = plan.states[-1]
     assert abs(final[2] - 2.0) < 0.01 and np.abs(final[[0, 1, 3]]).max() < 0.01
     assert plan.states.shape == (2001, 4) and plan.controls.shape == (2000, 1)
-    for index in (0, 1000, 2000, 2001, 5000):  # inside the plan, its last state, past its end
+    indices = (0, 1000, 2000, 2001, 5000)  # inside the plan, its last state, past its end
+    for index in indices:
         np.testing.assert_array_equal(plan.state(index), plan.window(index, 1)[0])
+    np.testing.assert_array_equal(
+        plan.states_at(np.array(indices)), [plan.state(index) for index in indices]
+    )
 
 
 def test_3d_plan_turns_to_an_offset_goal() -> None:

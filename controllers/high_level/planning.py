@@ -184,6 +184,12 @@ class Plan:
         without building the window: the controllers record it every control step)."""
         return self.states[index] if index < len(self.states) else self.goal_state
 
+    def states_at(self, indices: np.ndarray) -> np.ndarray:
+        """:meth:`state` of each of ``indices`` (integers >= 0), as rows: the goal state past
+        the end."""
+        padded = np.vstack([self.states, self.goal_state[None, :]])
+        return padded[np.minimum(np.asarray(indices, dtype=np.intp), len(self.states))]
+
     def window(self, start: int, count: int) -> np.ndarray:
         """``count`` states from index ``start``, padded with the goal state past the end."""
         out = np.tile(self.goal_state, (count, 1))
