@@ -15,13 +15,18 @@ from dynamics_reference import random_minimal_state
 from test_wbc import _load, _realistic_tasks
 
 from controllers.low_level import compiled_tasks as ct
-from controllers.low_level.disturbance_tasks import DisturbanceRejectingTask, ObserverSettings
+from controllers.low_level.disturbance_tasks import (
+    ADVANCED_IN_MEMORY,
+    DisturbanceRejectingTask,
+    ObserverSettings,
+)
 from controllers.low_level.motion_probe import MotionProbe
 from controllers.low_level.task_qp import QPSettings, TaskQP
 from controllers.low_level.task_stack import CompiledTaskStack, supports
 from controllers.low_level.tasks import (
     FrameOrientationTask,
     FramePositionTask,
+    PostureTask,
     Task,
     ThetaTask,
     rotation_error,
@@ -186,6 +191,89 @@ def test_a_second_solve_at_one_state_does_not_advance_the_observers_again() -> N
         again = compiled.solve(robot, None, tasks).actuators
         np.testing.assert_array_equal(again, first)
         np.testing.assert_array_equal(compiled._stack.observer_memory, memory)
+
+
+def test_an_observer_advanced_by_the_compiled_path_gives_its_rows_to_the_python_path() -> None:
+    """After a compiled step the observers are marked advanced at this state
+    (``ADVANCED_IN_MEMORY``): asked by their Python path at the same state they return the
+    command the compiled rows hold, to the bit, and do not advance; asked after the next
+    update they advance again. And the other way round: an observer the Python path advanced
+    at this state is not advanced again by the compiled step."""
+    robot = RobotModel(_load("krang"))
+    rng = np.random.default_rng(9)
+    compiled, _ = _paths(robot)
+    q, nu = random_minimal_state(robot, rng)
+    tasks = _task_set(robot, observed=True)
+    observed = [task for task in tasks if isinstance(task, DisturbanceRejectingTask)]
+    assert len(observed) == 4
+    for step in range(4):
+        robot.update(*robot.full_state(q + 1e-3 * step * nu, nu + 0.1 * step))
+        compiled.solve(robot, None, tasks)
+        stack = compiled._stack
+        memory = stack.observer_memory.copy()
+        for task in observed:
+            assert robot.cache[task.cache_key] is ADVANCED_IN_MEMORY
+        for k, task in enumerate(tasks):
+            if task in observed:
+                start, stop = stack.row_start[k], stack.row_start[k + 1]
+                command = task.reference_acceleration(robot)
+                np.testing.assert_array_equal(command, compiled._target[start:stop])
+                assert task.reference_acceleration(robot) is command  # memoised from now on
+        np.testing.assert_array_equal(stack.observer_memory, memory)  # nothing advanced
+    # the Python path first at a new state: the compiled step then does not advance it again
+    robot.update(*robot.full_state(q + 0.01 * nu, nu))
+    first = observed[0].reference_acceleration(robot)
+    memory = compiled._stack.observer_memory.copy()
+    compiled.solve(robot, None, tasks)
+    np.testing.assert_array_equal(compiled._stack.observer_memory[0], memory[0])
+    assert not np.array_equal(compiled._stack.observer_memory[1], memory[1])  # the others did
+    assert robot.cache[observed[0].cache_key] is first
+
+
+def test_the_steady_step_takes_the_cheap_check_and_a_change_the_full_one() -> None:
+    """Between steps where nothing structural changed, the task QP's one-call step finds its
+    stack, buffers and table by ``CompiledTaskStack.unchanged`` alone (``_compiled_stack`` is
+    not called); a task list changed in place, a posture task's columns changed in place, or
+    new torque limits send it through the full checks, and it solves as the Python path
+    does."""
+    robot = RobotModel(_load("krang"))
+    compiled, python = _paths(robot)
+    rng = np.random.default_rng(12)
+    q, nu = random_minimal_state(robot, rng)
+    tasks = _realistic_tasks(robot)
+    full: list[int] = []
+    original = compiled._compiled_stack
+
+    def counted(robot_: RobotModel, tasks_: list[Task]) -> CompiledTaskStack | None:
+        full.append(1)
+        return original(robot_, tasks_)
+
+    compiled._compiled_stack = counted  # type: ignore[method-assign]
+
+    def step(k: int) -> None:
+        robot.update(*robot.full_state(q + 1e-3 * k * nu, nu))
+        a, b = compiled.solve(robot, None, tasks), python.solve(robot, None, tasks)
+        _close(a.actuators, b.actuators, 1e-9)
+
+    for k in range(3):
+        step(k)
+    assert len(full) == 1  # the first step built the stack; the others took the cheap check
+    posture = next(t for t in tasks if isinstance(t, PostureTask))
+    changes = [
+        lambda: tasks.insert(0, tasks.pop()),  # the list, in place: the rows' order
+        lambda: posture.columns.__setitem__(0, posture.columns[1]),  # in place
+        lambda: setattr(compiled, "torque_high", compiled.torque_high * 0.5),
+    ]
+    for n, change in enumerate(changes):
+        stack = compiled._stack
+        change()
+        python.torque_high = compiled.torque_high
+        step(10 + n)
+        assert len(full) == 2 + n
+        if n < 2:
+            assert compiled._stack is not stack  # built anew for the new structure
+        step(20 + n)
+        assert len(full) == 2 + n  # and steady again
 
 
 def test_a_changed_site_or_columns_rebuilds_the_compiled_stack() -> None:

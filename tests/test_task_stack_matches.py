@@ -57,3 +57,51 @@ def test_matches_follows_the_structure() -> None:
     assert not agrees(tasks)
     wrapped.task = frame
     assert agrees(tasks)
+
+
+def test_unchanged_holds_only_where_matches_does_and_after_it() -> None:
+    """``unchanged`` (the control step's cheap check) is True only when ``matches`` is, and
+    only once ``matches`` and ``prepare_parameters`` have looked at the current count of store
+    events: any assignment to a task or an observer, or a posture task's columns changed in
+    place, makes it False until they look again."""
+    robot = RobotModel(_load("krang"))
+    robot.update(*robot.full_state(*random_minimal_state(robot, np.random.default_rng(6))))
+    tasks = _task_set(robot, observed=True)
+    stack = CompiledTaskStack(robot, MotionProbe(robot), tasks)
+    w = np.zeros(stack.rows)
+
+    def look(candidate: list[object]) -> bool:
+        matched = stack.matches(candidate)
+        stack.prepare_parameters(robot, w)
+        return matched
+
+    assert stack.unchanged(tasks)  # as built
+    posture = next(t for t in tasks if isinstance(t, PostureTask))
+    posture.name = "posture"  # an assignment
+    assert not stack.unchanged(tasks)
+    assert stack.matches(tasks) and not stack.unchanged(tasks)  # prepare_parameters not yet
+    stack.prepare_parameters(robot, w)
+    assert stack.unchanged(tasks) and stack.unchanged(list(tasks))  # another list, same tasks
+    assert not stack.unchanged(tasks[:-1]) and not stack.unchanged([*tasks[1:], tasks[0]])
+    wrapped = next(t for t in tasks if isinstance(t, DisturbanceRejectingTask))
+    frame = wrapped.task
+    assert isinstance(frame, FramePositionTask)
+    changes = [
+        lambda: setattr(frame, "site", frame.site),  # an assignment, even of the same site
+        lambda: setattr(wrapped, "task", frame),
+        lambda: setattr(posture, "name", "posture"),
+    ]
+    for change in changes:
+        change()
+        assert not stack.unchanged(tasks)
+        assert look(tasks) and stack.unchanged(tasks)  # all of these leave it matching
+    # a gain or a target written into the stack's arrays is no store event
+    posture.kp = 4.0
+    posture.target[0] += 0.1
+    assert stack.unchanged(tasks)
+    posture.columns[0] += 1  # in place: no assignment, seen by the columns' check
+    assert not stack.unchanged(tasks) and not look(tasks)
+    posture.columns[0] -= 1
+    assert look(tasks) and stack.unchanged(tasks)
+    frame.site = frame.site + 1
+    assert not stack.unchanged(tasks) and not look(tasks)

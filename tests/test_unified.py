@@ -182,3 +182,34 @@ def test_diagnostics_wipm_state_and_reference_are_the_per_step_ones(env_id: str)
     policy.plan = plan
     policy.reset(*env.reset(seed=2))
     assert policy.diagnostics == {}
+
+
+@pytest.mark.parametrize("name", ["unified", "unified-waiter"])
+def test_the_closed_loop_takes_the_task_qps_steady_step(name: str) -> None:
+    """In the closed loop nothing structural changes between control steps, so every step
+    after reset finds its stack, buffers and table by the cheap check
+    (``TaskQP._steady_call``); a per-step assignment of something a stack does not hold (a
+    store event) would send every step through the full checks, unseen but for the time."""
+    import gymnasium as gym
+
+    from controllers.registry import make_policy
+
+    env = gym.make("wip_gym/KrangTray-v0")
+    observation, info = env.reset(seed=0)
+    policy = make_policy(name, env)
+    policy.reset(observation, info)
+    qp = policy.qp
+    full_steps = []
+    one_call = qp._one_call
+
+    def counted(robot: object, tasks: object) -> object:
+        full_steps.append(1)
+        return one_call(robot, tasks)  # type: ignore[arg-type]
+
+    qp._one_call = counted
+    for _ in range(40):
+        observation, *_ = env.step(policy(observation))
+    env.close()
+    policy.high_level.close()
+    assert full_steps == []
+    assert qp.compiled

@@ -29,21 +29,37 @@ torque limits): the estimate then raises the task's priority within the bound.
 The wrapper composes with any task of ``controllers.low_level.tasks`` (``jacobian``, ``error``,
 ``weights``, ``reference_acceleration``, ``name``). The estimate is advanced once per robot
 state (memoised in ``robot.cache``, which every ``RobotModel.update`` clears), so it is called
-once per control step however often the QP asks.
+once per control step however often the QP asks. A compiled task stack that advanced it marks
+the entry :data:`ADVANCED_IN_MEMORY` instead (the command is then the memory's last command row,
+copied at its first read here).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 from controllers.low_level.motion_probe import MotionProbe
+from controllers.low_level.tasks import StoredParameters
 from wip_gym.robot_model import RobotModel
 
 Array = NDArray[np.float64]
+
+
+class _AdvancedInMemory:
+    """The type of :data:`ADVANCED_IN_MEMORY`."""
+
+    def __repr__(self) -> str:
+        return "ADVANCED_IN_MEMORY"
+
+
+#: a ``robot.cache`` entry of an observer advanced at this state by a compiled task stack
+#: (``controllers.low_level.task_stack``): its command is row 2 of its ``memory``, which the
+#: stack's compiled step wrote (one marker per observer instead of a copy of its rows)
+ADVANCED_IN_MEMORY = _AdvancedInMemory()
 
 
 class AccelerationTask(Protocol):
@@ -104,6 +120,14 @@ class DisturbanceRejectingTask:
         # the wrapped task's own J nu when it has one (shared with its PD law), else J @ nu
         self._velocity = getattr(task, "velocity", None)
 
+    if not TYPE_CHECKING:  # mypy would accept any attribute name with __setattr__ defined
+
+        def __setattr__(self, name: str, value: Any) -> None:
+            # the wrapped task is a compiled stack's structure: an assignment is a store
+            # event, after which a stack looks at its tasks again (StoredParameters)
+            StoredParameters.store_events += 1
+            object.__setattr__(self, name, value)
+
     @property
     def estimate(self) -> Array:
         """``d_hat``, the current estimate (a view on :attr:`memory`)."""
@@ -137,6 +161,8 @@ class DisturbanceRejectingTask:
     def reference_acceleration(self, robot: RobotModel) -> Array:
         cached = robot.cache.get(self.cache_key)
         if cached is not None:
+            if cached is ADVANCED_IN_MEMORY:  # a compiled stack advanced it at this state
+                cached = robot.cache[self.cache_key] = self.memory[2].copy()
             return cached  # type: ignore[return-value]
         velocity = (
             self._velocity(robot)

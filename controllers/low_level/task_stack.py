@@ -25,6 +25,7 @@ The disturbance observers keep their state in one array of this stack
 
 from __future__ import annotations
 
+import operator
 from collections.abc import Sequence
 
 import numpy as np
@@ -32,7 +33,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from controllers.low_level import compiled_tasks as ct
-from controllers.low_level.disturbance_tasks import DisturbanceRejectingTask
+from controllers.low_level.disturbance_tasks import ADVANCED_IN_MEMORY, DisturbanceRejectingTask
 from controllers.low_level.motion_probe import MotionProbe, idealise
 from controllers.low_level.tasks import (
     FrameOrientationTask,
@@ -330,6 +331,12 @@ class CompiledTaskStack:
             (task, _unwrap(task)[0], site, columns)
             for task, (_, _, site, columns) in zip(self.tasks, self._structure, strict=True)
         ]
+        # unchanged(): matches() held at this count of store events (set once built, below)
+        self._checked_events = -1
+        self._count = len(self.tasks)
+        self._column_checks = [
+            (task, columns) for _, task, _, columns in self._expected if columns is not None
+        ]
         self._robot = robot
         self._probe = probe
         inner = [_unwrap(task) for task in tasks]
@@ -369,6 +376,9 @@ class CompiledTaskStack:
                 slot += 1
         self._observer_keys = [key for key, _, _ in self._observer_rows]
         self._observer_key_set = frozenset(self._observer_keys)
+        # memoise_observers' entries: every observer marked as advanced at this state
+        self._advanced_entries = dict.fromkeys(self._observer_keys, ADVANCED_IN_MEMORY)
+        self._all_advance = True  # prepare_parameters: no observer had advanced at the state
         self.params = np.zeros((len(tasks), ct.PARAMETERS))
         self.targets = np.zeros((len(tasks), 9))
         self.row_column = np.zeros(self.rows, dtype=np.int64)
@@ -384,8 +394,9 @@ class CompiledTaskStack:
         self._stored = [(task, self._parameter_slots(k)) for k, task in enumerate(self._inner)]
         for task, slots in self._stored:
             task.store_parameters(self._owner, slots)  # type: ignore[attr-defined]
-        # StoredParameters.store_events when every task was last seen stored here
-        self._store_events_seen = StoredParameters.store_events
+        # StoredParameters.store_events when every task was last seen stored here; built from
+        # these tasks, the stack matches them at this count
+        self._store_events_seen = self._checked_events = StoredParameters.store_events
         n_sites, nv = len(sites), m.nv
         self.scalars = np.zeros(6)
         self.scalars[5] = -1 if lay.index_psi is None else lay.index_psi
@@ -422,6 +433,7 @@ class CompiledTaskStack:
         task's site, each posture task's columns), compared against the objects the stack
         holds, without building the tuple (it runs every step)."""
         expected = self._expected
+        events = StoredParameters.store_events
         if len(tasks) != len(expected):
             return False
         for task, (task0, inner, site, columns) in zip(tasks, expected, strict=True):
@@ -430,6 +442,27 @@ class CompiledTaskStack:
             if site is not None and inner.site != site:  # type: ignore[attr-defined]
                 return False
             if columns is not None and np.asarray(inner.columns).tobytes() != columns:  # type: ignore[attr-defined]
+                return False
+        self._checked_events = events
+        return True
+
+    def unchanged(self, tasks: Sequence[object]) -> bool:
+        """:meth:`matches` for the cost of its cheapest part, when nothing it compares can
+        have changed since it last held, and nothing :meth:`prepare_parameters` looks after
+        either: ``tasks`` are this stack's task objects in order, no store event since both
+        last looked (``StoredParameters.store_events``: a task stored elsewhere, an assignment
+        to a task or an observer, its site or its wrapped task included) and each posture
+        task's columns as they were (a change in place is no assignment). False says only
+        "not known": :meth:`matches` and :meth:`prepare_parameters` decide then."""
+        events = StoredParameters.store_events
+        if events != self._checked_events or events != self._store_events_seen:
+            return False
+        if len(tasks) != self._count:
+            return False
+        if not all(map(operator.is_, tasks, self.tasks)):
+            return False
+        for task, columns in self._column_checks:
+            if np.asarray(task.columns).tobytes() != columns:
                 return False
         return True
 
@@ -472,7 +505,8 @@ class CompiledTaskStack:
         if robot is not self._robot:
             raise ValueError("a compiled task stack serves the robot model it was built for")
         cache = robot.cache
-        if self._observer_key_set.isdisjoint(cache):
+        self._all_advance = self._observer_key_set.isdisjoint(cache)
+        if self._all_advance:
             self.observer_advance.fill(1)  # the common case: none has advanced at this state
         else:
             advance = self.observer_advance
@@ -493,15 +527,37 @@ class CompiledTaskStack:
         self.prepare_parameters(robot, w)
         robot_scalars_into(robot.update_buffers()["robot_scalars"], robot.nu, self.scalars)
 
+    def steady_parts(
+        self,
+    ) -> tuple[frozenset[object], NDArray[np.int64], Array, dict[object, object]]:
+        """What a step that :meth:`unchanged` allows does in place of
+        :meth:`prepare_parameters` and :meth:`memoise_observers` when no observer has advanced
+        at the state yet: the observers' ``robot.cache`` keys (none of them in the cache),
+        the advance flags (all set), the weights (copied into the QP's rows) and the entries
+        that mark every observer advanced (``TaskQP``'s one-call step inlines them)."""
+        return (
+            self._observer_key_set,
+            self.observer_advance,
+            self.weights,
+            self._advanced_entries,
+        )
+
     def memoise_observers(self, robot: RobotModel, target: Array) -> None:
         """What :meth:`fill` does after its compiled call: an observer advances once per state,
-        its command memoised as its Python path does (views on one private copy of the
-        rows)."""
-        if self._observer_rows:
-            cache = robot.cache
-            commands = target.copy()
-            for key, start, stop in self._observer_rows:
-                cache[key] = commands[start:stop]
+        so each is marked as advanced at this state in ``robot.cache``
+        (``disturbance_tasks.ADVANCED_IN_MEMORY``: its command is its memory's last command,
+        which the compiled call wrote, equal to its rows of ``target``; its Python path copies
+        it from there when asked at this state). One dict update, where a copy of the rows and
+        an entry per observer cost about 1.7 us in the closed loop (docs/performance.md §25).
+        An observer whose Python path advanced it at this state keeps its own entry."""
+        if not self._advanced_entries:
+            return
+        cache = robot.cache
+        if self._all_advance:
+            cache.update(self._advanced_entries)
+        else:
+            for key in self._observer_keys:
+                cache.setdefault(key, ADVANCED_IN_MEMORY)
 
     def table_entries(self, robot: RobotModel) -> dict[str, np.ndarray]:
         """The arrays of :func:`stack_rows` by name, for the one-call step of

@@ -56,6 +56,11 @@ class StoredParameters:
       is refused there, naming the task and the parameter), or a new stack is built when
       the task's structure changed with it (a posture task's columns).
 
+    A posture task's ``columns`` are held the same way (a view on the stack's row columns:
+    a change in place, or an assignment of as many columns, is what the next call uses).
+    Any other assignment (a frame task's ``site``, its ``name``) counts as a store event,
+    so that a stack looks at its tasks' structure again before its next call.
+
     A task owns its arrays: an array given to its constructor (or by
     ``dataclasses.replace``) is copied, and a copy or a pickle of a task holds copies of its
     arrays and no stack's. A task taken by a second stack is stored there (the first stack
@@ -64,8 +69,10 @@ class StoredParameters:
 
     _stored_slots: dict[str, tuple[Array, Any]] | None = None  # set by store_parameters
     _stored_by: object | None = None
-    #: how many times any task was stored or left its stack's arrays (class-wide): a stack
-    #: that saw this count unchanged since it last checked its tasks owns them all still
+    #: how many times any task was stored, left its stack's arrays or had an attribute the
+    #: stack does not hold assigned (class-wide; ``DisturbanceRejectingTask`` counts its
+    #: assignments here too): a stack that saw this count unchanged since it last checked its
+    #: tasks owns them all still, and their structure is the one it checked
     store_events: ClassVar[int] = 0
 
     def __post_init__(self) -> None:
@@ -78,23 +85,25 @@ class StoredParameters:
 
         def __setattr__(self, name: str, value: Any) -> None:
             slots = self._stored_slots
-            if slots is not None:
-                slot = slots.get(name)
-                if slot is not None:
-                    array, index = slot
-                    if _scalar_slot(index, value):
-                        array[index] = value  # a scalar: the attribute stays the value
-                    else:
-                        view = array if index is None else array[index]
-                        if np.shape(value) == view.shape:
-                            view[...] = value
-                            return  # the attribute is the view already
-                        # another shape: the task leaves the stack's arrays; the stack
-                        # stores it again before its next call (and refuses a shape it
-                        # cannot hold), or is built anew if the task's structure changed
-                        state = self.__dict__
-                        state["_stored_slots"] = state["_stored_by"] = None
-                        StoredParameters.store_events += 1
+            slot = None if slots is None else slots.get(name)
+            if slot is None:
+                # not held by a stack's arrays: maybe the task's structure (a site, ...)
+                StoredParameters.store_events += 1
+            else:
+                array, index = slot
+                if _scalar_slot(index, value):
+                    array[index] = value  # a scalar: the attribute stays the value
+                else:
+                    view = array if index is None else array[index]
+                    if np.shape(value) == view.shape:
+                        view[...] = value
+                        return  # the attribute is the view already
+                    # another shape: the task leaves the stack's arrays; the stack
+                    # stores it again before its next call (and refuses a shape it
+                    # cannot hold), or is built anew if the task's structure changed
+                    state = self.__dict__
+                    state["_stored_slots"] = state["_stored_by"] = None
+                    StoredParameters.store_events += 1
             object.__setattr__(self, name, value)
 
     def store_parameters(self, owner: object, slots: dict[str, tuple[Array, Any]]) -> None:
