@@ -5,7 +5,8 @@ what they time is what they say (no bounds on times: they depend on the machine)
   (so the per-stage figures add up the real forward pass, nothing left out or run twice), and
   its option table compares every option against the model's own step.
 - ``benchmarks.speed.loop_eviction``: its core is the one-call low level, and each case's work
-  runs once before every timed call."""
+  runs once before every timed call.
+- ``benchmarks.speed.guard_bound``: its bound gives the controller's actions to the bit."""
 
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from benchmarks.speed import loop_eviction, physics_stages
+from benchmarks.speed import guard_bound, loop_eviction, physics_stages
 from benchmarks.speed.yardstick import ReferenceStep
 
 
@@ -74,3 +75,28 @@ def test_loop_eviction_times_the_one_call_core_after_each_work() -> None:
     assert all(len(values) == 2 for values in figures.values())
     with pytest.raises(ValueError, match="rounds and calls"):
         loop_eviction.measure(core, before, rounds=0, calls=3)
+
+
+def test_guard_bound_cuts_the_qp_step_down_to_its_compiled_call_and_acts_alike() -> None:
+    times = {}
+    actions = {}
+    for cut_down in (False, True):
+        times[cut_down], actions[cut_down] = guard_bound.timed_loop(
+            "wip_gym/PlanarTray-v0", seed=1, steps=25, cut_down=cut_down
+        )
+    np.testing.assert_array_equal(actions[True], actions[False])
+    assert all(t.shape == (25,) and (t > 0).all() for t in times.values())
+    # a QP not stepped yet (no compiled stack) is refused
+    import gymnasium as gym
+
+    from controllers.registry import make_policy
+
+    env = gym.make("wip_gym/PlanarTray-v0")
+    observation, info = env.reset(seed=1)
+    policy = make_policy("unified", env)
+    policy.reset(observation, info)
+    with pytest.raises(RuntimeError, match="no compiled stack"):
+        policy.qp._stack = None
+        guard_bound.cut_down_solve(policy)
+    env.close()
+    policy.high_level.close()
