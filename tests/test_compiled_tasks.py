@@ -206,11 +206,15 @@ def test_an_observer_advanced_by_the_compiled_path_gives_its_rows_to_the_python_
     tasks = _task_set(robot, observed=True)
     observed = [task for task in tasks if isinstance(task, DisturbanceRejectingTask)]
     assert len(observed) == 4
+    before = None
     for step in range(4):
         robot.update(*robot.full_state(q + 1e-3 * step * nu, nu + 0.1 * step))
         compiled.solve(robot, None, tasks)
         stack = compiled._stack
         memory = stack.observer_memory.copy()
+        if before is not None:  # the next update's step advanced every observer
+            assert all(not np.array_equal(memory[i], before[i]) for i in range(len(observed)))
+        before = memory
         for task in observed:
             assert robot.cache[task.cache_key] is ADVANCED_IN_MEMORY
         for k, task in enumerate(tasks):
@@ -228,6 +232,38 @@ def test_an_observer_advanced_by_the_compiled_path_gives_its_rows_to_the_python_
     np.testing.assert_array_equal(compiled._stack.observer_memory[0], memory[0])
     assert not np.array_equal(compiled._stack.observer_memory[1], memory[1])  # the others did
     assert robot.cache[observed[0].cache_key] is first
+
+
+def test_the_advanced_marker_survives_copies_and_follows_the_stack_that_owns_the_memory() -> None:
+    """The marker is one object through a deep copy and a pickle (a copied controller's cache
+    holds it), and an observer another stack has adopted since is memoised as its rows of the
+    stack that advanced it: a Python-path QP at that state gets that stack's command, not the
+    adopting stack's stale one."""
+    import copy
+    import pickle
+
+    assert copy.deepcopy(ADVANCED_IN_MEMORY) is ADVANCED_IN_MEMORY
+    assert pickle.loads(pickle.dumps(ADVANCED_IN_MEMORY)) is ADVANCED_IN_MEMORY
+    robot = RobotModel(_load("krang"))
+    q, nu = random_minimal_state(robot, np.random.default_rng(13))
+    tasks = _task_set(robot, observed=True)
+    first, python = _paths(robot)
+    second, _ = _paths(robot)
+    robot.update(*robot.full_state(q, nu))
+    first.solve(robot, None, tasks)
+    twin = copy.deepcopy(robot)
+    observed = [(k, t) for k, t in enumerate(tasks) if isinstance(t, DisturbanceRejectingTask)]
+    for _, task in observed:
+        assert twin.cache[task.cache_key] is ADVANCED_IN_MEMORY
+    second.solve(robot, None, tasks)  # a second stack: it adopts the observers' memory
+    assert not first._stack.owns_its_observers() and second._stack.owns_its_observers()
+    robot.update(*robot.full_state(q + 1e-3 * nu, nu + 0.1))
+    first.solve(robot, None, tasks)  # advances its own memory, not the adopted one
+    assert first._steady is None  # no steady step while another stack holds the memory
+    for k, task in observed:
+        start, stop = first._stack.row_start[k], first._stack.row_start[k + 1]
+        np.testing.assert_array_equal(task.reference_acceleration(robot), first._target[start:stop])
+    python.solve(robot, None, tasks)  # reads the memoised commands: no error, no advance
 
 
 def test_the_steady_step_takes_the_cheap_check_and_a_change_the_full_one() -> None:

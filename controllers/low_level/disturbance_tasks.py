@@ -55,6 +55,9 @@ class _AdvancedInMemory:
     def __repr__(self) -> str:
         return "ADVANCED_IN_MEMORY"
 
+    def __reduce__(self) -> str:
+        return "ADVANCED_IN_MEMORY"  # the one marker: a copy or a pickle of a cache keeps it
+
 
 #: a ``robot.cache`` entry of an observer advanced at this state by a compiled task stack
 #: (``controllers.low_level.task_stack``): its command is row 2 of its ``memory``, which the

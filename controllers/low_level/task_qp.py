@@ -314,16 +314,22 @@ class TaskQP:
         feasible = rows_and_kernel(table.rows)
         stack.memoise_observers(robot, self._target)
         self._terms_ready = feasible
+        # the next step may take the steady path only while each observer's memory is this
+        # stack's (its marker in robot.cache points there)
         self._steady = (
-            stack,
-            table,
-            self.kernel,
-            self._w,
-            self.torque_low,
-            self.torque_high,
-            self.settings,
-            robot,
-            *stack.steady_parts(),
+            None
+            if not stack.owns_its_observers()
+            else (
+                stack,
+                table,
+                self.kernel,
+                self._w,
+                self.torque_low,
+                self.torque_high,
+                self.settings,
+                robot,
+                *stack.steady_parts(),
+            )
         )
         return feasible
 

@@ -364,12 +364,17 @@ class CompiledTaskStack:
         self.observer_advance = np.ones(max(len(observers), 1), dtype=np.int64)
         slot = 0
         self._observer_rows: list[tuple[object, int, int]] = []
+        # each observer and the view on this stack's memory it was given (its own while
+        # observer.memory is that view: another stack may adopt it later)
+        self._observer_memory_views: list[tuple[DisturbanceRejectingTask, Array]] = []
         for k, (_, observer) in enumerate(inner):
             if observer is not None:
                 self._observer_rows.append(
                     (observer.cache_key, int(self.row_start[k]), int(self.row_start[k + 1]))
                 )
-                observer.adopt_memory(self.observer_memory[slot])
+                view = self.observer_memory[slot]
+                observer.adopt_memory(view)
+                self._observer_memory_views.append((observer, view))
                 s = observer.settings
                 self.observer_settings[slot] = (s.dt, s.alpha, s.bound)
                 self.observers[k] = slot
@@ -377,7 +382,9 @@ class CompiledTaskStack:
         self._observer_keys = [key for key, _, _ in self._observer_rows]
         self._observer_key_set = frozenset(self._observer_keys)
         # memoise_observers' entries: every observer marked as advanced at this state
-        self._advanced_entries = dict.fromkeys(self._observer_keys, ADVANCED_IN_MEMORY)
+        self._advanced_entries: dict[object, object] = dict.fromkeys(
+            self._observer_keys, ADVANCED_IN_MEMORY
+        )
         self._all_advance = True  # prepare_parameters: no observer had advanced at the state
         self.params = np.zeros((len(tasks), ct.PARAMETERS))
         self.targets = np.zeros((len(tasks), 9))
@@ -527,6 +534,11 @@ class CompiledTaskStack:
         self.prepare_parameters(robot, w)
         robot_scalars_into(robot.update_buffers()["robot_scalars"], robot.nu, self.scalars)
 
+    def owns_its_observers(self) -> bool:
+        """Whether every observer's memory is still this stack's (another stack built on the
+        same tasks adopts them: their Python path then reads that stack's memory)."""
+        return all(observer.memory is view for observer, view in self._observer_memory_views)
+
     def steady_parts(
         self,
     ) -> tuple[frozenset[object], NDArray[np.int64], Array, dict[object, object]]:
@@ -547,17 +559,22 @@ class CompiledTaskStack:
         so each is marked as advanced at this state in ``robot.cache``
         (``disturbance_tasks.ADVANCED_IN_MEMORY``: its command is its memory's last command,
         which the compiled call wrote, equal to its rows of ``target``; its Python path copies
-        it from there when asked at this state). One dict update, where a copy of the rows and
-        an entry per observer cost about 1.7 us in the closed loop (docs/performance.md §25).
-        An observer whose Python path advanced it at this state keeps its own entry."""
+        it from there when asked at this state). An observer another stack has adopted since
+        (its memory is no longer this stack's) gets a copy of its rows of ``target`` instead,
+        and one whose Python path advanced it at this state keeps its own entry."""
         if not self._advanced_entries:
             return
         cache = robot.cache
-        if self._all_advance:
-            cache.update(self._advanced_entries)
-        else:
-            for key in self._observer_keys:
-                cache.setdefault(key, ADVANCED_IN_MEMORY)
+        if self._all_advance and self.owns_its_observers():
+            cache.update(self._advanced_entries)  # the common case: one dict update
+            return
+        commands = target.copy()
+        for (key, start, stop), (observer, view) in zip(
+            self._observer_rows, self._observer_memory_views, strict=True
+        ):
+            if key in cache:
+                continue
+            cache[key] = ADVANCED_IN_MEMORY if observer.memory is view else commands[start:stop]
 
     def table_entries(self, robot: RobotModel) -> dict[str, np.ndarray]:
         """The arrays of :func:`stack_rows` by name, for the one-call step of

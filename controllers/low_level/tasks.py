@@ -56,10 +56,10 @@ class StoredParameters:
       is refused there, naming the task and the parameter), or a new stack is built when
       the task's structure changed with it (a posture task's columns).
 
-    A posture task's ``columns`` are held the same way (a view on the stack's row columns:
-    a change in place, or an assignment of as many columns, is what the next call uses).
-    Any other assignment (a frame task's ``site``, its ``name``) counts as a store event,
-    so that a stack looks at its tasks' structure again before its next call.
+    Any other assignment (a frame task's ``site``, a posture task's ``columns``, a ``name``)
+    counts as a store event, so that a stack looks at its tasks' structure again before its
+    next call (a posture task's columns changed in place, which is no assignment, are compared
+    by their bytes every step).
 
     A task owns its arrays: an array given to its constructor (or by
     ``dataclasses.replace``) is copied, and a copy or a pickle of a task holds copies of its
