@@ -355,7 +355,7 @@ class TaskQP:
             or self.settings is not settings
             or robot is not owner
             or not robot.has_dynamics
-            or not stack.unchanged(tasks)
+            or not stack.unchanged(tasks)  # type: ignore[union-attr]
         ):
             return None
         cache = robot.cache

@@ -469,7 +469,7 @@ class CompiledTaskStack:
         if not all(map(operator.is_, tasks, self.tasks)):
             return False
         for task, columns in self._column_checks:
-            if np.asarray(task.columns).tobytes() != columns:
+            if np.asarray(task.columns).tobytes() != columns:  # type: ignore[attr-defined]
                 return False
         return True
 
