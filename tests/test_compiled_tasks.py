@@ -399,3 +399,30 @@ def test_a_copied_controller_steps_on_its_own_data() -> None:
         assert np.isfinite(action).all()
         obs, *_ = env.step(action)
     env.close()
+
+
+def test_a_site_or_column_out_of_range_is_refused_by_name() -> None:
+    """The compiled rows read sites and posture columns without bounds checks: a stack is not
+    built on an index out of range (the Python path raises ``IndexError`` there), whether the
+    task came so or was changed in place between steps; a negative column counts from the end,
+    as in NumPy, on both paths."""
+    robot = RobotModel(_load("krang"))
+    compiled, python = _paths(robot)
+    robot.update(*robot.full_state(*random_minimal_state(robot, np.random.default_rng(14))))
+    tasks = _realistic_tasks(robot)
+    compiled.solve(robot, None, tasks)
+    posture = next(t for t in tasks if isinstance(t, PostureTask))
+    n_min = robot.layout.n_min
+    posture.columns[0] = n_min  # in place, between steps
+    with pytest.raises(ValueError, match=r"task 'posture': columns \[\d+\] are not indices"):
+        compiled.solve(robot, None, tasks)
+    with pytest.raises(IndexError):
+        python.solve(robot, None, tasks)
+    posture.columns[0] = -1  # the last coordinate, on both paths
+    a, b = compiled.solve(robot, None, tasks), python.solve(robot, None, tasks)
+    _close(a.actuators, b.actuators, 1e-9)
+    posture.columns[0] = 3
+    frame = next(t for t in tasks if isinstance(t, FramePositionTask))
+    frame.site = robot.model.nsite
+    with pytest.raises(ValueError, match=r"site \d+ is not one of the model's"):
+        compiled.solve(robot, None, tasks)

@@ -314,6 +314,34 @@ def structure(tasks: Sequence[object]) -> tuple[object, ...]:
     return tuple(parts)
 
 
+def _check_indices(tasks: Sequence[object], n_sites: int, n_min: int) -> None:
+    """``ValueError`` naming the task for a frame task's site that is not one of the model's
+    ``n_sites`` or a posture task's column that is not an integer index into the ``n_min``
+    minimal coordinates (NumPy's rule: ``-n_min`` to ``n_min - 1``). The compiled rows read
+    them without bounds checks, where the Python path would raise ``IndexError`` (or MuJoCo
+    read past its arrays); checked whenever a stack is built, which a change of either causes."""
+    for task in tasks:
+        name = getattr(task, "name", type(task).__name__)
+        if isinstance(task, FramePositionTask | FrameOrientationTask):
+            site = task.site
+            if isinstance(site, bool) or not isinstance(site, int | np.integer):
+                raise ValueError(f"task {name!r}: site must be an integer id, got {site!r}")
+            if not 0 <= site < n_sites:
+                raise ValueError(f"task {name!r}: site {site} is not one of the model's {n_sites}")
+        elif isinstance(task, PostureTask):
+            columns = np.asarray(task.columns)
+            if columns.ndim != 1 or (columns.size and not np.issubdtype(columns.dtype, np.integer)):
+                raise ValueError(
+                    f"task {name!r}: columns must be a 1-D array of integers, got {task.columns!r}"
+                )
+            outside = (columns < -n_min) | (columns >= n_min)
+            if outside.any():
+                raise ValueError(
+                    f"task {name!r}: columns {columns[outside].tolist()} are not indices into "
+                    f"the {n_min} minimal coordinates"
+                )
+
+
 class CompiledTaskStack:
     """One task list's arrays and snapshot buffers (module docstring)."""
 
@@ -341,6 +369,7 @@ class CompiledTaskStack:
         self._probe = probe
         inner = [_unwrap(task) for task in tasks]
         self._inner = [task for task, _ in inner]
+        _check_indices(self._inner, m.nsite, lay.n_min)
         self.kinds = np.array([_KINDS[type(task)] for task in self._inner], dtype=np.int64)
         sites: list[int] = []
         slots = []
