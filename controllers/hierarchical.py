@@ -135,6 +135,11 @@ class HierarchicalConfig:
             raise ValueError(
                 f"posture_weight must be a number or 'authors', got {self.posture_weight!r}"
             )
+        if not (self.tray_lead_s >= 0.0 and self.tray_window_s > 0.0):
+            raise ValueError(
+                f"tray_lead_s must be >= 0 and tray_window_s > 0, got {self.tray_lead_s!r} and "
+                f"{self.tray_window_s!r}"
+            )
         weights = np.asarray(self.ee_position_weight, dtype=float)
         if weights.shape not in ((), (3,)) or not np.all(weights >= 0):
             raise ValueError(

@@ -184,12 +184,24 @@ class ClipCounter:
     torque constraint; within ``1e-6`` of the bound's size)."""
 
     def __init__(self, low: NDArray[np.float64], high: NDArray[np.float64]) -> None:
-        self.low = np.asarray(low, dtype=float)
-        self.high = np.asarray(high, dtype=float)
-        if self.low.shape != self.high.shape or np.any(self.low > self.high):
+        low, high = np.array(low, dtype=float), np.array(high, dtype=float)
+        if low.shape != high.shape or low.ndim != 1 or np.any(low > high):
             raise ValueError(f"action bounds must be ordered and of one shape, got {low}, {high}")
-        self._at_limit_tolerance = 1e-6 * np.maximum(1.0, np.maximum(-self.low, self.high))
+        # not assignable: the compiled clip reads them and the tolerance made from them with
+        # the shape checked here (a shorter high let a torque through unclipped)
+        self._low, self._high = low, high
+        self._at_limit_tolerance = 1e-6 * np.maximum(1.0, np.maximum(-low, high))
         self.reset()
+
+    @property
+    def low(self) -> NDArray[np.float64]:
+        """The lower bounds (not assignable: a counter with other bounds is a new one)."""
+        return self._low
+
+    @property
+    def high(self) -> NDArray[np.float64]:
+        """The upper bounds (not assignable)."""
+        return self._high
 
     def reset(self) -> None:
         self.clipped_steps = 0

@@ -402,10 +402,12 @@ def test_a_copied_controller_steps_on_its_own_data() -> None:
 
 
 def test_a_site_or_column_out_of_range_is_refused_by_name() -> None:
-    """The compiled rows read sites and posture columns without bounds checks: a stack is not
-    built on an index out of range (the Python path raises ``IndexError`` there), whether the
-    task came so or was changed in place between steps; a negative column counts from the end,
-    as in NumPy, on both paths."""
+    """The compiled rows read sites and posture columns without bounds checks, and MuJoCo's
+    Jacobians read past their arrays on a bad site id: both paths refuse an index out of
+    range by the task's name, whether the task came so or was changed in place between steps;
+    a negative column counts from the end, as in NumPy, on both paths; a negative site is
+    refused (NumPy would take the last site, MuJoCo read before its arrays); a posture task
+    needs one weight per column."""
     robot = RobotModel(_load("krang"))
     compiled, python = _paths(robot)
     robot.update(*robot.full_state(*random_minimal_state(robot, np.random.default_rng(14))))
@@ -416,13 +418,21 @@ def test_a_site_or_column_out_of_range_is_refused_by_name() -> None:
     posture.columns[0] = n_min  # in place, between steps
     with pytest.raises(ValueError, match=r"task 'posture': columns \[\d+\] are not indices"):
         compiled.solve(robot, None, tasks)
-    with pytest.raises(IndexError):
+    with pytest.raises(ValueError, match=r"task 'posture': columns \[\d+\] are not indices"):
         python.solve(robot, None, tasks)
     posture.columns[0] = -1  # the last coordinate, on both paths
     a, b = compiled.solve(robot, None, tasks), python.solve(robot, None, tasks)
     _close(a.actuators, b.actuators, 1e-9)
     posture.columns[0] = 3
     frame = next(t for t in tasks if isinstance(t, FramePositionTask))
-    frame.site = robot.model.nsite
-    with pytest.raises(ValueError, match=r"site \d+ is not one of the model's"):
-        compiled.solve(robot, None, tasks)
+    site = frame.site
+    for bad in (robot.model.nsite, -1):
+        frame.site = bad
+        for qp in (compiled, python):
+            with pytest.raises(ValueError, match=r"site -?\d+ is not one of the model's"):
+                qp.solve(robot, None, tasks)
+    frame.site = site
+    posture.joint_weights = posture.joint_weights[1:]  # leaves the stack: another shape
+    for qp in (compiled, python):  # a stack built anew, or the one that held the weights
+        with pytest.raises(ValueError, match="task 'posture': .*(one weight per column|not fit)"):
+            qp.solve(robot, None, tasks)

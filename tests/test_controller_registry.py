@@ -223,6 +223,11 @@ def test_clip_counter_counts_and_refuses_non_finite_actions() -> None:
         counter.clip(np.array([np.nan, 5.0]))  # the values given, not the clipped copy
     with pytest.raises(ValueError, match="shape"):
         counter.clip(np.zeros(3))
+    # its bounds are not assignable (the compiled clip reads them with the shape checked once)
+    with pytest.raises(AttributeError):
+        counter.high = np.array([1.0])  # type: ignore[misc]
+    with pytest.raises(ValueError, match="ordered and of one shape"):
+        ClipCounter(np.array([-1.0, -2.0]), np.array([1.0]))
 
 
 # ------------------------------------------------------------- every controller, closed loop

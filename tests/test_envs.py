@@ -118,6 +118,26 @@ def test_bad_kwargs_raise() -> None:
         gym.make("wip_gym/Krang-v0", mass_randomization=2.0)
 
 
+def test_frame_skip_assigned_between_steps_is_checked_and_timed() -> None:
+    """``frame_skip`` (MujocoEnv's attribute) assigned after construction: a value that is not
+    a positive integer is refused at the next step (``mj_step`` takes 0 or a negative count as
+    no step at all), and a valid one steps that many times, its control cost over the new
+    step's duration."""
+    env = gym.make("wip_gym/Planar-v0").unwrapped
+    env.reset(seed=0)
+    action = 0.1 * env.action_space.high
+    _, _, _, _, once = env.step(action)
+    for bad in (0, -3, 1.5):
+        env.frame_skip = bad
+        with pytest.raises(ValueError, match="frame_skip must be a positive integer"):
+            env.step(action)
+    env.frame_skip = 2
+    time = env.data.time
+    _, _, _, _, twice = env.step(action)
+    assert env.data.time == pytest.approx(time + 2 * env.model.opt.timestep)
+    assert twice["reward_ctrl"] == pytest.approx(2 * once["reward_ctrl"])
+
+
 @pytest.mark.parametrize("env_id", TRAY_IDS)
 def test_tray_starts_level_with_cup_on_it(env_id: str) -> None:
     env = gym.make(env_id, reset_noise_scale=0.0)

@@ -183,3 +183,43 @@ def test_a_task_without_an_exact_jdot_nu_is_an_error() -> None:
     qp = TaskQP(robot, *_limits(robot), QPSettings())
     with pytest.raises(ValueError, match="no_drift"):
         qp.solve(robot, None, [*tasks, NoDrift(tasks[0])])
+
+
+def test_a_layout_or_input_of_the_wrong_size_is_refused() -> None:
+    """The compiled step reads the layout's arrays and ``run``'s inputs without bounds checks
+    (two torque limits for eighteen actuators gave the third a bound from memory past the
+    array): a kernel is not made on a layout of the wrong sizes, the controller's QP refuses
+    torque limits of another length when they are assigned between steps, and ``run``
+    refuses rows of another shape."""
+    robot = RobotModel(_load("krang"))
+    low, high = _limits(robot)
+    qp = TaskQP(robot, low, high, QPSettings())
+    _set_state(robot, 4)
+    tasks = _realistic_tasks(robot)
+    qp.solve(robot, None, tasks)
+    layout = qp.kernel.layout
+    n = layout.n_min - 1
+    bad_layouts = {
+        "torque_low": dataclasses.replace(layout, torque_low=layout.torque_low[:2]),
+        "torque_high": dataclasses.replace(layout, torque_high=np.append(layout.torque_high, 1)),
+        "index_q1": dataclasses.replace(layout, index_q1=n),
+        "limit_indices": dataclasses.replace(layout, limit_indices=layout.limit_indices + 40),
+        "actuator map": dataclasses.replace(layout, actuator_map=layout.actuator_map[:, 1:]),
+    }
+    for what, bad in bad_layouts.items():
+        with pytest.raises(ValueError, match=what):
+            LowLevelKernel(bad)
+    qp.torque_low = low[:2]
+    with pytest.raises(ValueError, match="torque_low must hold one limit per actuator"):
+        qp.solve(robot, None, tasks)
+    qp.torque_low = low
+    qp.solve(robot, None, tasks)
+    J, target, w = qp._J, qp._target, qp._w
+    jdot_nu = np.zeros_like(target)
+    kernel = qp.kernel
+    with pytest.raises(ValueError, match="J must be"):
+        kernel.run(robot.A, robot.h, J[:5], target, jdot_nu, w, robot.q, robot.nu)
+    with pytest.raises(ValueError, match="w must be"):
+        kernel.run(robot.A, robot.h, J, target, jdot_nu, w[:-1], robot.q, robot.nu)
+    with pytest.raises(ValueError, match="A and h must be"):
+        kernel.run(robot.A[:-1], robot.h, J, target, jdot_nu, w, robot.q, robot.nu)

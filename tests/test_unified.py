@@ -10,6 +10,12 @@ from benchmarks.rollout import rollout
 from controllers.hierarchical import HierarchicalConfig, tilt_toward
 
 
+def test_the_waiters_window_must_look_ahead() -> None:
+    for lead, window in ((-0.01, 0.1), (0.1, 0.0)):  # a negative index wrapped; 0: 0 / 0
+        with pytest.raises(ValueError, match="tray_lead_s must be >= 0 and tray_window_s > 0"):
+            HierarchicalConfig(tray_lead_s=lead, tray_window_s=window)
+
+
 def test_tilt_toward_the_specific_force() -> None:
     R = tilt_toward(np.array([9.81, 0.0]), max_tilt_deg=90.0)
     normal = R @ np.array([0.0, 0.0, 1.0])

@@ -74,6 +74,37 @@ class KernelLayout:
     rows: int
 
 
+def _check_layout(layout: KernelLayout, m: int, n_limit: int) -> None:
+    """``ValueError`` for a layout whose arrays the compiled step would read past: it reads
+    them without bounds checks (a torque limit too few gave a bound from memory past its
+    array). The torque limits are read at every call, so ``TaskQP`` makes a new kernel when
+    they are assigned; this runs then too."""
+    n_min, n = layout.n_min, layout.n_min - 1
+    actuator_map = np.asarray(layout.actuator_map)
+    if actuator_map.ndim != 2 or actuator_map.shape[1] != n:
+        raise ValueError(f"the actuator map must be (actuators, {n}), got {actuator_map.shape}")
+    for name in ("torque_low", "torque_high"):
+        shape = np.shape(getattr(layout, name))
+        if shape != (m,):
+            raise ValueError(f"{name} must hold one limit per actuator, ({m},), got {shape}")
+    if not 0 <= layout.index_q1 < n:
+        raise ValueError(
+            f"index_q1 must be a QP variable's index (0 to {n - 1}), got {layout.index_q1}"
+        )
+    columns = np.asarray(layout.limit_columns)
+    indices = np.asarray(layout.limit_indices)
+    if columns.shape != (n_limit,) or indices.shape != (n_limit,):
+        raise ValueError("limit_columns and limit_indices must be 1-D and as long as each other")
+    for values, name, size in ((columns, "limit_columns", n), (indices, "limit_indices", n_min)):
+        if n_limit and not ((values >= 0) & (values < size)).all():
+            raise ValueError(f"{name} must be indices in 0 to {size - 1}, got {values.tolist()}")
+    for name in ("limit_min", "limit_max"):
+        if np.shape(getattr(layout, name)) != (n_limit,):
+            raise ValueError(f"{name} must hold one value per joint limit, ({n_limit},)")
+    if layout.rows < 0:
+        raise ValueError(f"rows must be >= 0, got {layout.rows}")
+
+
 class LowLevelKernel:
     """Buffers of fixed shapes and the one call that fills them (module docstring)."""
 
@@ -83,6 +114,7 @@ class LowLevelKernel:
         n = n_min - 1
         m = len(layout.actuator_map)
         n_limit = len(layout.limit_columns)
+        _check_layout(layout, m, n_limit)
         unreached = np.flatnonzero(~(np.asarray(layout.actuator_map) != 0.0).any(axis=0))
         if len(unreached):
             # the constraint rows M_act calA skip zero entries (small_linalg.matmul_into): a
@@ -161,8 +193,25 @@ class LowLevelKernel:
     ) -> bool:
         """Fill every buffer for this state; True when the unconstrained minimiser ``x`` meets
         every constraint (it is then the QP's optimum). With ``iso`` given, its ``calA``,
-        ``Ph``, ``E``, ``e`` are used instead of step 1."""
+        ``Ph``, ``E``, ``e`` are used instead of step 1. ``ValueError`` for arrays of
+        other shapes than the layout's (the compiled step reads them unchecked)."""
         lay = self.layout
+        rows, n_min = lay.rows, lay.n_min
+        for name, array, shape in (
+            ("J", J, (rows, n_min)),
+            ("target", target, (rows,)),
+            ("jdot_nu", jdot_nu, (rows,)),
+            ("w", w, (rows,)),
+            ("q", q, (n_min,)),
+            ("nu", nu, (n_min,)),
+        ):
+            if np.shape(array) != shape:
+                raise ValueError(f"{name} must be {shape} for this kernel, got {np.shape(array)}")
+        if iso is None and (np.shape(A) != (n_min, n_min) or np.shape(h) != (n_min,)):
+            raise ValueError(
+                f"A and h must be ({n_min}, {n_min}) and ({n_min},), got "
+                f"{np.shape(A)} and {np.shape(h)}"
+            )
         if iso is not None:
             self.calA[:] = iso.calA
             self.Ph[:] = iso.Ph

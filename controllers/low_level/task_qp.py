@@ -44,7 +44,7 @@ from controllers.low_level.compiled_step import rows_and_kernel, step_table
 from controllers.low_level.isolated_dynamics import IsolatedDynamics
 from controllers.low_level.kernel import KernelLayout, LowLevelKernel, solution_terms
 from controllers.low_level.motion_probe import MotionProbe
-from controllers.low_level.task_stack import CompiledTaskStack, supports
+from controllers.low_level.task_stack import CompiledTaskStack, check_indices, supports
 from controllers.low_level.tasks import Task
 from wip_gym.array_table import ArrayTable
 from wip_gym.robot_model import RobotModel
@@ -264,6 +264,9 @@ class TaskQP:
             self._ensure_buffers(stack.rows, robot.layout.n_min)
             stack.fill(robot, self._J, self._target, self._bias, self._w)
             return
+        # MuJoCo's Jacobian calls read past their arrays on a bad site id (a negative one
+        # would pass NumPy's indexing): the same checks as a compiled stack's
+        check_indices(tasks, robot.model.nsite, robot.layout.n_min)
         blocks = [task.jacobian(robot) for task in tasks]
         rows = sum(len(block) for block in blocks)
         self._ensure_buffers(rows, blocks[0].shape[1])

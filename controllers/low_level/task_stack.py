@@ -314,13 +314,15 @@ def structure(tasks: Sequence[object]) -> tuple[object, ...]:
     return tuple(parts)
 
 
-def _check_indices(tasks: Sequence[object], n_sites: int, n_min: int) -> None:
+def check_indices(tasks: Sequence[object], n_sites: int, n_min: int) -> None:
     """``ValueError`` naming the task for a frame task's site that is not one of the model's
     ``n_sites`` or a posture task's column that is not an integer index into the ``n_min``
     minimal coordinates (NumPy's rule: ``-n_min`` to ``n_min - 1``). The compiled rows read
     them without bounds checks, where the Python path would raise ``IndexError`` (or MuJoCo
-    read past its arrays); checked whenever a stack is built, which a change of either causes."""
-    for task in tasks:
+    read past its arrays); checked whenever a stack is built, which a change of either causes,
+    and by ``TaskQP``'s Python path at every step. A posture task needs one joint weight per
+    column (the stack counts its rows by the weights)."""
+    for task in (_unwrap(task)[0] for task in tasks):
         name = getattr(task, "name", type(task).__name__)
         if isinstance(task, FramePositionTask | FrameOrientationTask):
             site = task.site
@@ -339,6 +341,12 @@ def _check_indices(tasks: Sequence[object], n_sites: int, n_min: int) -> None:
                 raise ValueError(
                     f"task {name!r}: columns {columns[outside].tolist()} are not indices into "
                     f"the {n_min} minimal coordinates"
+                )
+            weights = np.atleast_1d(task.joint_weights)
+            if weights.shape != columns.shape:
+                raise ValueError(
+                    f"task {name!r}: {len(columns)} columns and {len(weights)} joint weights "
+                    "(one weight per column)"
                 )
 
 
@@ -369,7 +377,7 @@ class CompiledTaskStack:
         self._probe = probe
         inner = [_unwrap(task) for task in tasks]
         self._inner = [task for task, _ in inner]
-        _check_indices(self._inner, m.nsite, lay.n_min)
+        check_indices(self._inner, m.nsite, lay.n_min)
         self.kinds = np.array([_KINDS[type(task)] for task in self._inner], dtype=np.int64)
         sites: list[int] = []
         slots = []

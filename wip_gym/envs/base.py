@@ -350,6 +350,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         self._view_xmat = d.xmat
         self._view_push = d.xfrc_applied[self._push_body]
         self._step_dt = float(m.opt.timestep) * self.frame_skip
+        self._frames_bound = self.frame_skip  # do_simulation's n_frames that _step_dt is for
         self._measure_table = ms.address_table(m, d)
 
     # ----------------------------------------------------------------- model
@@ -594,6 +595,13 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         """``n_frames`` MuJoCo steps with the (validated) torques ``ctrl``. Unlike Gymnasium's,
         it does not run ``mj_rnePostConstraint`` after them: ``data.cfrc_int``/``cfrc_ext``
         are not computed (no observation, reward or info uses them); call it to read them."""
+        if n_frames != self._frames_bound:  # frame_skip assigned since: checked, dt made again
+            if isinstance(n_frames, bool) or not isinstance(n_frames, int | np.integer):
+                raise ValueError(f"frame_skip must be a positive integer, got {n_frames!r}")
+            if n_frames < 1:
+                raise ValueError(f"frame_skip must be a positive integer, got {n_frames!r}")
+            self._frames_bound = int(n_frames)
+            self._step_dt = float(self.model.opt.timestep) * n_frames
         self.data.ctrl[:] = ctrl
         mujoco.mj_step(self.model, self.data, n_frames)
 
