@@ -215,10 +215,10 @@ class ClipCounter:
         # caller's array is left as it was
         given = action
         clipped = np.array(action, dtype=np.float64)
-        if clipped.shape != self.low.shape:
-            raise ValueError(f"action must have shape {self.low.shape}, got {clipped.shape}")
+        if clipped.shape != self._low.shape:
+            raise ValueError(f"action must have shape {self._low.shape}, got {clipped.shape}")
         finite, excess, at_limit = _clip_and_measure(
-            clipped, self.low, self.high, self._at_limit_tolerance, clipped
+            clipped, self._low, self._high, self._at_limit_tolerance, clipped
         )
         if not finite:
             raise ValueError(f"the controller produced a non-finite action: {given}")
