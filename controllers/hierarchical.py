@@ -135,10 +135,13 @@ class HierarchicalConfig:
             raise ValueError(
                 f"posture_weight must be a number or 'authors', got {self.posture_weight!r}"
             )
-        if not (self.tray_lead_s >= 0.0 and self.tray_window_s > 0.0):
+        horizon = self.high_level.mpc.horizon_s
+        if not (0.0 <= self.tray_lead_s < horizon and self.tray_window_s >= 0.0):
+            # a negative lead wrapped to the prediction's end; one at or past the horizon read
+            # past it (or divided by a zero span)
             raise ValueError(
-                f"tray_lead_s must be >= 0 and tray_window_s > 0, got {self.tray_lead_s!r} and "
-                f"{self.tray_window_s!r}"
+                f"tray_lead_s must be in [0, the MPC horizon {horizon} s) and tray_window_s "
+                f">= 0, got {self.tray_lead_s!r} and {self.tray_window_s!r}"
             )
         weights = np.asarray(self.ee_position_weight, dtype=float)
         if weights.shape not in ((), (3,)) or not np.all(weights >= 0):

@@ -184,9 +184,16 @@ class ClipCounter:
     torque constraint; within ``1e-6`` of the bound's size)."""
 
     def __init__(self, low: NDArray[np.float64], high: NDArray[np.float64]) -> None:
-        low, high = np.array(low, dtype=float), np.array(high, dtype=float)
-        if low.shape != high.shape or low.ndim != 1 or np.any(low > high):
-            raise ValueError(f"action bounds must be ordered and of one shape, got {low}, {high}")
+        # the arrays given, not copies: a change of their values in place (a controller's
+        # torque limits narrowed) reaches the clip, as it always did
+        low, high = np.asarray(low, dtype=float), np.asarray(high, dtype=float)
+        if low.ndim != 1 or low.shape != high.shape:
+            raise ValueError(
+                f"action bounds must be two 1-D arrays of one length, got shapes {low.shape} "
+                f"and {high.shape}"
+            )
+        if np.any(low > high):
+            raise ValueError(f"action bounds must be ordered (low <= high), got {low}, {high}")
         # not assignable: the compiled clip reads them and the tolerance made from them with
         # the shape checked here (a shorter high let a torque through unclipped)
         self._low, self._high = low, high

@@ -432,7 +432,15 @@ def test_a_site_or_column_out_of_range_is_refused_by_name() -> None:
             with pytest.raises(ValueError, match=r"site -?\d+ is not one of the model's"):
                 qp.solve(robot, None, tasks)
     frame.site = site
-    posture.joint_weights = posture.joint_weights[1:]  # leaves the stack: another shape
-    for qp in (compiled, python):  # a stack built anew, or the one that held the weights
-        with pytest.raises(ValueError, match="task 'posture': .*(one weight per column|not fit)"):
+    # one weight for all the columns: broadcast on both paths, into a stack's arrays too
+    weights = posture.joint_weights.copy()
+    posture.joint_weights = np.array([2.0])
+    a, b = compiled.solve(robot, None, tasks), python.solve(robot, None, tasks)
+    _close(a.actuators, b.actuators, 1e-9)
+    posture.joint_weights = weights
+    # another number of weights: refused when a stack is built, and on the Python path
+    fresh, _ = _paths(robot)
+    posture.joint_weights = weights[1:]
+    for qp in (fresh, python):
+        with pytest.raises(ValueError, match="task 'posture': .*one weight per column"):
             qp.solve(robot, None, tasks)

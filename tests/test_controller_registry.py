@@ -226,8 +226,15 @@ def test_clip_counter_counts_and_refuses_non_finite_actions() -> None:
     # its bounds are not assignable (the compiled clip reads them with the shape checked once)
     with pytest.raises(AttributeError):
         counter.high = np.array([1.0])  # type: ignore[misc]
-    with pytest.raises(ValueError, match="ordered and of one shape"):
-        ClipCounter(np.array([-1.0, -2.0]), np.array([1.0]))
+    with pytest.raises(ValueError, match="two 1-D arrays of one length"):
+        ClipCounter(np.zeros((2, 2)), np.ones((2, 2)))
+    with pytest.raises(ValueError, match="ordered"):
+        ClipCounter(np.array([1.0, -2.0]), np.array([-1.0, 2.0]))
+    # the bounds given, shared: a change of their values in place reaches the clip
+    low, high = np.array([-1.0, -2.0]), np.array([1.0, 2.0])
+    shared = ClipCounter(low, high)
+    high[0] = 0.5
+    np.testing.assert_array_equal(shared.clip(np.array([0.75, 0.0])), [0.5, 0.0])
 
 
 # ------------------------------------------------------------- every controller, closed loop

@@ -10,10 +10,13 @@ from benchmarks.rollout import rollout
 from controllers.hierarchical import HierarchicalConfig, tilt_toward
 
 
-def test_the_waiters_window_must_look_ahead() -> None:
-    for lead, window in ((-0.01, 0.1), (0.1, 0.0)):  # a negative index wrapped; 0: 0 / 0
-        with pytest.raises(ValueError, match="tray_lead_s must be >= 0 and tray_window_s > 0"):
+def test_the_waiters_lead_must_lie_inside_the_mpc_horizon() -> None:
+    """A negative lead wrapped to the prediction's end; one at or past the horizon (1 s) read
+    past it or divided by a zero span; a zero window is one MPC step each side."""
+    for lead, window in ((-0.01, 0.1), (1.0, 0.1), (1.05, 0.1), (0.1, -0.1)):
+        with pytest.raises(ValueError, match=r"tray_lead_s must be in \[0, the MPC horizon"):
             HierarchicalConfig(tray_lead_s=lead, tray_window_s=window)
+    HierarchicalConfig(tray_lead_s=0.99, tray_window_s=0.0)
 
 
 def test_tilt_toward_the_specific_force() -> None:

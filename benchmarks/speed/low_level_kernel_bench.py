@@ -8,7 +8,9 @@ Timed per call (median over the recorded states, then the median of ``--repeats`
 interleaved so that the machine's load falls on every variant alike), beside the unit of
 ``benchmarks.speed.yardstick``:
 
-* ``numba``: ``LowLevelKernel.run`` (steps 1 to 5, eq. iso3 included), ours;
+* ``numba``: ``LowLevelKernel.run`` (steps 1 to 5, eq. iso3 included), ours; since fd4c7b9
+  it includes the shape checks ``run`` makes on its inputs, which figures measured before it
+  do not;
 * ``numpy``: the same five steps as one NumPy function into preallocated buffers (the kernel
   before it was compiled);
 * ``before``: the same arithmetic as the task QP did it before the kernel, piece by piece

@@ -321,7 +321,7 @@ def check_indices(tasks: Sequence[object], n_sites: int, n_min: int) -> None:
     them without bounds checks, where the Python path would raise ``IndexError`` (or MuJoCo
     read past its arrays); checked whenever a stack is built, which a change of either causes,
     and by ``TaskQP``'s Python path at every step. A posture task needs one joint weight per
-    column (the stack counts its rows by the weights)."""
+    column, or one for all (broadcast, as both paths do)."""
     for task in (_unwrap(task)[0] for task in tasks):
         name = getattr(task, "name", type(task).__name__)
         if isinstance(task, FramePositionTask | FrameOrientationTask):
@@ -343,10 +343,10 @@ def check_indices(tasks: Sequence[object], n_sites: int, n_min: int) -> None:
                     f"the {n_min} minimal coordinates"
                 )
             weights = np.atleast_1d(task.joint_weights)
-            if weights.shape != columns.shape:
+            if weights.ndim != 1 or weights.size not in (1, columns.size):
                 raise ValueError(
-                    f"task {name!r}: {len(columns)} columns and {len(weights)} joint weights "
-                    "(one weight per column)"
+                    f"task {name!r}: {columns.size} columns and joint weights of shape "
+                    f"{np.shape(task.joint_weights)} (one weight per column, or one for all)"
                 )
 
 
@@ -390,7 +390,14 @@ class CompiledTaskStack:
                 slots.append(-1)
         self.site_ids = np.array(sites, dtype=np.int64)
         self.sites = np.array(slots, dtype=np.int64)
-        counts = [len(np.atleast_1d(task.weights())) for task in self.tasks]  # type: ignore[attr-defined]
+        # a task's rows: a posture task's columns (its weights may be one for all), else its
+        # weights
+        counts = [
+            len(np.atleast_1d(task.columns))
+            if isinstance(task, PostureTask)
+            else len(np.atleast_1d(task.weights()))  # type: ignore[attr-defined]
+            for task in self.tasks
+        ]
         self.row_start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
         self.rows = int(self.row_start[-1])
         observers = [observer for _, observer in inner if observer is not None]

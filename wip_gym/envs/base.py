@@ -349,8 +349,9 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         self._view_robot_qpos, self._view_robot_qvel = d.qpos[: self._nq], d.qvel[: self._nv]
         self._view_xmat = d.xmat
         self._view_push = d.xfrc_applied[self._push_body]
-        self._step_dt = float(m.opt.timestep) * self.frame_skip
-        self._frames_bound = self.frame_skip  # do_simulation's n_frames that _step_dt is for
+        # do_simulation checks frame_skip and makes _step_dt for it at the next step (-1: none
+        # checked yet; frame_skip may have been assigned since the env was made)
+        self._frames_bound = -1
         self._measure_table = ms.address_table(m, d)
 
     # ----------------------------------------------------------------- model
