@@ -131,6 +131,9 @@ def test_frame_skip_assigned_between_steps_is_checked_and_timed() -> None:
         env.frame_skip = bad
         with pytest.raises(ValueError, match="frame_skip must be a positive integer"):
             env.step(action)
+        env._bind_views()  # as after the env's data or model is replaced: still checked
+        with pytest.raises(ValueError, match="frame_skip must be a positive integer"):
+            env.step(action)
     env.frame_skip = 2
     time = env.data.time
     _, _, _, _, twice = env.step(action)
