@@ -53,6 +53,7 @@ TOP_KEYS = {
     "frame_skip",
     "setup_s",
     "setup_frozen",
+    "parts_timed",
     "collector_passes",
     "reference_step_us",
     "control_time_ms",
@@ -128,6 +129,31 @@ def test_short_unified_profile_schema(tmp_path: Path, capsys: pytest.CaptureFixt
     summary = closed_loop_table({"PlanarTray": [result, result]}, summary=True).splitlines()
     mean = units["mean"]
     assert summary[2] == f"| control, mean | {mean:.1f} [{mean:.1f}, {mean:.1f}] | 5 |"
+
+
+def test_no_parts_times_the_loop_without_the_part_wrappers(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``time_parts=False`` (``--no-parts``) wraps none of the policy's methods: every controller
+    part, ``python_overhead`` and ``low_level`` are null, the control and the env's physics are
+    timed, and the table says why the low level's ratio is missing."""
+    wrapped = []
+    real_instrument = profile_module._instrument
+
+    def instrument(policy: Any) -> Any:
+        wrapped.append(policy)
+        return real_instrument(policy)
+
+    monkeypatch.setattr(profile_module, "_instrument", instrument)
+    result = profile_episode("PlanarTray-v0", "unified", duration=0.05, time_parts=False)
+    assert wrapped == []
+    per_step = result["per_step_us"]
+    for name in (*profile_module.PARTS, "python_overhead", "low_level"):
+        assert per_step[name] is None, name
+    assert per_step["control"]["mean"] > 0 and per_step["env_physics"]["mean"] > 0
+    assert result["parts_timed"] is False and result["low_level_over_mujoco_step"] is None
+    assert "parts not timed: --no-parts" in profile_module.format_table(result)
+    timed = profile_episode("PlanarTray-v0", "unified", duration=0.05)
+    assert len(wrapped) == 1 and timed["parts_timed"] is True
+    assert timed["per_step_us"]["robot_model"] is not None
 
 
 def test_a_known_delay_lands_in_its_own_part(monkeypatch: pytest.MonkeyPatch) -> None:

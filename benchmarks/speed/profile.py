@@ -3,6 +3,7 @@ against the simulator's own floor measured in the same run.
 
     wip-bench profile --env KrangTray-v0 --controller unified [--duration 5] [--seed 0]
                       [--preset paper] [--set KEY=VALUE ...] [--json PATH] [--no-freeze]
+                      [--no-parts]
 
 ``--preset`` and ``--set`` are compare's (``benchmarks.overrides``): for example
 ``--set unified.high_level.mpc_delay_steps=5`` profiles the MPC solved beside the loop.
@@ -21,7 +22,11 @@ task rows, ``H``, ``g``, the constraint rows and the unconstrained minimiser, wh
 minus ``_run_kernel``) and
 ``high_level.reference`` (the MPC and the reference it hands the low level, amortised: it runs
 every 10 ms), and the env's ``do_simulation`` (``env_physics``: its ``mj_step`` in the loop). A
-part the controller lacks is ``null``. The floor, ``mujoco_step``, is a bare
+part the controller lacks is ``null``. The part wrappers cost the control step itself about
+0.1 to 0.15 units of its median (KrangTray-v0, ``unified``; docs/performance.md §25):
+``--no-parts`` times the loop without them (every controller part and ``python_overhead``
+``null``; the env's physics is still timed), for a control time comparable across controllers
+whatever parts they have. The floor, ``mujoco_step``, is a bare
 ``mujoco.mj_step(model, data, nstep=frame_skip)`` (one control period) from every state the
 episode stepped, with the control the policy gave there: the state (``mj_getState``, the
 integration state) is recorded before every ``env.step`` and the floor is timed after the
@@ -80,21 +85,22 @@ JSON schema (``--json PATH``; times per control step in microseconds unless name
       "qp_iterations": {"mean": float, "max": int} | null,  # ProxQP's; 0 on a shortcut step
       "qp_paths": {"shortcut": int, "proxqp": int} | null,  # steps solved by each path
       "control_over_mujoco_step": float,  # mean control / mean floor
-      "low_level_over_mujoco_step": float,
+      "low_level_over_mujoco_step": float | null,  # null with --no-parts
       "real_time_factor": float,          # steps * dt / sum(control + env_step)
       "sim_only_real_time_factor": float, # steps * dt / sum(mujoco_step): the ceiling
       "fell": bool,
       "setup_frozen": bool,               # the loop under benchmarks.heap.setup_frozen
+      "parts_timed": bool,                # the controller parts wrapped (not --no-parts)
       "collector_passes": {"by_generation": [int, int, int], "longest_ms": float,
                            "total_ms": float},  # the garbage collector's, in the loop
       "machine": {"cpu": str, "cores": int, "python": str}
     }
 
-The means of ``robot_model``, ``qp_assembly``, ``qp_solve``, ``high_level`` and
-``python_overhead`` add up to the mean of ``control``; ``low_level`` + ``high_level`` is
-``control``; ``env_physics`` + ``env_overhead`` is ``env_step``; ``control`` + ``env_step`` is
-``loop`` (means). ``env_physics`` over ``mujoco_step`` is what the loop costs the physics: the
-same steps, in the loop and warm.
+With the parts timed, the means of ``robot_model``, ``qp_assembly``, ``qp_solve``,
+``high_level`` and ``python_overhead`` add up to the mean of ``control``, and ``low_level`` +
+``high_level`` is ``control``; ``env_physics`` + ``env_overhead`` is ``env_step``; ``control``
++ ``env_step`` is ``loop`` (means). ``env_physics`` over ``mujoco_step`` is what the loop costs
+the physics: the same steps, in the loop and warm.
 """
 
 from __future__ import annotations
@@ -259,11 +265,13 @@ def profile_episode(
     env_kwargs: dict[str, Any] | None = None,
     config: Any = None,
     freeze_setup: bool = True,
+    time_parts: bool = True,
 ) -> dict[str, Any]:
     """Run one instrumented episode; return the JSON-ready profile (module docstring).
     ``env_kwargs`` and ``config`` (the controller's) default to the env's and the
     controller's defaults. ``freeze_setup=False`` times the loop without
-    ``benchmarks.heap.setup_frozen`` (what a loop of one's own sees without it)."""
+    ``benchmarks.heap.setup_frozen`` (what a loop of one's own sees without it);
+    ``time_parts=False`` without the controller parts' wrappers (``--no-parts``)."""
     if duration <= 0:
         raise ValueError(f"duration must be positive, got {duration}")
     env_id = resolve_env_id(env_id)
@@ -283,7 +291,7 @@ def profile_episode(
     if steps < 1:
         env.close()
         raise ValueError(f"duration {duration} s is less than one control step ({dt} s)")
-    timers = _instrument(policy)
+    timers = _instrument(policy) if time_parts else {}
     physics_timer = _Timer()
     base.do_simulation = physics_timer.wrap(base.do_simulation)
     physics = np.zeros(steps)
@@ -335,9 +343,9 @@ def profile_episode(
     per_step: dict[str, dict[str, float] | None] = {
         "mujoco_step": _stats(floor),
         **{name: _stats(parts[name]) if present[name] else None for name in PARTS},
-        "python_overhead": _stats(control - measured),
+        "python_overhead": _stats(control - measured) if time_parts else None,
         "control": _stats(control),
-        "low_level": _stats(control - high_level),
+        "low_level": _stats(control - high_level) if time_parts else None,
         "env_step": _stats(env_step),
         "env_physics": _stats(physics),
         "env_overhead": _stats(env_step - physics),
@@ -373,11 +381,14 @@ def profile_episode(
         "qp_iterations": _iterations(iterations),
         "qp_paths": _paths(iterations),
         "control_over_mujoco_step": float(control.mean() / floor_mean),
-        "low_level_over_mujoco_step": float((control - high_level).mean() / floor_mean),
+        "low_level_over_mujoco_step": (
+            float((control - high_level).mean() / floor_mean) if time_parts else None
+        ),
         "real_time_factor": float(k * dt / (control.sum() + env_step.sum())),
         "sim_only_real_time_factor": float(k * dt / floor.sum()),
         "fell": fell,
         "setup_frozen": freeze_setup,
+        "parts_timed": time_parts,
         "collector_passes": collector.summary(),
         "machine": {
             "cpu": platform.processor() or platform.machine(),
@@ -418,7 +429,11 @@ def format_table(result: dict[str, Any]) -> str:
         f"({result['control_time_units']['mean']:.1f} / "
         f"{result['control_time_units']['p99']:.1f} units mean / p99)",
         f"controller cost: {result['control_over_mujoco_step']:.1f}x the bare mj_step "
-        f"(low level alone {result['low_level_over_mujoco_step']:.1f}x)",
+        + (
+            f"(low level alone {result['low_level_over_mujoco_step']:.1f}x)"
+            if result["low_level_over_mujoco_step"] is not None
+            else "(parts not timed: --no-parts)"
+        ),
         f"real-time factor: {result['real_time_factor']:.1f} (simulation alone "
         f"{result['sim_only_real_time_factor']:.1f})",
     ]
@@ -447,6 +462,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--json", type=Path, default=None, help="write the profile here")
     parser.add_argument(
+        "--no-parts",
+        action="store_true",
+        help="time the loop without the controller parts' wrappers (about 0.1 units of the "
+        "control step): the parts and python_overhead are null",
+    )
+    parser.add_argument(
         "--no-freeze",
         action="store_true",
         help="time the loop without the setup's objects frozen (benchmarks.heap): a full "
@@ -471,6 +492,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         spec.env_kwargs,
         spec.configs[args.controller],
         freeze_setup=not args.no_freeze,
+        time_parts=not args.no_parts,
     )
     result["preset"] = args.preset
     result["overrides"] = spec.overrides
