@@ -314,6 +314,11 @@ def structure(tasks: Sequence[object]) -> tuple[object, ...]:
     return tuple(parts)
 
 
+def _same_columns(task: object, columns: bytes) -> bool:
+    """Whether a posture task's columns are the ``columns`` bytes :func:`structure` took."""
+    return np.asarray(task.columns).tobytes() == columns  # type: ignore[attr-defined,no-any-return]
+
+
 def check_indices(tasks: Sequence[object], n_sites: int, n_min: int) -> None:
     """``ValueError`` naming the task for a frame task's site that is not one of the model's
     ``n_sites`` or a posture task's column that is not an integer index into the ``n_min``
@@ -492,7 +497,7 @@ class CompiledTaskStack:
                 return False
             if site is not None and inner.site != site:  # type: ignore[attr-defined]
                 return False
-            if columns is not None and np.asarray(inner.columns).tobytes() != columns:  # type: ignore[attr-defined]
+            if columns is not None and not _same_columns(inner, columns):
                 return False
         self._checked_events = events
         return True
@@ -512,10 +517,7 @@ class CompiledTaskStack:
             return False
         if not all(map(operator.is_, tasks, self.tasks)):
             return False
-        for task, columns in self._column_checks:
-            if np.asarray(task.columns).tobytes() != columns:  # type: ignore[attr-defined]
-                return False
-        return True
+        return all(_same_columns(task, columns) for task, columns in self._column_checks)
 
     def __getstate__(self) -> dict[str, object]:
         raise TypeError(

@@ -56,6 +56,16 @@ def _goal_array(goal: Any, planar: bool) -> NDArray[np.float64]:
     return arr
 
 
+def _check_frame_skip(frame_skip: Any) -> None:
+    """``ValueError`` unless ``frame_skip`` is a positive integer (``mj_step`` takes 0 or a
+    negative count as no step at all); checked when the env is made and at the first step after
+    it is assigned."""
+    if isinstance(frame_skip, bool) or not isinstance(frame_skip, int | np.integer):
+        raise ValueError(f"frame_skip must be a positive integer, got {frame_skip!r}")
+    if frame_skip < 1:
+        raise ValueError(f"frame_skip must be a positive integer, got {frame_skip!r}")
+
+
 def friction_use(
     model: mujoco.MjModel,
     data: mujoco.MjData,
@@ -165,8 +175,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             raise ValueError(f"push_force must be finite, got {push_force}")
         if not 0.0 <= mass_randomization < 1.0:
             raise ValueError(f"mass_randomization must be in [0, 1), got {mass_randomization}")
-        if not isinstance(frame_skip, int | np.integer) or frame_skip < 1:
-            raise ValueError(f"frame_skip must be a positive integer, got {frame_skip!r}")
+        _check_frame_skip(frame_skip)
         self._scene = SceneOptions(
             robot=robot,
             tray=tray,
@@ -597,10 +606,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         it does not run ``mj_rnePostConstraint`` after them: ``data.cfrc_int``/``cfrc_ext``
         are not computed (no observation, reward or info uses them); call it to read them."""
         if n_frames != self._frames_bound:  # frame_skip assigned since: checked, dt made again
-            if isinstance(n_frames, bool) or not isinstance(n_frames, int | np.integer):
-                raise ValueError(f"frame_skip must be a positive integer, got {n_frames!r}")
-            if n_frames < 1:
-                raise ValueError(f"frame_skip must be a positive integer, got {n_frames!r}")
+            _check_frame_skip(n_frames)
             self._frames_bound = int(n_frames)
             self._step_dt = float(self.model.opt.timestep) * n_frames
         self.data.ctrl[:] = ctrl
