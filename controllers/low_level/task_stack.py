@@ -316,7 +316,7 @@ def structure(tasks: Sequence[object]) -> tuple[object, ...]:
 
 def _same_columns(task: object, columns: bytes) -> bool:
     """Whether a posture task's columns are the ``columns`` bytes :func:`structure` took."""
-    return np.asarray(task.columns).tobytes() == columns  # type: ignore[attr-defined,no-any-return]
+    return np.asarray(task.columns).tobytes() == columns  # type: ignore[attr-defined]
 
 
 def check_indices(tasks: Sequence[object], n_sites: int, n_min: int) -> None:
