@@ -19,10 +19,12 @@ import mujoco
 import numpy as np
 import pytest
 
+import benchmarks.speed.closed_loop_table as closed_loop_module
 import benchmarks.speed.profile as profile_module
 from benchmarks.cli import main
 from benchmarks.speed import mpc_inputs, mpc_phase
-from benchmarks.speed.closed_loop_table import MissingFigure, disturbed_rounds
+from benchmarks.speed.closed_loop_table import COLUMNS as CLOSED_LOOP_COLUMNS
+from benchmarks.speed.closed_loop_table import MissingFigure, PartNotTimed, disturbed_rounds
 from benchmarks.speed.closed_loop_table import comparison as closed_loop_comparison
 from benchmarks.speed.closed_loop_table import figure as closed_loop_figure
 from benchmarks.speed.closed_loop_table import main as closed_loop_main
@@ -452,6 +454,47 @@ def test_closed_loop_comparison_shows_each_columns_rounds_before_and_after() -> 
     nulled["per_step_units"]["env_physics"] = None
     with pytest.raises(ValueError, match="null"):
         closed_loop_figure(nulled, ("per_step_units", "env_physics", "mean"))
+
+
+def test_closed_loop_columns_without_part_timers_show_no_parts() -> None:
+    """A column run with ``--no-parts`` has its control, env and loop figures and ``-`` for the
+    controller's parts, in the table and in a comparison; a part of a profile with the parts
+    timed but null (a controller without a QP) is still refused; a base revision whose
+    profiler predates ``--no-parts`` runs no such column."""
+    part = {"mean": 1.0, "median": 1.0}
+    timed_parts = ("robot_model", "qp_assembly", "qp_solve", "high_level")
+    untimed: dict[str, Any] = {
+        "control_time_units": {"mean": 4.9, "p99": 20.0},
+        "per_step_units": {
+            **dict.fromkeys((*timed_parts, "python_overhead", "low_level")),
+            **dict.fromkeys(("env_step", "env_physics", "mujoco_step", "env_overhead"), part),
+            "loop": {"mean": 8.2, "median": 8.0},
+        },
+        "real_time_factor": 16.0,
+        "reference_step_us": 7.0,
+        "parts_timed": False,
+    }
+    with pytest.raises(PartNotTimed):
+        closed_loop_figure(untimed, ("per_step_units", "qp_assembly", "mean"))
+    with pytest.raises(PartNotTimed):
+        closed_loop_figure(untimed, ("per_step_units", "robot_model", "mean"))
+    lines = closed_loop_table({"KrangTray, no part timers": [untimed, untimed]}).splitlines()
+    assert lines[2] == "| control, mean | 4.9, 4.9 | 5 |"
+    assert "| of which the robot model (mean) | - |  |" in lines
+    assert "| of which the task rows and QP (mean) | - |  |" in lines
+    assert "| closed loop, mean | 8.2, 8.2 | 8 |" in lines
+    compared = closed_loop_comparison({"K": [untimed]}, {"K": [untimed, untimed]}).splitlines()
+    assert "| of which the high level (mean) | - | - |  |" in compared
+    assert "| closed loop, mean | 8.2 | 8.2 [8.2, 8.2] | 8 |" in compared
+    timed_null = {**untimed, "parts_timed": True}
+    with pytest.raises(ValueError, match="no task QP"):
+        closed_loop_figure(timed_null, ("per_step_units", "qp_assembly", "mean"))
+    # the default columns have both envs without the timers; a tree without the flag none
+    untimed_columns = [c for c in CLOSED_LOOP_COLUMNS if "--no-parts" in c[2]]
+    assert {c[1] for c in untimed_columns} == {"wip_gym/KrangTray-v0", "wip_gym/PlanarTray-v0"}
+    assert closed_loop_module._runs_in(closed_loop_module.REPO, untimed_columns[0][2])
+    assert closed_loop_module._runs_in(Path("/nonexistent"), ())
+    assert not closed_loop_module._runs_in(Path("/nonexistent"), untimed_columns[0][2])
 
 
 def test_closed_loop_rounds_on_a_disturbed_machine_are_flagged() -> None:

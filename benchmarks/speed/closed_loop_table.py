@@ -5,8 +5,12 @@
 
 Each figure of the table is one ``wip-bench profile`` process (a fresh process per run, as a user
 runs it; ``--json`` files kept in ``--out``) of the ``unified`` controller on one env and one
-setting: the paper's timing (the MPC inside every tenth control step) and the MPC beside the
-loop (``--set unified.high_level.mpc_delay_steps=5``). The runs go round by round, every
+setting: the paper's timing (the MPC inside every tenth control step), the MPC beside the
+loop (``--set unified.high_level.mpc_delay_steps=5``), and the paper's timing again without the
+profiler's wrappers around the controller's parts (``--no-parts``). The wrappers, which the
+rows "of which" need, cost the control step itself about 0.15 units (docs/performance.md §25):
+the columns "no part timers" measure the control step and the closed loop as a user's loop
+runs them, and have no "of which" rows ("-"). The runs go round by round, every
 column once per round, so that a change of the machine's load spreads over all columns; a cell
 shows its rounds' values side by side, and a second table their median [min, max]. Every
 figure is in units of a bare, warm ``mj_step`` of Krang-v0 timed in the same process
@@ -49,6 +53,8 @@ COLUMNS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
         "wip_gym/PlanarTray-v0",
         ("--set", "unified.high_level.mpc_delay_steps=5"),
     ),
+    ("KrangTray, no part timers", "wip_gym/KrangTray-v0", ("--no-parts",)),
+    ("PlanarTray, no part timers", "wip_gym/PlanarTray-v0", ("--no-parts",)),
 )
 
 #: (row title, the figure's path in ``wip-bench profile --json``, its target in units or None)
@@ -72,11 +78,30 @@ class MissingFigure(ValueError):
     revision's)."""
 
 
+class PartNotTimed(ValueError):
+    """A controller part's figure of a profile run with ``--no-parts`` (``parts_timed`` false):
+    the part was not timed, its cell is ``-``."""
+
+
+#: the ``per_step_units`` keys that are the controller's parts (null with ``--no-parts``)
+PART_KEYS = frozenset(
+    {"robot_model", "qp_assembly", "qp_solve", "high_level", "python_overhead", "low_level"}
+)
+
+
 def figure(result: dict[str, Any], path: Sequence[str]) -> float:
     """The number at ``path`` of one profile's JSON; ``qp_assembly`` also counts ``qp_solve``
     (the task rows and the QP kernel are one compiled call: the split between them is not
-    meaningful). Raises :class:`MissingFigure` for a key the profile lacks, ``ValueError``
-    for a part it has as ``null`` (a controller without it)."""
+    meaningful). Raises :class:`MissingFigure` for a key the profile lacks,
+    :class:`PartNotTimed` for a controller part of a profile run without the part timers
+    (``--no-parts``), ``ValueError`` for a part it has as ``null`` (a controller without it)."""
+    if (
+        result.get("parts_timed") is False
+        and len(path) > 1
+        and path[0] == "per_step_units"
+        and path[1] in PART_KEYS
+    ):
+        raise PartNotTimed(f"{'.'.join(path)}: the profile ran with --no-parts")
     if tuple(path) == ("per_step_units", "qp_assembly", "mean"):
         parts = [result["per_step_units"][k] for k in ("qp_assembly", "qp_solve")]
         if any(part is None for part in parts):
@@ -145,11 +170,11 @@ def table(results: dict[str, list[dict[str, Any]]], summary: bool = False) -> st
         "|---" * (len(titles) + 2) + "|",
     ]
     for title, path, target in ROWS:
-        values = [[figure(r, path) for r in results[t]] for t in titles]
+        values = [_timed_figures(results[t], path) for t in titles]
         if summary:
             cells = [spread(v) for v in values]
         else:
-            cells = [", ".join(f"{x:.1f}" for x in v) for v in values]
+            cells = [", ".join(f"{x:.1f}" for x in v) or "-" for v in values]
         lines.append(
             f"| {title} | " + " | ".join(cells) + f" | {'' if target is None else f'{target:g}'} |"
         )
@@ -197,11 +222,20 @@ def _profile(
     return dict(json.loads(path.read_text()))
 
 
-def _base_figures(runs: Sequence[dict[str, Any]], path: Sequence[str]) -> list[float]:
-    """The figure at ``path`` of each of a ``--base`` revision's runs; none if they predate it
-    (:class:`MissingFigure`)."""
+def _timed_figures(runs: Sequence[dict[str, Any]], path: Sequence[str]) -> list[float]:
+    """The figure at ``path`` of each run; none for a part the runs did not time
+    (:class:`PartNotTimed`, a column run with ``--no-parts``)."""
     try:
         return [figure(r, path) for r in runs]
+    except PartNotTimed:
+        return []
+
+
+def _base_figures(runs: Sequence[dict[str, Any]], path: Sequence[str]) -> list[float]:
+    """The figure at ``path`` of each of a ``--base`` revision's runs; none if they predate it
+    (:class:`MissingFigure`) or did not time it (:class:`PartNotTimed`)."""
+    try:
+        return _timed_figures(runs, path)
     except MissingFigure:
         return []
 
@@ -227,7 +261,7 @@ def comparison(
         cells = [
             spread(values)
             for t in titles
-            for values in (_base_figures(before[t], path), [figure(r, path) for r in after[t]])
+            for values in (_base_figures(before[t], path), _timed_figures(after[t], path))
         ]
         lines.append(
             f"| {title} | " + " | ".join(cells) + f" | {'' if target is None else f'{target:g}'} |"
@@ -265,6 +299,15 @@ def _worktree(revision: str, directory: Path) -> None:
         )
 
 
+def _runs_in(tree: Path, extra: Sequence[str]) -> bool:
+    """Whether ``tree``'s profiler takes the column's arguments: a ``--base`` revision from
+    before ``--no-parts`` (066366b) has no such columns (their cells ``-``)."""
+    if "--no-parts" not in extra:
+        return True
+    source = tree / "benchmarks" / "speed" / "profile.py"
+    return source.exists() and '"--no-parts"' in source.read_text()
+
+
 def _remove_worktree(directory: Path) -> None:
     subprocess.run(
         ["git", "-C", str(REPO), "worktree", "remove", "--force", str(directory)],
@@ -300,9 +343,10 @@ def main(argv: list[str] | None = None) -> int:
                 for r in range(args.rounds)
                 for column in COLUMNS
                 for version in trees
+                if _runs_in(trees[version], column[2])
             ]
             for r, version, (title, env, extra) in tqdm(runs, desc="profile runs", unit="run"):
-                slug = title.lower().replace(", d = ", "_d").replace(" ", "_")
+                slug = title.lower().replace(", d = ", "_d").replace(",", "").replace(" ", "_")
                 path = args.out / f"{version}_{slug}_{r}.json"
                 result = _profile(env, extra, args.duration, path, trees[version])
                 results[version][title].append(result)
