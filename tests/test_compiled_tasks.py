@@ -15,6 +15,7 @@ from dynamics_reference import random_minimal_state
 from test_wbc import _load, _realistic_tasks
 
 from controllers.low_level import compiled_tasks as ct
+from controllers.low_level import tasks as tasks_module
 from controllers.low_level.disturbance_tasks import (
     ADVANCED_IN_MEMORY,
     DisturbanceRejectingTask,
@@ -151,6 +152,45 @@ def test_compiled_rows_equal_the_task_objects(name: str, observed: bool) -> None
         assert any(np.abs(m[0]).max() > 1e-3 for m in references)  # the estimates moved
         for ours, theirs in zip(memories, references, strict=True):
             _close(ours, theirs)
+
+
+def test_every_stock_task_has_the_one_pd_law(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The paper's PD law ``xdd_d - Kp e - Kv e_dot`` is one function, ``pd_acceleration``:
+    its compiled form gives its bits, every stock task's reference acceleration is its value
+    for the task's error and rate error, and a law changed there reaches every task (the
+    compiled rows call the same function: ``test_compiled_rows_equal_the_task_objects``)."""
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        ff, e, ed, kp, kv = rng.normal(size=5) * 10.0
+        assert ct._pd(ff, e, ed, kp, kv) == ct.pd_acceleration(ff, e, ed, kp, kv)
+        assert ct.pd_acceleration(ff, e, ed, kp, kv) == ff - kp * e - kv * ed
+    robot = RobotModel(_load("krang"))
+    q, nu = random_minimal_state(robot, rng)
+    robot.update(*robot.full_state(q, nu))
+    tasks = _task_set(robot, observed=False)
+    assert {type(t).__name__ for t in tasks} == {
+        "ThetaTask", "SpinTask", "FramePositionTask", "FrameOrientationTask", "PostureTask"
+    }  # fmt: skip
+    for task in tasks:
+        if isinstance(task, PostureTask):  # every task off its target
+            task.target = task.target + 0.01
+        elif isinstance(task, FrameOrientationTask):
+            task.target = task.target @ _random_rotation(rng, 0.1)
+    before = [task.reference_acceleration(robot) for task in tasks]
+    calls = []
+
+    def law(feedforward: object, error: object, rate_error: object, kp: float, kv: float) -> object:
+        calls.append(kp)
+        return ct.pd_acceleration(feedforward, error, rate_error, 2.0 * kp, kv)
+
+    monkeypatch.setattr(tasks_module, "pd_acceleration", law)
+    after = [task.reference_acceleration(robot) for task in tasks]
+    assert len(calls) == len(tasks)
+    for task, old, new in zip(tasks, before, after, strict=True):
+        # doubling Kp moves each reference by -Kp e: the error term went through the law
+        error = task.error(robot)
+        assert np.abs(error).max() > 1e-4
+        _close(new - old, -task.kp * error, 1e-9 * max(1.0, float(np.abs(old).max())))
 
 
 def test_task_qp_compiled_and_python_paths_solve_alike() -> None:

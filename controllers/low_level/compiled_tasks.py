@@ -16,7 +16,8 @@ task from
   time derivative (``mj_jacDot``); for the body CoM the subtree rows behind ``com_motion``,
 
 and the tasks' parameters packed as arrays (:mod:`controllers.low_level.task_stack`). Paper
-section "Optimization Based Control": ``xdd* = xdd_d - Kp (x - x_d) - Kv (xd - xd_d)``.
+section "Optimization Based Control": ``xdd* = xdd_d - Kp (x - x_d) - Kv (xd - xd_d)``, the one
+PD law of every task, :func:`pd_acceleration`, which both paths call.
 
 Why numba: at this size (Krang: 18 variables, 31 task rows) a task is a few dozen operations on
 3-vectors; a NumPy call costs a microsecond before any arithmetic and a jitted JAX call tens of
@@ -26,6 +27,7 @@ microseconds (``benchmarks/speed/low_level_kernel_bench.py`` measures the three)
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -38,6 +40,19 @@ PARAMETERS = 5
 psid_d, psidd_d``."""
 
 _MIN_VALUE = 1e-15  # MuJoCo's mjMINVAL (mju_normalize3, mju_normalize4)
+
+
+def pd_acceleration(feedforward: Any, error: Any, rate_error: Any, kp: float, kv: float) -> Any:
+    """The PD law of every task (paper section "Optimization Based Control"), written once:
+    ``xdd* = xdd_d - Kp (x - x_d) - Kv (xd - xd_d)`` with ``feedforward = xdd_d`` (0 for a
+    task that holds a place), ``error = x - x_d`` and ``rate_error = xd - xd_d``, floats or
+    arrays. The Python tasks (``controllers.low_level.tasks``) call it, and :func:`task_rows`
+    its compiled form; it lives in this file because numba keys the cache of a compiled
+    function on its own file (docs/performance.md §14), so an edit here reaches both."""
+    return feedforward - kp * error - kv * rate_error
+
+
+_pd = njit(cache=True)(pd_acceleration)
 
 
 @njit(cache=True)
@@ -400,9 +415,7 @@ def task_rows(
         J[start:stop] = 0.0
         if kind == THETA:
             J[start] = J_theta
-            target[start] = (
-                params[k, 4] - kp * (theta - params[k, 2]) - kv * (thetad - params[k, 3])
-            )
+            target[start] = _pd(params[k, 4], theta - params[k, 2], thetad - params[k, 3], kp, kv)
             M, m_l, m_r = subtree_mass[base], subtree_mass[left], subtree_mass[right]
             mass = M - m_l - m_r
             com, xipos, linvel = probe_subtree_com, probe_xipos, probe_subtree_linvel
@@ -430,8 +443,8 @@ def task_rows(
                 ) / D
         elif kind == SPIN:
             J[start, index_psi] = 1.0
-            target[start] = (
-                params[k, 4] - kp * (q[index_psi] - params[k, 2]) - kv * (psid - params[k, 3])
+            target[start] = _pd(
+                params[k, 4], q[index_psi] - params[k, 2], psid - params[k, 3], kp, kv
             )
             jdot_nu[start] = 0.0
         elif kind in (POSITION, ORIENTATION):
@@ -447,7 +460,7 @@ def task_rows(
                 velocity[row] = total
             if kind == POSITION:
                 for row in range(3):
-                    reference[row] = -kp * (rel[i, row] - targets[k, row]) - kv * velocity[row]
+                    reference[row] = _pd(0.0, rel[i, row] - targets[k, row], velocity[row], kp, kv)
                 _relative_drift(
                     probe_site_xpos[site_ids[i]], v, a, p_o, v_o, a_o, c, s, psid, drift3
                 )
@@ -455,9 +468,9 @@ def task_rows(
                     jdot_nu[start + row] = drift3[2, row]
             else:
                 e0, e1, e2 = _rotation_error(R[i], targets[k].reshape(3, 3))
-                reference[0] = -kp * e0 - kv * velocity[0]
-                reference[1] = -kp * e1 - kv * velocity[1]
-                reference[2] = -kp * e2 - kv * velocity[2]
+                reference[0] = _pd(0.0, e0, velocity[0], kp, kv)
+                reference[1] = _pd(0.0, e1, velocity[1], kp, kv)
+                reference[2] = _pd(0.0, e2, velocity[2], kp, kv)
                 u0, u1 = c * v[3] + s * v[4], -s * v[3] + c * v[4]
                 acc0, acc1 = c * a[3] + s * a[4], -s * a[3] + c * a[4]
                 jdot_nu[start] = acc0 + psid * u1
@@ -479,5 +492,5 @@ def task_rows(
             for row in range(start, stop):
                 column = row_column[row]
                 J[row, column] = 1.0
-                target[row] = -kp * (q[column] - row_target[row]) - kv * nu[column]
+                target[row] = _pd(0.0, q[column] - row_target[row], nu[column], kp, kv)
                 jdot_nu[row] = 0.0

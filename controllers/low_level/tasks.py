@@ -5,6 +5,9 @@ Each task is a small object (mink's style): ``jacobian(robot)`` over the minimal
 
     xdd* = xdd_d - Kp (x - x_d) - Kv (xd - xd_d)
 
+written once, as ``pd_acceleration`` (``controllers.low_level.compiled_tasks``: the compiled task
+rows call the same function), which every task here calls with its error and rate error.
+
 The QP (``controllers.low_level.task_qp``) turns them into rows ``w J E qdd = w (xdd* - Jdot nu - J
 e)`` (``nu_dot = E qdd + e`` from the isolated dynamics), with ``Jdot nu`` from each task's
 ``jdot_nu(probe)``: exact, from the drift accelerations of ``controllers.low_level.motion_probe``
@@ -22,6 +25,7 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from controllers.low_level.compiled_tasks import pd_acceleration
 from controllers.low_level.motion_probe import MotionProbe
 from wip_gym.robot_model import RobotModel
 
@@ -262,13 +266,8 @@ class ThetaTask(DesiredMotion):
         return np.array([robot.theta - self.theta_d])
 
     def reference_acceleration(self, robot: RobotModel) -> Array:
-        return np.array(
-            [
-                self.thdd_d
-                - self.kp * (robot.theta - self.theta_d)
-                - self.kv * (robot.thetad - self.thetad_d)
-            ]
-        )
+        error, rate_error = robot.theta - self.theta_d, robot.thetad - self.thetad_d
+        return np.array([pd_acceleration(self.thdd_d, error, rate_error, self.kp, self.kv)])
 
     def weights(self) -> Array:
         return np.array([self.weight])
@@ -310,10 +309,8 @@ class SpinTask(DesiredMotion):
         return np.array([robot.psi - self.psi_d])
 
     def reference_acceleration(self, robot: RobotModel) -> Array:
-        psid = robot.nu[robot.layout.index_psi]
-        return np.array(
-            [self.psidd_d - self.kp * (robot.psi - self.psi_d) - self.kv * (psid - self.psid_d)]
-        )
+        error, rate_error = robot.psi - self.psi_d, robot.nu[robot.layout.index_psi] - self.psid_d
+        return np.array([pd_acceleration(self.psidd_d, error, rate_error, self.kp, self.kv)])
 
     def weights(self) -> Array:
         return np.array([self.weight])
@@ -344,8 +341,8 @@ class FramePositionTask(StoredParameters):
         return site_velocity_in_axle_frame(robot, self.site)[0]
 
     def reference_acceleration(self, robot: RobotModel) -> Array:
-        position = site_in_axle_frame(robot, self.site)[0]
-        return -self.kp * (position - self.target) - self.kv * self.velocity(robot)
+        error = site_in_axle_frame(robot, self.site)[0] - self.target
+        return pd_acceleration(0.0, error, self.velocity(robot), self.kp, self.kv)
 
     def weights(self) -> Array:
         return np.full(3, self.weight)
@@ -379,8 +376,8 @@ class FrameOrientationTask(StoredParameters):
         return site_velocity_in_axle_frame(robot, self.site)[1]
 
     def reference_acceleration(self, robot: RobotModel) -> Array:
-        R = site_in_axle_frame(robot, self.site)[1]
-        return -self.kp * rotation_error(R, self.target) - self.kv * self.velocity(robot)
+        error = rotation_error(site_in_axle_frame(robot, self.site)[1], self.target)
+        return pd_acceleration(0.0, error, self.velocity(robot), self.kp, self.kv)
 
     def weights(self) -> Array:
         return np.full(3, self.weight)
@@ -415,7 +412,8 @@ class PostureTask(StoredParameters):
         return robot.q[self.columns] - self.target
 
     def reference_acceleration(self, robot: RobotModel) -> Array:
-        return -self.kp * (robot.q[self.columns] - self.target) - self.kv * robot.nu[self.columns]
+        error = robot.q[self.columns] - self.target
+        return pd_acceleration(0.0, error, robot.nu[self.columns], self.kp, self.kv)
 
     def weights(self) -> Array:
         return self.joint_weights
