@@ -98,3 +98,39 @@ def test_an_episode_that_raises_is_a_failure_of_the_run_not_of_the_arguments(
     with pytest.raises(EpisodeError, match=r"step 1 .*t = 0.000 s"):
         rollout("wip_gym/WIP-v0", {}, "decoupled", None, 0, 0.1)
     assert not issubclass(EpisodeError, ValueError)
+
+
+def test_the_rollout_reports_simulated_seconds_and_compare_counts_them() -> None:
+    """``progress`` hears the simulated time every ``PROGRESS_INTERVAL_S`` and at the end
+    (through ``compare_episode``, as ``(task index, seconds)``); compare's bar of simulated
+    seconds adds each episode's advance once, never past its duration, and counts an episode
+    that ended early (a fall) as whole."""
+    import queue
+
+    from benchmarks.compare import _SimulatedSeconds
+    from benchmarks.episode import compare_episode
+    from benchmarks.rollout import PROGRESS_INTERVAL_S
+
+    spec = resolve_run("wip_gym/Planar-v0", ["decoupled"])
+    reports: queue.SimpleQueue[tuple[int, float]] = queue.SimpleQueue()
+    compare_episode(
+        3, "wip_gym/Planar-v0", {}, "decoupled", spec.configs["decoupled"], 0, 0.35,
+        progress=reports,
+    )  # fmt: skip
+    heard = []
+    while not reports.empty():
+        heard.append(reports.get())
+    assert [index for index, _ in heard] == [3] * 4
+    seconds = [s for _, s in heard]
+    expected = [PROGRESS_INTERVAL_S, 2 * PROGRESS_INTERVAL_S, 3 * PROGRESS_INTERVAL_S, 0.35]
+    assert seconds == pytest.approx(expected, abs=1e-12)
+
+    bar = _SimulatedSeconds(tasks=2, duration=1.0)
+    try:
+        for report in [(0, 0.1), (1, 0.2), (0, 0.3), (0, 0.3), (1, 5.0)]:
+            bar(report)  # a repeated report adds nothing; one past the end stops at it
+        assert bar.done_ms == [300, 1000] and bar.bar.n == 1300
+        bar.finish(0)  # episode 0 ended at 0.3 s (a fall): its whole second counts
+        assert bar.done_ms == [1000, 1000] and bar.bar.n == bar.bar.total == 2000
+    finally:
+        bar.close()
