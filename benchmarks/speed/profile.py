@@ -464,7 +464,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--no-parts",
         action="store_true",
-        help="time the loop without the controller parts' wrappers (about 0.1 units of the "
+        help="time the loop without the controller parts' wrappers (about 0.15 units of the "
         "control step): the parts and python_overhead are null",
     )
     parser.add_argument(
