@@ -6,12 +6,14 @@ Each task is a small object (mink's style): ``jacobian(robot)`` over the minimal
     xdd* = xdd_d - Kp (x - x_d) - Kv (xd - xd_d)
 
 written once, as ``pd_acceleration`` (``controllers.low_level.compiled_tasks``: the compiled task
-rows call the same function), which every task here calls with its error and rate error.
+rows call the same function), which :class:`PDTask`, the base of every task here, applies to
+the task's ``error`` and ``rate_error``: a task of a new kind gives those, its Jacobian, its
+weights and its ``Jdot nu``, and nothing else.
 
 The QP (``controllers.low_level.task_qp``) turns them into rows ``w J E qdd = w (xdd* - Jdot nu - J
 e)`` (``nu_dot = E qdd + e`` from the isolated dynamics), with ``Jdot nu`` from each task's
 ``jdot_nu(probe)``: exact, from the drift accelerations of ``controllers.low_level.motion_probe``
-(a task without it gets a central finite difference of ``J nu`` along the motion). Frames:
+(the QP refuses a task without it, by name). Frames:
 end-effector targets live in the axle frame (origin at the axle midpoint, x along the heading, z up;
 docs/DESIGN.md §4, docs/ERRATA.md §5).
 """
@@ -150,7 +152,53 @@ class StoredParameters:
         }
 
 
-class DesiredMotion(StoredParameters):
+class PDTask(StoredParameters):
+    """The base of every task: a subclass says what the task measures, the base how it is
+    driven there.
+
+    A subclass (a dataclass with the fields ``kp``, ``kv``, ``name`` and its weight) gives
+
+    * ``jacobian(robot)``: ``J``, shape ``(m, n_min)``, the task's rows over ``nu``;
+    * ``error(robot)``: ``x - x_d`` (``m``,);
+    * ``rate_error(robot)``: ``xd - xd_d`` (``m``,), with ``xd = J nu``;
+    * ``weights()``: one weight per row;
+    * ``jdot_nu(probe)``: ``Jdot nu`` at the robot's state (``m``,);
+    * ``feedforward()``, if the task tracks an acceleration: ``xdd_d`` (default 0).
+
+    The base gives ``reference_acceleration(robot)``, the paper's PD law
+    ``xdd* = xdd_d - Kp (x - x_d) - Kv (xd - xd_d)``, once, through :func:`pd_acceleration`,
+    the function the compiled task rows call too. A task of a new kind runs on the task QP's
+    Python path (docs/extending.md §1 has an example and how to make it compiled)."""
+
+    if TYPE_CHECKING:  # the subclass's dataclass fields
+        kp: float
+        kv: float
+        name: str
+
+    def error(self, robot: RobotModel) -> Array:
+        """``x - x_d`` at the robot's state."""
+        raise NotImplementedError(f"{type(self).__name__} must give error(robot)")
+
+    def rate_error(self, robot: RobotModel) -> Array:
+        """``xd - xd_d`` at the robot's state (``xd = J nu``)."""
+        raise NotImplementedError(f"{type(self).__name__} must give rate_error(robot)")
+
+    def feedforward(self) -> float:
+        """``xdd_d``, the acceleration the task tracks beside its PD terms (0: it holds a
+        place)."""
+        return 0.0
+
+    def reference_acceleration(self, robot: RobotModel) -> Array:
+        """The paper's PD law on this task's error and rate error (:func:`pd_acceleration`)."""
+        return np.asarray(
+            pd_acceleration(
+                self.feedforward(), self.error(robot), self.rate_error(robot), self.kp, self.kv
+            ),
+            dtype=np.float64,
+        )
+
+
+class DesiredMotion(PDTask):
     """A task that tracks a scalar's desired value, rate and acceleration (``desired_names``),
     set together every control step by :meth:`set_desired`."""
 
@@ -265,9 +313,11 @@ class ThetaTask(DesiredMotion):
     def error(self, robot: RobotModel) -> Array:
         return np.array([robot.theta - self.theta_d])
 
-    def reference_acceleration(self, robot: RobotModel) -> Array:
-        error, rate_error = robot.theta - self.theta_d, robot.thetad - self.thetad_d
-        return np.array([pd_acceleration(self.thdd_d, error, rate_error, self.kp, self.kv)])
+    def rate_error(self, robot: RobotModel) -> Array:
+        return np.array([robot.thetad - self.thetad_d])
+
+    def feedforward(self) -> float:
+        return self.thdd_d
 
     def weights(self) -> Array:
         return np.array([self.weight])
@@ -308,9 +358,11 @@ class SpinTask(DesiredMotion):
     def error(self, robot: RobotModel) -> Array:
         return np.array([robot.psi - self.psi_d])
 
-    def reference_acceleration(self, robot: RobotModel) -> Array:
-        error, rate_error = robot.psi - self.psi_d, robot.nu[robot.layout.index_psi] - self.psid_d
-        return np.array([pd_acceleration(self.psidd_d, error, rate_error, self.kp, self.kv)])
+    def rate_error(self, robot: RobotModel) -> Array:
+        return np.array([robot.nu[robot.layout.index_psi] - self.psid_d])
+
+    def feedforward(self) -> float:
+        return self.psidd_d
 
     def weights(self) -> Array:
         return np.array([self.weight])
@@ -320,7 +372,7 @@ class SpinTask(DesiredMotion):
 
 
 @dataclass
-class FramePositionTask(StoredParameters):
+class FramePositionTask(PDTask):
     """Hold a site's position in the axle frame (authors: KpEE 750, KvEE 250)."""
 
     site: int
@@ -340,9 +392,8 @@ class FramePositionTask(StoredParameters):
         """``J nu``: the site's velocity relative to the axle, in the axle frame."""
         return site_velocity_in_axle_frame(robot, self.site)[0]
 
-    def reference_acceleration(self, robot: RobotModel) -> Array:
-        error = site_in_axle_frame(robot, self.site)[0] - self.target
-        return pd_acceleration(0.0, error, self.velocity(robot), self.kp, self.kv)
+    def rate_error(self, robot: RobotModel) -> Array:
+        return self.velocity(robot)  # the target is held still
 
     def weights(self) -> Array:
         return np.full(3, self.weight)
@@ -354,7 +405,7 @@ class FramePositionTask(StoredParameters):
 
 
 @dataclass
-class FrameOrientationTask(StoredParameters):
+class FrameOrientationTask(PDTask):
     """Hold a site's orientation in the axle frame (authors: KpOr 150, KvOr 50, weight 10).
     ``target`` may be changed every step (the waiter's tray)."""
 
@@ -375,9 +426,8 @@ class FrameOrientationTask(StoredParameters):
         """``J nu``: the site's angular velocity relative to the axle frame, in it."""
         return site_velocity_in_axle_frame(robot, self.site)[1]
 
-    def reference_acceleration(self, robot: RobotModel) -> Array:
-        error = rotation_error(site_in_axle_frame(robot, self.site)[1], self.target)
-        return pd_acceleration(0.0, error, self.velocity(robot), self.kp, self.kv)
+    def rate_error(self, robot: RobotModel) -> Array:
+        return self.velocity(robot)  # the target is held still
 
     def weights(self) -> Array:
         return np.full(3, self.weight)
@@ -393,7 +443,7 @@ class FrameOrientationTask(StoredParameters):
 
 
 @dataclass
-class PostureTask(StoredParameters):
+class PostureTask(PDTask):
     """Regularise the body joints toward a posture (authors: KpPose 10, KvPose 20)."""
 
     target: Array
@@ -411,9 +461,8 @@ class PostureTask(StoredParameters):
     def error(self, robot: RobotModel) -> Array:
         return robot.q[self.columns] - self.target
 
-    def reference_acceleration(self, robot: RobotModel) -> Array:
-        error = robot.q[self.columns] - self.target
-        return pd_acceleration(0.0, error, robot.nu[self.columns], self.kp, self.kv)
+    def rate_error(self, robot: RobotModel) -> Array:
+        return robot.nu[self.columns]  # the posture is held still
 
     def weights(self) -> Array:
         return self.joint_weights
