@@ -1,0 +1,107 @@
+"""The default scenario's metrics stay within their seed spread (the guard of every speed change).
+
+``tests/default_scenario_recording.py`` recorded the default scenario (``wip-bench compare
+--env wip_gym/PlanarTray-v0``, every controller, 5 seeds) into
+``tests/data/default_scenario.json``. Here the same command runs again, and for each controller
+
+* every episode's outcome (success, cup kept, tray kept, fell, goal reached) is the recorded
+  one, seed by seed;
+* every other metric and counter, averaged over the seeds, lies within the recorded values'
+  spread over the seeds ``[min, max]`` (a metric the same at every seed, such as a slipping
+  time of 0, must stay that value).
+
+On the machine and code of the recording the episodes are equal to the bit; the spread is the
+room a change of rounding (another CPU, a faster kernel) may take without moving what the
+comparison reports. It guards what the comparison reports, not every gain: on this scenario
+the theta task's Kp at 20 or Kv at 20 (50 and 100 by default), or the hand's Kp at 300 (750),
+stay within the spread, while the hand observer switched off moves the hand's largest error
+from 2e-5 m to 5e-4 m and is caught (one-off checks when the guard was written).
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import numpy as np
+
+from tests.default_scenario_recording import PATH, run_default_scenario
+
+OUTCOMES = ("success", "cup_kept", "tray_kept", "fell", "goal_reached")
+
+
+def _numbers(row: dict[str, Any]) -> dict[str, float]:
+    """The row's numeric metrics and counters (``None`` and the outcomes left out)."""
+    numbers = {
+        key: float(value)
+        for key, value in row.items()
+        if key not in ("seed", *OUTCOMES)
+        and isinstance(value, int | float)
+        and not isinstance(value, bool)
+    }
+    numbers.update({f"counters.{k}": float(v) for k, v in row["counters"].items()})
+    return numbers
+
+
+def outside_spread(recorded: list[dict[str, Any]], current: list[dict[str, Any]]) -> list[str]:
+    """What of ``current`` leaves ``recorded``'s seed spread: one line per outcome that differs
+    at a seed and per metric whose mean over the seeds is outside the recorded ``[min, max]``
+    of its controller (an episode missing or added counts too)."""
+    problems = []
+    key = [(r["controller"], r["seed"]) for r in recorded]
+    if [(r["controller"], r["seed"]) for r in current] != key:
+        return [f"episodes {[(r['controller'], r['seed']) for r in current]} against {key}"]
+    for controller in dict.fromkeys(r["controller"] for r in recorded):
+        before = [r for r in recorded if r["controller"] == controller]
+        after = [r for r in current if r["controller"] == controller]
+        for then, now in zip(before, after, strict=True):
+            for name in OUTCOMES:
+                if then.get(name) != now.get(name):
+                    problems.append(
+                        f"{controller} seed {now['seed']}: {name} {now.get(name)} against "
+                        f"{then.get(name)}"
+                    )
+        values_before = [_numbers(r) for r in before]
+        values_after = [_numbers(r) for r in after]
+        for name in dict.fromkeys(n for v in values_before + values_after for n in v):
+            # a metric some episodes lack (a time to the goal never reached) is compared over
+            # the episodes that have it, and must be had by the same seeds
+            spread = [v[name] for v in values_before if name in v]
+            present = [v[name] for v in values_after if name in v]
+            if [name in v for v in values_before] != [name in v for v in values_after]:
+                problems.append(f"{controller}: {name} present at other seeds than recorded")
+                continue
+            mean = float(np.mean(present))
+            low, high = min(spread), max(spread)
+            if not low <= mean <= high:
+                problems.append(
+                    f"{controller}: {name} mean {mean:.6g} outside the seeds' [{low:.6g}, "
+                    f"{high:.6g}]"
+                )
+    return problems
+
+
+def test_the_default_scenario_stays_within_its_seed_spread() -> None:
+    record = json.loads(PATH.read_text())
+    recorded = record["episodes"]
+    assert len({r["controller"] for r in recorded}) >= 5 and len(recorded) >= 25
+    problems = outside_spread(recorded, run_default_scenario())
+    assert not problems, "\n".join(problems)
+
+
+def test_the_guard_sees_a_moved_metric_and_a_changed_outcome() -> None:
+    """The comparison itself: a metric moved past its spread, an outcome flipped at one seed
+    and a missing episode are each reported; the recording against itself is clean."""
+    recorded = json.loads(PATH.read_text())["episodes"]
+    assert outside_spread(recorded, recorded) == []
+    moved = [dict(r) for r in recorded]
+    unified = [r for r in moved if r["controller"] == "unified"]
+    largest = max(r["max_cup_friction_use"] for r in unified)
+    for r in unified:
+        r["max_cup_friction_use"] = largest + 0.01
+    lines = outside_spread(recorded, moved)
+    assert len(lines) == 1 and lines[0].startswith("unified: max_cup_friction_use mean"), lines
+    flipped = [dict(r) for r in recorded]
+    flipped[0]["cup_kept"] = not flipped[0]["cup_kept"]
+    assert any("cup_kept" in line for line in outside_spread(recorded, flipped))
+    assert "episodes" in outside_spread(recorded, recorded[1:])[0]
