@@ -33,6 +33,17 @@ from controllers import registry
 from wip_gym.envs.base import wip_env
 
 PROGRESS_INTERVAL_S = 0.1  # simulated seconds between progress callbacks
+#: the fields of an episode's metrics that time the run rather than measure the episode (the
+#: rest are the same on every run of the same seed on one machine)
+TIMING_FIELDS = frozenset(
+    {"control_time_ms_mean", "control_time_ms_p99", "real_time_factor", "setup_s"}
+)
+
+
+def without_timing(metrics: Mapping[str, Any]) -> dict[str, Any]:
+    """An episode's metrics without :data:`TIMING_FIELDS`: what two runs of one seed share."""
+    return {key: value for key, value in metrics.items() if key not in TIMING_FIELDS}
+
 
 StepHook = Callable[[gym.Env, dict[str, Any], int], None]
 ProgressHook = Callable[[float], None]

@@ -3,7 +3,7 @@
 The default scenario is what ``make demo`` runs: ``wip-bench compare --env
 wip_gym/PlanarTray-v0`` with every controller. :data:`COMMAND` runs it over :data:`EPISODES`
 seeds, and ``tests/data/default_scenario.json`` keeps every episode's record except its timing
-fields (:data:`TIMING`), with the revision it was recorded at.
+fields (``benchmarks.rollout.TIMING_FIELDS``), with the revision it was recorded at.
 ``tests/test_default_scenario_guard.py`` runs the same command and holds each controller's
 metrics within their spread over those seeds.
 
@@ -24,8 +24,6 @@ SEED = 0
 ENV_ID = "wip_gym/PlanarTray-v0"
 #: the ``wip-bench`` arguments (``--out`` is added)
 COMMAND = ("compare", "--env", ENV_ID, "--episodes", str(EPISODES), "--seed", str(SEED))
-#: fields that time the run rather than measure the episode
-TIMING = frozenset({"control_time_ms_mean", "control_time_ms_p99", "real_time_factor", "setup_s"})
 PATH = Path(__file__).resolve().parents[1] / "tests" / "data" / "default_scenario.json"
 
 
@@ -33,6 +31,7 @@ def run_default_scenario(jobs: int = 2) -> list[dict[str, Any]]:
     """The episodes of :data:`COMMAND` (``--jobs jobs``), their timing fields left out, in the
     order ``compare`` writes them."""
     from benchmarks.cli import main
+    from benchmarks.rollout import without_timing
 
     with tempfile.TemporaryDirectory(prefix="wip-gym-default-") as out:
         code = main([*COMMAND, "--jobs", str(jobs), "--out", out])
@@ -40,7 +39,7 @@ def run_default_scenario(jobs: int = 2) -> list[dict[str, Any]]:
             raise RuntimeError(f"wip-bench {' '.join(COMMAND)} exited with {code}")
         lines = (Path(out) / "episodes.jsonl").read_text().splitlines()
     episodes = [json.loads(line) for line in lines]
-    return [{k: v for k, v in row.items() if k not in TIMING} for row in episodes]
+    return [without_timing(row) for row in episodes]
 
 
 def main() -> None:

@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from benchmarks.cli import main
+from benchmarks.rollout import without_timing
 
 RATE_KEYS = {"success_rate", "goal_reached_rate", "cup_kept_rate", "tray_kept_rate", "fell_rate"}
 METRIC_KEYS = {
@@ -30,7 +31,6 @@ METRIC_KEYS = {
 }
 SUMMARY_KEYS = {"config", "episodes", "counters", "control_time_ms"} | RATE_KEYS | METRIC_KEYS
 SPREAD = {"mean", "std", "min", "max", "n"}
-TIMING_KEYS = {"control_time_ms_mean", "control_time_ms_p99", "real_time_factor", "setup_s"}
 
 
 def run(tmp: Path, *flags: str) -> dict:
@@ -140,7 +140,7 @@ def test_parallel_jobs_give_the_same_numbers(tmp_path: Path) -> None:
 
     def lines(folder: Path) -> list[dict]:
         rows = [json.loads(x) for x in (folder / "episodes.jsonl").read_text().splitlines()]
-        return [{k: v for k, v in row.items() if k not in TIMING_KEYS} for row in rows]
+        return [without_timing(row) for row in rows]
 
     assert lines(tmp_path / "serial") == lines(tmp_path / "parallel")
 

@@ -27,9 +27,10 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.compare import RATES
 from tests.default_scenario_recording import PATH, run_default_scenario
 
-OUTCOMES = ("success", "cup_kept", "tray_kept", "fell", "goal_reached")
+OUTCOMES = RATES  # success, goal reached, cup kept, tray kept, fell: compare's rates
 #: metrics that count control steps, in seconds, and the control step
 STEP_COUNTED = frozenset({"slipping_time_s", "time_at_actuator_limit_s", "time_to_goal_s"})
 STEP_S = 1e-3
