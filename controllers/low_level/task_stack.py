@@ -372,8 +372,6 @@ class CompiledTaskStack:
             (task, _unwrap(task)[0], site, columns)
             for task, (_, _, site, columns) in zip(self.tasks, self._structure, strict=True)
         ]
-        # unchanged(): matches() held at this count of store events (set once built, below)
-        self._checked_events = -1
         self._count = len(self.tasks)
         self._column_checks = [
             (task, columns) for _, task, _, columns in self._expected if columns is not None
@@ -450,8 +448,9 @@ class CompiledTaskStack:
         self._stored = [(task, self._parameter_slots(k)) for k, task in enumerate(self._inner)]
         for task, slots in self._stored:
             task.store_parameters(self._owner, slots)  # type: ignore[attr-defined]
-        # StoredParameters.store_events when every task was last seen stored here; built from
-        # these tasks, the stack matches them at this count
+        # StoredParameters.store_events when every task was last seen stored here, and when
+        # matches() last held (unchanged() compares both): built from these tasks, the stack
+        # matches them at this count
         self._store_events_seen = self._checked_events = StoredParameters.store_events
         n_sites, nv = len(sites), m.nv
         self.scalars = np.zeros(6)

@@ -60,9 +60,8 @@ def _check_frame_skip(frame_skip: Any) -> None:
     """``ValueError`` unless ``frame_skip`` is a positive integer (``mj_step`` takes 0 or a
     negative count as no step at all); checked when the env is made and at the first step after
     it is assigned."""
-    if isinstance(frame_skip, bool) or not isinstance(frame_skip, int | np.integer):
-        raise ValueError(f"frame_skip must be a positive integer, got {frame_skip!r}")
-    if frame_skip < 1:
+    integer = isinstance(frame_skip, int | np.integer) and not isinstance(frame_skip, bool)
+    if not integer or frame_skip < 1:
         raise ValueError(f"frame_skip must be a positive integer, got {frame_skip!r}")
 
 
