@@ -14,6 +14,7 @@ controller's ``counters``, timing) and ``summary.json``:
                   "episodes", "seed", "seeds", "controllers", "preset"},
      "controllers": {name: {"config": {...resolved config...}, "episodes": n,
                             "<flag>_rate": {"rate", "ci95": [low, high], "n"} | null,
+                            "outcomes": {outcome: episodes},
                             "<metric>": {"mean", "std", "min", "max", "n"} | null,
                             "counters": {name: {"mean", "std", "min", "max", "n"}},
                             "control_time_ms": {"mean", "std", "min", "max", "p99"}}}}
@@ -35,6 +36,7 @@ import numpy as np
 from tqdm import tqdm
 
 from benchmarks.episode import compare_episode
+from benchmarks.metrics import outcome_counts
 from benchmarks.overrides import (
     RunSpec,
     config_dict,
@@ -58,7 +60,7 @@ from controllers import registry
 from controllers.optimizer import jax_setup
 
 DEFAULT_ENV = "wip_gym/PlanarTray-v0"
-RATES = ("success", "goal_reached", "cup_kept", "tray_kept", "fell")
+RATES = ("success", "carried", "goal_reached", "cup_kept", "tray_kept", "fell")
 METRICS = (
     "time_to_goal_s",
     "final_goal_error_m",
@@ -71,6 +73,7 @@ METRICS = (
     "tray_slip_distance_m",
     "max_cup_tilt_deg",
     "cup_lost_at_s",
+    "outcome_time_s",
     "time_at_actuator_limit_s",
     "sim_time_s",
     "real_time_factor",
@@ -190,11 +193,13 @@ def scenario_record(spec: RunSpec, args: argparse.Namespace, seeds: list[int]) -
 
 def summarize(episodes: list[dict[str, Any]], control_times: list[np.ndarray]) -> dict[str, Any]:
     """Every metric over the episodes with its spread, every flag as a rate with its Wilson
-    95 % interval, the controller's counters, the control time over all steps."""
+    95 % interval, the episodes per outcome, the controller's counters, the control time over
+    all steps."""
     times = np.concatenate(control_times) * 1e3
     summary: dict[str, Any] = {"episodes": len(episodes)}
     for flag in RATES:
         summary[f"{flag}_rate"] = rate([e.get(flag) for e in episodes])
+    summary["outcomes"] = outcome_counts(episodes)
     for metric in METRICS:
         summary[metric] = describe([e.get(metric) for e in episodes])
     counter_names = sorted({k for e in episodes for k in e.get("counters", {})})
@@ -215,16 +220,25 @@ def _fmt(value: Any, spec: str) -> str:
     return "-" if value is None else format(value, spec)
 
 
+def _rate_with_interval(stat: dict[str, Any] | None) -> str:
+    """``0.80 [0.49,0.94]``: a rate and its Wilson 95 % interval; ``-`` when not reported."""
+    if stat is None:
+        return "-"
+    low, high = stat["ci95"]
+    return f"{stat['rate']:.2f} [{low:.2f},{high:.2f}]"
+
+
 def format_table(summary: dict[str, Any]) -> str:
     header = (
-        f"{'controller':<16}{'success':>8}{'goal':>6}{'cup':>6}{'fell':>6}"
-        f"{'t_goal s':>10}{'err m':>8}{'tilt deg':>10}{'fric use':>10}{'slip s':>8}"
+        f"{'controller':<16}{'carried [95% CI]':>18}{'success':>8}{'goal':>6}{'cup':>6}"
+        f"{'fell':>6}{'t_goal s':>10}{'err m':>8}{'tilt deg':>10}{'fric use':>10}{'slip s':>8}"
         f"{'slip cm':>9}{'ctrl ms':>9}{'RTF':>7}"
     )
     scenario = {k: summary["scenario"][k] for k in ("env", "goal", "duration_s", "preset")}
     lines = [
         f"{summary['env']}  {json.dumps(scenario)}  overrides {json.dumps(summary['overrides'])}",
-        "(means over episodes; fric use: peak, mean over episodes)",
+        "(rates over episodes, carried with its Wilson 95 % interval; means over episodes; "
+        "fric use: peak, mean over episodes)",
         header,
         "-" * len(header),
     ]
@@ -237,7 +251,8 @@ def format_table(summary: dict[str, Any]) -> str:
             return None if s[key] is None else s[key]["rate"]
 
         lines.append(
-            f"{name:<16}{_fmt(share('success_rate'), '.2f'):>8}"
+            f"{name:<16}{_rate_with_interval(s['carried_rate']):>18}"
+            f"{_fmt(share('success_rate'), '.2f'):>8}"
             f"{_fmt(share('goal_reached_rate'), '.2f'):>6}"
             f"{_fmt(share('cup_kept_rate'), '.2f'):>6}{_fmt(share('fell_rate'), '.2f'):>6}"
             f"{_fmt(mean('time_to_goal_s'), '.2f'):>10}{_fmt(mean('final_goal_error_m'), '.3f'):>8}"
@@ -247,6 +262,11 @@ def format_table(summary: dict[str, Any]) -> str:
             f"{_fmt(mean('cup_slip_distance_m', scale=100.0), '.2f'):>9}"
             f"{s['control_time_ms']['mean']:>9.3f}{mean('real_time_factor'):>7.2f}"
         )
+    outcomes = {
+        name: ", ".join(f"{kind} {n}" for kind, n in s["outcomes"].items())
+        for name, s in summary["controllers"].items()
+    }
+    lines += ["", "outcomes (episodes): " + "; ".join(f"{k}: {v}" for k, v in outcomes.items())]
     return "\n".join(lines)
 
 

@@ -11,7 +11,14 @@ import pytest
 from benchmarks.cli import main
 from benchmarks.rollout import without_timing
 
-RATE_KEYS = {"success_rate", "goal_reached_rate", "cup_kept_rate", "tray_kept_rate", "fell_rate"}
+RATE_KEYS = {
+    "success_rate",
+    "carried_rate",
+    "goal_reached_rate",
+    "cup_kept_rate",
+    "tray_kept_rate",
+    "fell_rate",
+}
 METRIC_KEYS = {
     "time_to_goal_s",
     "final_goal_error_m",
@@ -24,12 +31,15 @@ METRIC_KEYS = {
     "tray_slip_distance_m",
     "max_cup_tilt_deg",
     "cup_lost_at_s",
+    "outcome_time_s",
     "time_at_actuator_limit_s",
     "sim_time_s",
     "real_time_factor",
     "setup_s",
 }
-SUMMARY_KEYS = {"config", "episodes", "counters", "control_time_ms"} | RATE_KEYS | METRIC_KEYS
+SUMMARY_KEYS = (
+    {"config", "episodes", "outcomes", "counters", "control_time_ms"} | RATE_KEYS | METRIC_KEYS
+)
 SPREAD = {"mean", "std", "min", "max", "n"}
 
 
@@ -75,7 +85,7 @@ def test_summary_schema_and_episode_lines(tmp_path: Path) -> None:
     assert set(stats) == SUMMARY_KEYS
     assert stats["episodes"] == 2
     assert stats["config"]["model"] == "nominal" and "plan" in stats["config"]
-    for key in METRIC_KEYS - {"time_to_goal_s", "cup_lost_at_s"}:
+    for key in METRIC_KEYS - {"time_to_goal_s", "cup_lost_at_s", "outcome_time_s"}:
         assert set(stats[key]) == SPREAD and stats[key]["n"] == 2, key
         assert stats[key]["min"] <= stats[key]["mean"] <= stats[key]["max"], key
     for key in RATE_KEYS:
@@ -84,6 +94,10 @@ def test_summary_schema_and_episode_lines(tmp_path: Path) -> None:
     assert all(set(v) == SPREAD for v in stats["counters"].values())
     assert stats["time_to_goal_s"] is None  # 0.3 s is too short to arrive
     lines = [json.loads(line) for line in (tmp_path / "episodes.jsonl").read_text().splitlines()]
+    # the rates and the outcome counts are those of the episodes' lines
+    assert [line["outcome"] for line in lines] == ["carried", "carried"]
+    assert stats["outcomes"] == {"carried": 2} and stats["carried_rate"]["rate"] == 1.0
+    assert stats["outcome_time_s"] is None  # no loss, no time
     assert [line["seed"] for line in lines] == [5, 6]
     # the summary's spread is that of the episodes' lines
     peaks = [line["max_cup_friction_use"] for line in lines]
@@ -92,12 +106,18 @@ def test_summary_schema_and_episode_lines(tmp_path: Path) -> None:
     assert lines[0]["max_cup_friction_use"] != lines[1]["max_cup_friction_use"]  # seeds differ
 
 
-def test_no_cup_metrics_are_null_without_a_tray(tmp_path: Path) -> None:
+def test_no_cup_metrics_are_null_without_a_tray(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     summary = run(
         tmp_path, "--env", "wip_gym/WIP-v0", "--controllers", "decoupled", "--duration", "0.2"
     )
     stats = summary["controllers"]["decoupled"]
     assert stats["cup_kept_rate"] is None and stats["max_cup_friction_use"] is None
+    assert stats["carried_rate"] is None  # no tray: nothing to carry, not a rate of 0
+    assert stats["outcomes"] == {"balanced": 1}
+    table = capsys.readouterr().out
+    assert "carried [95% CI]" in table and "outcomes (episodes): decoupled: balanced 1" in table
 
 
 @pytest.mark.parametrize(

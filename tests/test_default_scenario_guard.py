@@ -4,8 +4,8 @@
 --env wip_gym/PlanarTray-v0``, every controller, 5 seeds) into
 ``tests/data/default_scenario.json``. Here the same command runs again, and for each controller
 
-* every episode's outcome (success, cup kept, tray kept, fell, goal reached) is the recorded
-  one, seed by seed;
+* every episode's outcome (its ``outcome``, and success, carried, goal reached, cup kept, tray
+  kept, fell) is the recorded one, seed by seed;
 * every other metric and counter, averaged over the seeds, lies within the recorded values'
   spread over the seeds ``[min, max]`` (a metric the same at every seed, such as a slipping
   time of 0, must stay that value), give or take a rounding step of the mean, and for a time
@@ -30,7 +30,8 @@ import numpy as np
 from benchmarks.compare import RATES
 from tests.default_scenario_recording import PATH, run_default_scenario
 
-OUTCOMES = RATES  # success, goal reached, cup kept, tray kept, fell: compare's rates
+#: the episode's outcome and compare's rates (success, carried, goal reached, cup kept, ...)
+OUTCOMES = ("outcome", *RATES)
 #: metrics that count control steps, in seconds, and the control step
 STEP_COUNTED = frozenset({"slipping_time_s", "time_at_actuator_limit_s", "time_to_goal_s"})
 STEP_S = 1e-3
