@@ -111,6 +111,22 @@ def test_short_unified_profile_schema(tmp_path: Path, capsys: pytest.CaptureFixt
     )
     paths = result["qp_paths"]
     assert set(paths) == {"shortcut", "proxqp"} and paths["shortcut"] + paths["proxqp"] == 300
+    # the table adds up as the schema says (means, us), and the ratios are of its rows
+    mean = {name: result["per_step_us"][name]["mean"] for name in ROWS}
+    measured = ("robot_model", "qp_assembly", "qp_solve", "high_level", "python_overhead")
+    assert sum(mean[name] for name in measured) == pytest.approx(mean["control"], rel=1e-9)
+    assert mean["low_level"] + mean["high_level"] == pytest.approx(mean["control"], rel=1e-9)
+    assert mean["env_physics"] + mean["env_overhead"] == pytest.approx(mean["env_step"], rel=1e-9)
+    assert mean["control"] + mean["env_step"] == pytest.approx(mean["loop"], rel=1e-9)
+    assert mean["control"] == pytest.approx(result["control_time_ms"]["mean"] * 1e3, rel=1e-9)
+    dt_us = result["control_dt_s"] * 1e6
+    assert result["real_time_factor"] == pytest.approx(dt_us / mean["loop"], rel=1e-9)
+    floor = mean["mujoco_step"]
+    assert result["sim_only_real_time_factor"] == pytest.approx(dt_us / floor, rel=1e-9)
+    assert result["control_over_mujoco_step"] == pytest.approx(mean["control"] / floor, rel=1e-9)
+    assert result["low_level_over_mujoco_step"] == pytest.approx(
+        mean["low_level"] / floor, rel=1e-9
+    )
     assert result["setup_s"] > 0 and not result["fell"]
     # the closed loop's table (benchmarks.speed.closed_loop_table) reads this schema
     lines = closed_loop_table({"PlanarTray": [result, result]}).splitlines()

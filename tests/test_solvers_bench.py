@@ -93,6 +93,48 @@ def test_quick_run_schema_and_agreement(tmp_path: Path, capsys: pytest.CaptureFi
         "plan_under_50ms_3d",
     ):
         assert set(results["targets"][key]) == {"figure", "limit", "met"}, key
+    # the figures derived in the run are what they are computed from: each ratio a peer's
+    # median over ours, each target its figure against its limit
+    for p in PROBLEMS:
+        for kind, table in (("plan", "ddp_plan_ms"), ("mpc", "mpc_step_ms")):
+            ours = results[table][p]["ours"]["median"]
+            for peer, label in (("crocoddyl", "crocoddyl"), ("numpy_ilqr", "numpy")):
+                assert results["ratios"][f"{label}_{kind}_{p}"] == pytest.approx(
+                    results[table][p][peer]["median"] / ours, rel=1e-12
+                ), (label, kind, p)
+    for env in QP_ENVS:
+        times = results["qp_solve_us"][env]
+        for s in QP_SOLVERS[2:]:
+            peer = times[s]["median"]
+            assert results["ratios"][f"qp_{s}_{env}"] == pytest.approx(
+                peer / times["proxqp"]["median"], rel=1e-12
+            )
+            assert results["ratios_controller_path"][f"qp_{s}_{env}"] == pytest.approx(
+                peer / times["proxqp_shortcut"]["median"], rel=1e-12
+            )
+    for name, target in results["targets"].items():
+        below = not name.endswith("_at_least_10x")
+        met = target["figure"] <= target["limit"] if below else target["figure"] >= target["limit"]
+        assert target["met"] is met, name
+    for p in PROBLEMS:
+        assert (
+            results["targets"][f"plan_under_10ms_{p}"]["figure"]
+            == (results["ddp_plan_ms"][p]["ours"]["median"])
+        )
+        assert (
+            results["targets"][f"crocoddyl_mpc_{p}_at_least_10x"]["figure"]
+            == (results["ratios"][f"crocoddyl_mpc_{p}"])
+        )
+    krang = results["qp_solve_us"]["krang"]
+    fastest_peer = min(krang[s]["median"] for s in QP_SOLVERS[2:])  # every peer agrees (below)
+    assert results["targets"]["qp_krang_within_2x_fastest_peer"]["figure"] == pytest.approx(
+        krang["proxqp"]["median"] / fastest_peer, rel=1e-12
+    )
+    units_3d = results["mpc_step_units"]["3d"]
+    assert results["targets"]["mpc_step_under_15_units_3d"]["figure"] == units_3d["median"]
+    assert results["targets"]["mpc_step_p99_under_2x_median_3d"]["figure"] == pytest.approx(
+        units_3d["p99"] / units_3d["median"], rel=1e-12
+    )
     # the optimum checks: every DDP solver converged to the same cost
     for p in PROBLEMS:
         for what in ("plan", "mpc_step"):
