@@ -13,7 +13,7 @@ Two backends run the same step (``MPCConfig.backend``): ``"jax"``, the DDP of
 ``controllers.optimizer.ddp`` jitted by XLA, the reference; and ``"numba"``, the same algorithm
 with every derivative from the same JAX functions, written out as scalar code and compiled by
 numba (``controllers.optimizer.numba_ddp``), equal to it to round-off (tests/test_numba_ddp.py)
-and 1.3 to 2.5 times as fast (docs/performance.md §18).
+and 1.3 to 2.5 times as fast.
 """
 
 from __future__ import annotations
@@ -51,8 +51,8 @@ class MPCConfig:
         ddp: solver settings except the iteration budget (iLQR, no tolerance stop, no backward
             pass after the last line search: the MPC uses the controls, not the gains; no
             gradient norm: nothing reads it).
-        backend: ``"numba"`` (default: the same solve to round-off, 1.3 to 2.5 times as fast;
-            docs/performance.md §18) or ``"jax"`` (the reference; it also runs the settings
+        backend: ``"numba"`` (default: the same solve to round-off, 1.3 to 2.5 times as fast)
+            or ``"jax"`` (the reference; it also runs the settings
             the numba backend refuses: ``second_order``, ``gradient_norm``).
     """
 
@@ -152,8 +152,7 @@ class _CompiledStep:
 
     The host's inputs (the plan index, the first-step flag, the state and ``lambda(q)``'s 11
     leaves) come packed in one vector (:func:`pack_inputs`): one argument to hand over instead
-    of fourteen. The results are the same to the bit, the step slightly faster
-    (docs/performance.md §13)."""
+    of fourteen. The results are the same to the bit, the step slightly faster."""
 
     def __init__(self, problem: WIPMProblem, ddp: DDPConfig, horizon: int) -> None:
         self.problem, self.ddp = problem, ddp

@@ -158,7 +158,7 @@ DynamicsDerivatives = Callable[[Array, Array, PyTree], tuple[Array, Array]]
 _ALPHAS_ALONE = 2
 """How many of the largest alphas the line search tries one at a time before the others in
 parallel: the first is accepted in about three quarters of the MPC's line searches, and a
-parallel search over all eleven cost about ten single rollouts (docs/performance.md §8, §10)."""
+parallel search over all eleven cost about ten single rollouts."""
 
 
 def _default_alphas() -> tuple[float, ...]:
@@ -182,7 +182,8 @@ class DDPConfig:
         gradient_norm: True (default): the backward pass also runs the adjoint recursion for
             the exact gradient, ``DDPResult.grad_norm``. False: skipped, ``grad_norm`` is NaN,
             every other result the same (the MPC's and the plan's setting: they stop on other
-            tests; the time it saves: docs/performance.md §16). Needs ``grad_tolerance = 0``.
+            tests; it saves 6 to 8 % of the plan's time and about 5 % of the planar MPC
+            step's). Needs ``grad_tolerance = 0``.
         second_order: True: DDP with the ``V_x . f_xx, f_ux, f_uu`` terms; False: iLQR (the
             authors' choice).
         mu_init: Initial ``Q_uu`` regularisation. Authors (46): 1.0. 13b had none (0).
@@ -337,7 +338,7 @@ def _mirrored_upper(a: Array) -> Array:
     For a product known to be symmetric (``F' V F``, the new ``V_xx``): its lower triangle is
     then never read, so in the scalar code that the MPC's numba backend writes from the jaxpr
     (``controllers.optimizer.numba_ddp``) those products are dead and the compiler drops them
-    (the 3-D backward pass about a quarter faster, docs/performance.md §20). XLA computes both
+    (the 3-D backward pass about a quarter faster: 52.4 to 38.7 us). XLA computes both
     triangles and selects. The result is exactly symmetric."""
     upper = np.triu(np.ones(a.shape, dtype=bool))
     return jnp.where(upper, a, a.T)
