@@ -46,8 +46,8 @@ class MPCConfig:
             Q = diag[0, 10, 10, 0.1, 0.1, 0.1, 10, 10] over [x, psi, theta, xd, psid, thetad,
             X0, Y0]: higher on positions than speeds, as the paper says).
         r_control: weights on [thdd, tau_0] (authors 0.01, 0.01).
-        q_terminal: terminal weights on positions and theta (authors 1e5) and speeds (1e4).
-        q_terminal_speed: see above.
+        q_terminal, q_terminal_speed: terminal weights on positions and theta (authors 1e5) and
+            on speeds (authors 1e4).
         ddp: solver settings except the iteration budget (iLQR, no tolerance stop, no backward
             pass after the last line search: the MPC uses the controls, not the gains; no
             gradient norm: nothing reads it).
