@@ -10,7 +10,9 @@ each from where the setting is documented, :mod:`benchmarks.key_docs`):
   keys.
 * ``plan.<field>[.<field>...]``: a field of the offline plan's ``PlanConfig``, applied to every
   ``PlanConfig`` inside every controller of the run (found by walking the config dataclasses),
-  so that every controller shares the same plan, e.g. ``plan.a_max=2.5``.
+  so that every controller shares the same plan, e.g. ``plan.a_max=2.5``. A controller of the
+  run without an offline plan is left as it is (``RunSpec.not_applied`` names it; compare and
+  the sweep say so); a run in which no controller has a plan refuses the key.
 * ``<controller>.<field>[.<field>...]``: one controller's config, by its dotted path through
   the nested config dataclasses, e.g. ``unified.ee_position_weight=5``,
   ``unified.high_level.mpc.horizon_s=0.5``.
@@ -347,6 +349,8 @@ class RunSpec:
         configs: controller name -> its resolved config dataclass, in run order.
         preset: the preset's name or None. overrides: the ``--set`` keys and parsed values.
         skipped: preset env arguments this env does not accept (logged, not applied).
+        not_applied: ``plan.*`` key -> the controllers of the run it leaves as they are (they
+            have no offline plan; :func:`keys_not_applied`).
     """
 
     env_id: str
@@ -355,12 +359,24 @@ class RunSpec:
     preset: str | None
     overrides: dict[str, Any]
     skipped: tuple[str, ...] = ()
+    not_applied: dict[str, tuple[str, ...]] = dataclasses.field(default_factory=dict)
 
     def env_arguments(self) -> dict[str, Any]:
         """Every env argument in effect: the defaults updated with ``env_kwargs``."""
         effective = {k[len("env.") :]: s.default for k, s in env_settings(self.env_id).items()}
         effective.update(_plain(self.env_kwargs))
         return effective
+
+
+def keys_not_applied(configs: Mapping[str, Any], keys: Iterable[str]) -> dict[str, tuple[str, ...]]:
+    """The rule shared by compare and the sweep: a ``plan.*`` key applies to every controller
+    of the run that has an offline plan and leaves the others as they are. This maps each such
+    key to the controllers (of ``configs``) it leaves; keys that reach every controller are
+    absent."""
+    without_plan = tuple(name for name, config in configs.items() if not plan_configs(config))
+    if not without_plan:
+        return {}
+    return {key: without_plan for key in keys if key.startswith("plan.")}
 
 
 def valid_settings(env_id: str, configs: Mapping[str, Any]) -> dict[str, Setting]:
@@ -402,7 +418,7 @@ def _apply(
                 f"{sorted(s[len('env.') :] for s in settings)}"
             )
         env_kwargs[rest] = coerce(value, settings[key].type, key)
-    elif head == "plan":
+    elif head == "plan":  # every controller with a plan; the others unchanged (RunSpec)
         if not any(plan_configs(c) for c in configs.values()):
             raise OverrideError(f"{key}: no controller of this run has an offline plan")
         for name in configs:
@@ -453,6 +469,7 @@ def resolve_run(
         preset=preset,
         overrides=_plain(parsed),
         skipped=tuple(skipped),
+        not_applied=keys_not_applied(configs, parsed),
     )
 
 
@@ -463,4 +480,8 @@ def format_keys(settings: Mapping[str, Setting]) -> str:
     ]
     width = max(len(r[0]) for r in rows) + 2
     type_width = max(len(r[1]) for r in rows) + 2
-    return "\n".join(f"{k:<{width}}{t:<{type_width}}{d}" for k, t, d in rows)
+    default_width = min(24, max(len(r[2]) for r in rows))
+    return "\n".join(
+        f"{k:<{width}}{t:<{type_width}}{d:<{default_width}}  {text}".rstrip()
+        for k, t, d, text in rows
+    )
