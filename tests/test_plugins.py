@@ -18,89 +18,16 @@ import pytest
 
 from benchmarks.sweep.store import read_rows
 from controllers import registry
+from tests.plugin_package import write_plugin
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ["decoupled", "decoupled-lqr", "decoupled-mpc", "unified", "unified-waiter"]
-
-# A plug-in package: a balance-in-place controller without an offline plan (the example of
-# docs/extending.md §2) and one whose control step raises, registered by a callable.
-PLUGIN = '''
-from dataclasses import dataclass
-
-from controllers.low_level.posture import PostureHold
-from controllers.policy import ModelChoice, PolicyBase
-from controllers.registry import register
-
-
-@dataclass(frozen=True)
-class BalanceConfig:
-    """Balance in place.
-
-    Attributes:
-        model: ``nominal`` or ``oracle``.
-        kp: wheel torque per rad of theta (N m).
-        kd: wheel torque per rad/s of theta (N m s).
-    """
-
-    model: ModelChoice = "nominal"
-    kp: float = 400.0
-    kd: float = 80.0
-
-
-class BalanceController(PolicyBase):
-    config_class = BalanceConfig
-
-    def __init__(self, robot, task, config):
-        super().__init__(robot, task, config)
-        self._posture = PostureHold()
-
-    def reset(self, observation, info):
-        self.robot.update(observation["qpos"], observation["qvel"])
-        self.begin_episode()
-        self._posture.reset(self.robot)
-
-    def __call__(self, observation):
-        robot = self.robot
-        robot.update(observation["qpos"], observation["qvel"])
-        wheel = self.config.kp * robot.theta + self.config.kd * robot.thetad
-        self._step += 1
-        return self.finish(self.assemble((wheel, wheel), self._posture.torques(robot)))
-
-
-class BrokenController(BalanceController):
-    def __call__(self, observation):
-        raise RuntimeError("the plug-in's broken controller")
-
-
-def register_all():
-    register("balance", BalanceController, BalanceConfig)
-    register("broken", BrokenController, BalanceConfig)
-'''
-# A module for --import: registers at import time, under another name.
-IMPORTED = """
-from controllers.registry import register
-from wipgym_balance_plugin import BalanceConfig, BalanceController
-
-register("balance-imported", BalanceController, BalanceConfig, kp=500.0)
-"""
 
 
 @pytest.fixture(scope="module")
 def plugin_path(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A directory holding the installed plug-in and, apart, the module for --import."""
-    site = tmp_path_factory.mktemp("site")
-    (site / "wipgym_balance_plugin").mkdir()
-    (site / "wipgym_balance_plugin" / "__init__.py").write_text(PLUGIN)
-    info = site / "wipgym_balance_plugin-0.1.dist-info"
-    info.mkdir()
-    (info / "METADATA").write_text(
-        "Metadata-Version: 2.1\nName: wipgym-balance-plugin\nVersion: 0.1\n"
-    )
-    (info / "entry_points.txt").write_text(
-        "[wip_gym.controllers]\nbalance = wipgym_balance_plugin:register_all\n"
-    )
-    (site / "my_imported_controllers.py").write_text(IMPORTED)
-    return site
+    return write_plugin(tmp_path_factory.mktemp("site"))
 
 
 def _bench(site: Path, *args: str, timeout: float = 600) -> subprocess.CompletedProcess[str]:
@@ -178,6 +105,27 @@ def test_without_the_import_the_name_is_unknown_before_anything_runs(
     missing = _bench(plugin_path, "compare", "--import", "no_such_module", "--list-keys")
     assert missing.returncode == 2
     assert "--import no_such_module: no module named 'no_such_module'" in missing.stderr
+
+
+def test_profile_times_an_imported_controller(plugin_path: Path, tmp_path: Path) -> None:
+    out = tmp_path / "profile.json"
+    result = _bench(
+        plugin_path,
+        "profile",
+        "--env",
+        "PlanarTray-v0",
+        "--controller",
+        "balance-imported",
+        "--import",
+        "my_imported_controllers",
+        "--duration",
+        "0.1",
+        "--json",
+        str(out),
+    )
+    assert result.returncode == 0, result.stderr[-3000:]
+    profile = json.loads(out.read_text())
+    assert profile["controller"] == "balance-imported" and profile["steps"] == 100
 
 
 SPEC = """
