@@ -72,7 +72,10 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    jax_setup.configure()  # the solvers' JAX settings, before JAX starts (one explicit call)
+    if args.command == "solvers":  # its peers call the WIPM's JAX functions themselves
+        jax_setup.configure()  # the compilation cache and float64 for the whole process
+    else:  # the solvers scope float64 themselves (docs/DESIGN.md §4)
+        jax_setup.use_compilation_cache()
     try:
         registry.import_modules(getattr(args, "imports", []))
         if args.command == "compare":

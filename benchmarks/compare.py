@@ -299,9 +299,9 @@ class _SimulatedSeconds:
 
 def _start_worker(imports: tuple[str, ...]) -> None:
     """A spawned worker's start: the ``--import`` modules, whose controllers its episodes
-    make, and the solvers' JAX settings (:mod:`controllers.optimizer.jax_setup`)."""
+    make, and JAX's persistent compilation cache (``jax_setup.use_compilation_cache``)."""
     registry.import_modules(imports)
-    jax_setup.configure()
+    jax_setup.use_compilation_cache()
 
 
 def _run_tasks(

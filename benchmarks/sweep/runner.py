@@ -7,9 +7,10 @@ machine's by default), without dashboard or usage reporting, its temporary files
 :data:`RAY_TEMP_DIR`. With an address it joins that cluster and ``--workers`` caps the episodes
 in flight. If this process already has Ray initialised (a test's shared cluster), it is used.
 
-Workers get the DDP's JAX settings through the task's runtime environment, set before the worker
-process imports JAX (:func:`worker_env_vars`); the JAX compilation cache stays per node (its
-default directory is under each node's home). A worker that dies is retried (``max_retries``); an
+Workers get XLA's loop option for the DDP through the task's runtime environment, set before the
+worker process starts JAX (:func:`worker_env_vars`; the solvers scope float64 themselves), and
+turn JAX's persistent compilation cache on, which stays per node (its default directory is
+under each node's home). A worker that dies is retried (``max_retries``); an
 episode that raises or outlives the wall-clock limit becomes an error row and the sweep goes on.
 Ctrl-C cancels the episodes in flight (nothing is written for them) and writes the report.
 """
@@ -44,22 +45,18 @@ EpisodeFn = Callable[[Mapping[str, Any]], dict[str, Any]]
 
 
 def worker_env_vars() -> dict[str, str]:
-    """The environment of a sweep worker: the JAX settings of ``controllers.optimizer.jax_setup``
-    (x64, XLA's small-while-loop threshold) before JAX starts, and one thread each for XLA, BLAS and
+    """The environment of a sweep worker: XLA's small-while-loop threshold of
+    ``controllers.optimizer.jax_setup`` before JAX starts, and one thread each for XLA, BLAS and
     OpenMP (one CPU per episode)."""
     from controllers.optimizer import jax_setup
 
     flags = os.environ.get("XLA_FLAGS", "")
-    if "xla_backend_extra_options" not in flags:
-        threshold = int(
-            os.environ.get(jax_setup.SMALL_LOOP_ENV, jax_setup.DEFAULT_SMALL_LOOP_BYTES)
-        )
-        if threshold > 0:
-            flags += f" --xla_backend_extra_options={jax_setup.SMALL_LOOP_OPTION}={threshold}"
+    option = jax_setup.loop_option()
+    if option is not None:
+        flags = jax_setup.with_loop_option(flags, option)
     if "xla_cpu_multi_thread_eigen" not in flags:
         flags += " --xla_cpu_multi_thread_eigen=false"
     env = {
-        "JAX_ENABLE_X64": "1",
         "XLA_FLAGS": flags.strip(),
         "OMP_NUM_THREADS": "1",
         "OPENBLAS_NUM_THREADS": "1",
@@ -104,7 +101,7 @@ def _run_task(
     from controllers.optimizer import jax_setup
 
     registry.import_modules(imports)  # idempotent: a worker runs many episodes
-    jax_setup.configure()  # before the episode's first JAX computation (idempotent)
+    jax_setup.use_compilation_cache()  # before the episode's first JAX compilation
     if episode_fn is None:
         from benchmarks.sweep.episode import run_episode_job
 
