@@ -62,7 +62,9 @@ EXTRA_OPTIONS = "--xla_backend_extra_options="
 # 64 MB: the largest loop state of the DDP (N = 2000, 3-D) is ~3 MB
 DEFAULT_SMALL_LOOP_BYTES = 64 * 2**20
 #: what the DDP loses without the loop option: the offline plan's solve (planar WIPM, N = 2000,
-#: 10 iterations, after compilation), best of 20 in each of two processes (:func:`loop_flag_cost`)
+#: 10 iterations, after compilation), best of 20 in each of two processes (:func:`loop_flag_cost`).
+#: Nine runs on the 2-core machine, shared with other jobs (load 8 to 12), gave 9 to 39 ms with
+#: it and 85 to 176 ms without; the figure is the best of each.
 LOOP_FLAG_COST = "about 9x slower (the offline plan's solve: 85 ms instead of 9 ms)"
 
 F = TypeVar("F", bound=Callable[..., Any])
