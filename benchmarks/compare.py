@@ -6,10 +6,15 @@ Settings resolve in the order defaults, ``--preset``, named flags, ``--set`` (se
 ``benchmarks.overrides``; ``--list-keys`` prints every key). Two progress bars: episodes, and
 the simulated seconds of all episodes (it moves inside a long episode).
 
+A ``plan.*`` key applies to every controller with an offline plan and leaves the others as
+they are (``benchmarks.overrides.keys_not_applied``, the sweep's rule too): the run prints a
+note and ``summary.json`` lists them under ``keys_not_applied``. ``--import MODULE`` modules
+are imported by the workers too.
+
 Outputs in ``--out``: ``episodes.jsonl`` (one line per episode: ``benchmarks.metrics``, the
 controller's ``counters``, timing) and ``summary.json``:
 
-    {"env", "preset", "overrides": {key: value},
+    {"env", "preset", "overrides": {key: value}, "keys_not_applied": {key: [controller]},
      "scenario": {every env argument in effect, "env", "duration_s", "control_dt_s",
                   "episodes", "seed", "seeds", "controllers", "preset"},
      "controllers": {name: {"config": {...resolved config...}, "episodes": n,
@@ -85,8 +90,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--env", default=DEFAULT_ENV, help="env id (wip_gym/NAME or NAME)")
     parser.add_argument(
         "--controllers",
-        default=",".join(registry.controller_names()),
-        help=f"comma-separated, from {registry.controller_names()}",
+        help="comma-separated registry names (default: every registered controller: "
+        f"{', '.join(registry.controller_names())}, and those of --import modules)",
     )
     parser.add_argument("--episodes", type=int, default=1)
     parser.add_argument("--seed", type=int, default=0)
@@ -96,7 +101,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "(repeatable; see --list-keys)",
     )
     parser.add_argument(
-        "--list-keys", action="store_true", help="print every --set key, its type and default"
+        "--list-keys",
+        action="store_true",
+        help="print every --set key: its type, default and what it means",
     )
     parser.add_argument("--goal", type=float, nargs="+", metavar=("X", "Y"))
     parser.add_argument(
@@ -137,11 +144,18 @@ def named_env_flags(args: argparse.Namespace) -> dict[str, Any]:
     return flags
 
 
+def controller_list(args: argparse.Namespace) -> list[str]:
+    """``--controllers``, or every registered controller (``--import`` modules included)."""
+    if args.controllers is None:
+        return registry.controller_names()
+    return parse_controllers(args.controllers)
+
+
 def spec_from_args(args: argparse.Namespace) -> RunSpec:
     """Validate the flags and resolve the run; raise ValueError naming the bad flag or key
     and the valid choices (nothing has run or been written yet)."""
     env_id = resolve_env_id(args.env)
-    names = parse_controllers(args.controllers)
+    names = controller_list(args)
     if args.episodes < 1:
         raise ValueError(f"--episodes must be >= 1, got {args.episodes}")
     if args.jobs < 1:
@@ -165,7 +179,7 @@ def list_keys(args: argparse.Namespace) -> str:
     """``--list-keys``: every key of this env and these controllers (defaults after the
     preset)."""
     env_id = resolve_env_id(args.env)
-    spec = resolve_run(env_id, parse_controllers(args.controllers), args.preset)
+    spec = resolve_run(env_id, controller_list(args), args.preset)
     return format_keys(valid_settings(env_id, spec.configs))
 
 
@@ -303,8 +317,19 @@ class _SimulatedSeconds:
         self.bar.close()
 
 
+def _start_worker(imports: tuple[str, ...]) -> None:
+    """A spawned worker's start: the ``--import`` modules, whose controllers its episodes
+    make, and JAX's persistent compilation cache (``jax_setup.use_compilation_cache``)."""
+    registry.import_modules(imports)
+    jax_setup.use_compilation_cache()
+
+
 def _run_tasks(
-    tasks: list[tuple[Any, ...]], jobs: int, duration: float, on_done: Any = None
+    tasks: list[tuple[Any, ...]],
+    jobs: int,
+    duration: float,
+    on_done: Any = None,
+    imports: tuple[str, ...] = (),
 ) -> list[Any]:
     results: list[Any] = [None] * len(tasks)
     episodes_bar = tqdm(total=len(tasks), desc="episodes", unit="ep", position=0)
@@ -322,8 +347,11 @@ def _run_tasks(
         with context.Manager() as manager:
             reports = manager.Queue()
             with ProcessPoolExecutor(
-                max_workers=jobs, mp_context=context, initializer=jax_setup.configure
-            ) as pool:  # a spawned worker is an entry point: the solvers' JAX settings first
+                max_workers=jobs,
+                mp_context=context,
+                initializer=_start_worker,
+                initargs=(imports,),
+            ) as pool:
                 futures = {
                     pool.submit(compare_episode, *task, progress=reports): k
                     for k, task in enumerate(tasks)
@@ -355,6 +383,8 @@ def run(args: argparse.Namespace) -> dict[str, Any] | None:
         return None
     spec = spec_from_args(args)
     names = list(spec.configs)
+    for key, left in spec.not_applied.items():
+        print(f"note: {key} leaves {', '.join(left)} as configured (no offline plan)")
     env = gym.make(spec.env_id, max_episode_steps=-1, **spec.env_kwargs)
     videos = video_options(args, env.unwrapped.model)
     env.close()
@@ -385,7 +415,10 @@ def run(args: argparse.Namespace) -> dict[str, Any] | None:
         if jobs is not None and tasks[k][7] is not None:
             jobs.submit(tasks[k][3])
 
-    outcomes = _run_tasks(tasks, args.jobs, args.duration, on_done=render_when_recorded)
+    imports = tuple(getattr(args, "imports", ()))
+    outcomes = _run_tasks(
+        tasks, args.jobs, args.duration, on_done=render_when_recorded, imports=imports
+    )
     episodes_done = time.perf_counter()
     results = [metrics for metrics, _ in outcomes]
     with open(out / "episodes.jsonl", "w") as f:
@@ -396,6 +429,7 @@ def run(args: argparse.Namespace) -> dict[str, Any] | None:
         "preset": spec.preset,
         "overrides": spec.overrides,
         "scenario": scenario_record(spec, args, seeds),
+        "keys_not_applied": {key: list(left) for key, left in spec.not_applied.items()},
         "controllers": {},
     }
     for name in names:

@@ -8,7 +8,8 @@ that every metric (``benchmarks.metrics``) is computed in one place.
     episode.policy         # the policy, after the episode (diagnostics, plan)
     episode.env            # the env, still open, with keep_env=True (close it yourself)
 
-    row = run_configured_episode(env_id, controller, overrides, seed, duration, preset=None)
+    row = run_configured_episode(env_id, controller, overrides, seed, duration, preset=None,
+                                 run_controllers=None)
 
 Seeds: episode ``i`` of a run with base seed ``S`` uses ``benchmarks.seeding.episode_seed(S, i)``.
 """
@@ -16,7 +17,7 @@ Seeds: episode ``i`` of a run with base seed ``S`` uses ``benchmarks.seeding.epi
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -153,22 +154,32 @@ def run_configured_episode(
     seed: int,
     duration: float,
     preset: str | None = None,
+    run_controllers: Sequence[str] | None = None,
 ) -> dict[str, Any]:
     """One episode of ``controller`` on ``env_id`` configured like ``wip-bench compare
     --preset PRESET --set KEY=VALUE ...``; its metrics row, JSON-ready.
 
     ``overrides`` maps ``--set`` keys (``benchmarks.overrides``) to values; a string value is
     parsed like a ``--set`` value (``"[2, 1]"`` is a list), other values are used as they are.
-    Keys of registered controllers other than ``controller`` are ignored, so that a sweep can
-    share one mapping. The row: the rollout's metrics plus ``env``, ``preset``, ``overrides``,
-    ``duration_s``, ``env_arguments`` (every env argument in effect) and ``config`` (the
-    controller's resolved config).
+    ``run_controllers``: the controllers of the run the overrides were written for (a sweep's),
+    ``controller`` among them; the overrides are resolved as compare resolves a run of them
+    (so a ``plan.*`` key leaves a controller without an offline plan as it is, and is refused
+    only if none of them has a plan), and this episode takes ``controller``'s config. Without
+    it, the run is ``controller`` alone and keys of other registered controllers are ignored.
+    The row: the rollout's metrics plus ``env``, ``preset``, ``overrides``, ``duration_s``,
+    ``env_arguments`` (every env argument in effect) and ``config`` (the controller's resolved
+    config).
     """
     env_id = resolve_env_id(env_id)
     parsed = {k: parse_value(v) if isinstance(v, str) else v for k, v in overrides.items()}
-    spec = resolve_run(
-        env_id, [controller], preset, overrides=parsed, ignore_other_controllers=True
-    )
+    if run_controllers is None:
+        spec = resolve_run(
+            env_id, [controller], preset, overrides=parsed, ignore_other_controllers=True
+        )
+    else:
+        if controller not in run_controllers:
+            raise ValueError(f"{controller!r} is not one of the run's {list(run_controllers)}")
+        spec = resolve_run(env_id, run_controllers, preset, overrides=parsed)
     episode = rollout(env_id, spec.env_kwargs, controller, spec.configs[controller], seed, duration)
     row = dict(episode.metrics)
     row.update(

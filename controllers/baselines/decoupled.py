@@ -41,6 +41,7 @@ from controllers.baselines.lqr import dlqr, zero_order_hold
 from controllers.baselines.minimum_jerk import GoalReference
 from controllers.high_level.planning import Plan, PlanConfig, plan_to_goal
 from controllers.low_level.posture import PostureHold
+from controllers.optimizer import jax_setup
 from controllers.policy import ModelChoice, PolicyBase, TaskInfo, plan_counters
 from controllers.simplified.wipm import (
     WIPMParams,
@@ -301,18 +302,20 @@ class DecoupledLQRController(PolicyBase):
         params = params_from_lambda(robot.wipm_parameters())
         if self._planar:
             s0, u0 = np.zeros(4), np.zeros(1)
-            A, B = (
-                np.asarray(a)
-                for a in linearize(
-                    lambda s, u, p: planar_torque_dynamics(s, u[0], p), s0, u0, params
+            with jax_setup.float64():  # JAX's linearisation in float64 (docs/DESIGN.md §4)
+                A, B = (
+                    np.asarray(a)
+                    for a in linearize(
+                        lambda s, u, p: planar_torque_dynamics(s, u[0], p), s0, u0, params
+                    )
                 )
-            )
             # state [theta, thetad, x, xd]; input total wheel torque
             weights = [cfg.q_theta, cfg.q_thetad, cfg.q_x, cfg.q_xd]
             x_index = 2
         else:
             s0, u0 = np.zeros(8), np.zeros(2)
-            A8, B8 = (np.asarray(a) for a in linearize(spatial_torque_dynamics, s0, u0, params))
+            with jax_setup.float64():
+                A8, B8 = (np.asarray(a) for a in linearize(spatial_torque_dynamics, s0, u0, params))
             A, B = A8[:6, :6], B8[:6]
             # state [x, psi, theta, xd, psid, thetad]; inputs (tau_L, tau_R)
             weights = [cfg.q_x, cfg.q_psi, cfg.q_theta, cfg.q_xd, cfg.q_psid, cfg.q_thetad]

@@ -27,6 +27,7 @@ from controllers.high_level.mpc import param_values, params_from_vector
 from controllers.high_level.planning import Plan, PlanConfig
 from controllers.high_level.receding_horizon import HighLevel, HighLevelConfig
 from controllers.low_level.posture import PostureHold
+from controllers.optimizer import jax_setup
 from controllers.policy import ModelChoice, PolicyBase, TaskInfo
 from controllers.simplified.wipm import (
     inverse_dynamics,
@@ -58,8 +59,9 @@ def _spatial_command(state: Array, u: Array, packed: Array) -> jax.Array:
 
 # one jitted call per control step, its result fetched whole: two calls with lambda(q)'s 11
 # leaves each and JAX-array indexing (an operation per index) cost ~0.57 ms a step
-_planar_command_jit = jax.jit(_planar_command)
-_spatial_command_jit = jax.jit(_spatial_command)
+# in float64 whatever the process's JAX settings (jax_setup; about 2 us a control step)
+_planar_command_jit = jax_setup.in_float64(jax.jit(_planar_command))
+_spatial_command_jit = jax_setup.in_float64(jax.jit(_spatial_command))
 
 
 @dataclass(frozen=True)

@@ -27,7 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from controllers.high_level.planning import Plan
-from controllers.optimizer import numba_ddp
+from controllers.optimizer import jax_setup, numba_ddp
 from controllers.optimizer.ddp import DDPConfig, rollout
 from controllers.simplified.wipm import WIPMParams
 from controllers.simplified.wipm_problem import Weights, WIPMProblem, ddp_solver_for
@@ -46,8 +46,8 @@ class MPCConfig:
             Q = diag[0, 10, 10, 0.1, 0.1, 0.1, 10, 10] over [x, psi, theta, xd, psid, thetad,
             X0, Y0]: higher on positions than speeds, as the paper says).
         r_control: weights on [thdd, tau_0] (authors 0.01, 0.01).
-        q_terminal: terminal weights on positions and theta (authors 1e5) and speeds (1e4).
-        q_terminal_speed: see above.
+        q_terminal, q_terminal_speed: terminal weights on positions and theta (authors 1e5) and
+            on speeds (authors 1e4).
         ddp: solver settings except the iteration budget (iLQR, no tolerance stop, no backward
             pass after the last line search: the MPC uses the controls, not the gains; no
             gradient norm: nothing reads it).
@@ -165,8 +165,10 @@ class _CompiledStep:
     def __call__(
         self, host: np.ndarray, warm: Any, plan_states: Any, plan_controls: Any
     ) -> tuple[Any, Any]:
-        """``(packed, next_warm)`` of one step (:meth:`_step`)."""
-        return self.jitted(host, warm, plan_states, plan_controls)
+        """``(packed, next_warm)`` of one step (:meth:`_step`), traced and run in float64
+        (``jax_setup.float64``: in any thread, whatever the process's JAX settings)."""
+        with jax_setup.float64():
+            return self.jitted(host, warm, plan_states, plan_controls)
 
     def __reduce__(self) -> tuple[Any, tuple[WIPMProblem, DDPConfig, int]]:
         # a copy or an unpickled one is the shared step of its problem, settings and horizon
@@ -382,9 +384,10 @@ class ModelPredictiveController:
             self._plan_states, self._plan_controls, self._warm = states, controls, warm
         else:
             self.compiled = compiled_step(self.problem, ddp, self.horizon)
-            self._plan_states = jax.device_put(states)
-            self._plan_controls = jax.device_put(controls)
-            self._warm = jax.device_put(warm)
+            with jax_setup.float64():  # float64 on the device too
+                self._plan_states = jax.device_put(states)
+                self._plan_controls = jax.device_put(controls)
+                self._warm = jax.device_put(warm)
         self._first = True  # the first step warm-starts from the plan's controls
         n, m = states.shape[1], controls.shape[1]
         self._sizes = ((H + 1) * n, H * m)

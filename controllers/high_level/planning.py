@@ -18,6 +18,7 @@ from typing import Literal
 import jax
 import numpy as np
 
+from controllers.optimizer import jax_setup
 from controllers.optimizer.ddp import DDPConfig
 from controllers.simplified.wipm import WIPMParams
 from controllers.simplified.wipm_problem import (
@@ -336,7 +337,8 @@ def plan_to_goal(
     result = solver(z0, np.zeros((steps, m)), params, refs)
     Z = np.asarray(result.X)
     states, controls = Z[:, :n], Z[:-1, n:]
-    accelerations = np.asarray(_accelerations(problem)(states[:-1], controls, params))
+    with jax_setup.float64():
+        accelerations = np.asarray(_accelerations(problem)(states[:-1], controls, params))
     peak_a = float(accelerations.max())
     peak_theta = float(np.abs(states[:, problem.theta_index]).max())
     times = np.arange(steps + 1) * config.dt

@@ -54,6 +54,7 @@ from typing import Any
 
 import numpy as np
 
+from controllers.optimizer import jax_setup
 from controllers.optimizer.ddp import DDPConfig
 from controllers.optimizer.scalar_codegen import nan_max, nan_min
 
@@ -421,6 +422,7 @@ OPTIONS = 'cache=True, error_model="numpy", nogil=True, fastmath={"contract"}'
 # Generation
 
 
+@jax_setup.in_float64  # traced in float64 whatever the process's JAX settings
 def _stage_sources(problem: Any, params: Any) -> list[str]:
     """The three stage functions of ``problem`` (a :class:`WIPMProblem` of the MPC: state
     ``s``, input ``u``) as scalar source, its constants and ``params``' leaves inputs."""

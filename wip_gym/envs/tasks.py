@@ -103,8 +103,9 @@ _COMMON = """
     | `payload_mass` | 0.0 | kg welded to the hand (`ee` site) |
     | `payload_time` | 0.0 | s at which the payload appears (0: from the start) |
     | `push_force` | 0.0 | N along the heading at the torso's CoM (sign = direction); with a push the env owns that body's `data.xfrc_applied` (zeroed outside the push), without one it never writes it |
-    | `push_time`, `push_duration` | 1.0, 0.1 | s |
-    | `reset_noise_scale` | 0.01 | rad and rad/s |
+    | `push_time` | 1.0 | s at which the push starts |
+    | `push_duration` | 0.1 | s the push lasts |
+    | `reset_noise_scale` | 0.01 | half-width of the uniform reset noise on the base pitch, body joints and their rates (rad, rad/s) |
     | `mass_randomization` | 0.0 | each link's mass and inertia scaled by `1 + U(-f, f)` per reset |
     | `wheel_torque_limit` | 150.0 | N m per wheel (authors' simulation); 63.6 for Krang's hardware |
     | `terminate_on_cup_loss` | True | end the episode when the cup leaves the tray |
