@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 
 from controllers.high_level.planning import Plan, PlanConfig
 from controllers.high_level.receding_horizon import HighLevel, HighLevelConfig
+from controllers.high_level.tray_reference import tilt_toward
 from controllers.low_level.disturbance_tasks import DisturbanceRejectingTask, ObserverSettings
 from controllers.low_level.task_qp import QPSettings, TaskQP
 from controllers.low_level.tasks import (
@@ -48,7 +49,6 @@ from wip_gym.robot_model import RobotModel
 from wip_gym.wheel_torques import generalized_to_wheel_matrix
 
 Array = NDArray[np.float64]
-GRAVITY = 9.81
 
 
 @dataclass(frozen=True)
@@ -213,22 +213,6 @@ def authors_joint_weights(robot: RobotModel) -> tuple[Array, Array]:
         posture.append(p)
         speed.append(v)
     return np.array(posture), np.array(speed)
-
-
-def tilt_toward(acceleration: Array, max_tilt_deg: float) -> Array:
-    """Rotation (axle frame) taking ``e_z`` to the direction of ``a - g``, tilt bounded."""
-    specific = np.array([acceleration[0], acceleration[1], GRAVITY])
-    n = specific / np.linalg.norm(specific)
-    axis = np.cross([0.0, 0.0, 1.0], n)
-    s = np.linalg.norm(axis)
-    angle = min(np.arctan2(s, n[2]), np.radians(max_tilt_deg))
-    if s < 1e-12:
-        return np.eye(3)
-    quat = np.zeros(4)
-    mujoco.mju_axisAngle2Quat(quat, axis / s, angle)
-    R = np.zeros(9)
-    mujoco.mju_quat2Mat(R, quat)
-    return R.reshape(3, 3)
 
 
 # the per-step diagnostics, in the order __call__ records them (DiagnosticsRecorder.record_row);
