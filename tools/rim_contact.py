@@ -22,9 +22,18 @@ contact with the rim walls changes between variants:
 Figures, per variant: the reach (mm) of the cup's wall, from its bottom up to the rim's height,
 past the rim's inner face when it meets the rim at 0.25, 0.5 and 1.0 m/s: the largest over 8
 phases of arrival (launched from 1 mm short of the wall to one step's travel more), read 50 ms;
-and the impact speed above which it tips over the rim's edge (bisection to 2 mm/s; tipped: its
-tilt passes 90 deg within 1 s) at rest and at a sustained 1.5 m/s^2 toward the rim (gravity
-turned), cup friction 0.05, beside the rigid cup's (``tests/test_rim.py``: ``impact_energy``).
+and the launch speed from which it falls over (its tilt passes 90 deg within 1 s: over the
+rim's edge, or through the wall where the reach says it passes; bisection to 2 mm/s) at rest
+and at a sustained 1.5 m/s^2 toward the rim (gravity turned), cup friction 0.05, beside the
+speed from which a rigid cup tips over the edge (``tests/test_rim.py``: ``impact_energy``).
+About 20 s a variant.
+
+``--cost``: what the model's rim contact costs while it acts. On ``KrangTray-v0`` with the rim
+(welded and free), robot held still, gravity turned for 1.5 m/s^2 along the tray's x, friction
+0.05 (the cup slides into the rim and leans on it), the state before each of 1500 steps is
+recorded and a bare ``mj_step`` replayed from each (as ``wip-bench profile`` times its floor),
+in the unit of ``benchmarks.speed.yardstick`` timed in bursts between them: the medians over
+the steps where the cup slides on the plate and where it touches the rim.
 """
 
 from __future__ import annotations
@@ -32,14 +41,17 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+import time
 from collections.abc import Callable
 from pathlib import Path
 
+import gymnasium as gym
 import mujoco
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from benchmarks.speed.yardstick import ReferenceStep  # noqa: E402
 from wip_gym.scene import (  # noqa: E402
     AUTHORS_TRAY_RIM,
     CUP_FEET,
@@ -206,10 +218,65 @@ def rigid_tipping_speed(acceleration: float) -> float:
     return math.sqrt(2 * k2 * energy) / pivot
 
 
+def contact_cost(attachment: str) -> tuple[float, float]:
+    """Median bare ``mj_step`` (units) of the steps where the cup slides and where it touches
+    the rim (see ``--cost`` in the module docstring)."""
+    env = gym.make(
+        "wip_gym/KrangTray-v0",
+        tray_rim=AUTHORS_TRAY_RIM,
+        tray_attachment=attachment,
+        cup_friction=FRICTION,
+        reset_noise_scale=0.0,
+        terminate_on_cup_loss=False,
+    )
+    env.reset(seed=0)
+    base = env.unwrapped
+    m, d = base.model, base.data
+    nq, nv = base.robot.layout.nq, base.robot.layout.nv
+    held = d.qpos[:nq].copy()
+    m.dof_armature[:nv] = 1e6  # the robot held (the harness of tests/test_rim.py)
+    m.opt.gravity[:] = d.xmat[m.body("tray").id].reshape(3, 3) @ np.array([1.5, 0.0, -G])
+    walls = {m.geom(name).id for name in _tray_geom_names(AUTHORS_TRAY_RIM)[1:]}
+    cup = set(np.flatnonzero(m.geom_bodyid == m.body("cup").id).tolist())
+    kind = mujoco.mjtState.mjSTATE_INTEGRATION
+    states, touching = [], []
+    for _ in range(1500):
+        d.qpos[:nq] = held
+        d.qvel[:nv] = 0.0
+        mujoco.mj_forward(m, d)
+        d.qfrc_applied[:nv] = d.qfrc_bias[:nv]
+        state = np.zeros(mujoco.mj_stateSize(m, kind))
+        mujoco.mj_getState(m, d, state, kind)
+        states.append(state)
+        mujoco.mj_step(m, d)
+        pairs = [set(d.contact.geom[i].tolist()) for i in range(d.ncon)]
+        touching.append(any(p & walls and p & cup for p in pairs))
+    unit, scratch, times = ReferenceStep(), mujoco.MjData(m), []
+    units = unit.burst(100)
+    for k, state in enumerate(states):
+        mujoco.mj_setState(m, scratch, state, kind)
+        start = time.perf_counter()
+        mujoco.mj_step(m, scratch)
+        times.append(time.perf_counter() - start)
+        if (k + 1) % 100 == 0:
+            units += unit.burst(20)
+    reference = float(np.median(units))
+    steps, rim = np.array(times[100:]) / reference, np.array(touching[100:])
+    return float(np.median(steps[~rim])), float(np.median(steps[rim]))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--variants", nargs="+", choices=list(VARIANTS), default=list(VARIANTS))
+    parser.add_argument("--cost", action="store_true", help="the rim contact's cost instead")
     args = parser.parse_args()
+    if args.cost:
+        print("| KrangTray-v0, rim | bare mj_step (units): cup sliding | cup on the rim |")
+        print("|---|---|---|")
+        for attachment in ("welded", "free"):
+            sliding, on_rim = contact_cost(attachment)
+            print(f"| {attachment} | {sliding:.2f} | {on_rim:.2f} |", flush=True)
+        return
     task = build_model(
         SceneOptions("krang", tray=True, cup=True, cup_friction=FRICTION, tray_rim=AUTHORS_TRAY_RIM)
     )

@@ -83,8 +83,8 @@ CUP_FOOT_RADIUS = 0.001
 #: assets/mjcf/README.md ("Contacts of the tray and the cup") gives the measurements.
 STIFF_SOLREF = (0.002, 1.0)
 #: solimp of the stiff pairs: an impedance of 0.99 at any depth (dmin = dmax; MuJoCo's default
-#: rises from 0.9 to 0.95 over the first mm), the constraint as hard as the wheels' (0.9999 moves
-#: no measured figure: penetrations and tipping speeds equal to 0.1 mm and 0.2 %)
+#: rises from 0.9 to 0.95 over the first mm); the wheels' 0.9999 changes none of the figures of
+#: tools/rim_contact.py
 STIFF_SOLIMP = (0.99, 0.99, 0.001, 0.5, 2.0)
 PAYLOAD_RADIUS = 0.04  # a 8 cm sphere in the hand, for its inertia and its picture
 
