@@ -1,7 +1,7 @@
 """Measure how the tray's rim meets the cup, for the model's contact and the variants it was
 chosen against (assets/mjcf/README.md, "Contacts of the tray and the cup").
 
-    python tools/rim_contact.py [--variants stiff mujoco-default ...]
+    python -m tools.rim_contact [--variants stiff mujoco-default ...] [--cost]
 
 The scene: the task's tray (``wip_gym.scene._add_tray``: the plate and the 5 mm rim) fixed in
 world, level, and the task's cup (``wip_gym.scene.add_cup``: its cylinder and feet on the
@@ -40,19 +40,15 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
 import time
 from collections.abc import Callable
-from pathlib import Path
 
 import gymnasium as gym
 import mujoco
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from benchmarks.speed.yardstick import ReferenceStep  # noqa: E402
-from wip_gym.scene import (  # noqa: E402
+from benchmarks.speed.yardstick import ReferenceStep
+from wip_gym.scene import (
     AUTHORS_TRAY_RIM,
     CUP_FEET,
     CUP_HALF_HEIGHT,
