@@ -101,6 +101,27 @@ def test_a_tray_left_behind_tilts_further_forward():
     assert slowing[1] == pytest.approx(-0.4)
 
 
+def test_a_tray_resting_tilted_is_levelled_first():
+    rng = np.random.default_rng(4)
+    normal = np.array([0.03, -0.04, 1.0])
+    normal /= np.linalg.norm(normal)
+    base = _reference()
+    ref = TrayReference(
+        base.pivot, [base.pivot + a for a in base._arms], base._rotations, TrayGains(), normal
+    )
+    np.testing.assert_allclose(ref.level @ normal, [0.0, 0.0, 1.0], atol=1e-12)
+    # the smallest such rotation: its axis is horizontal and its angle the normal's tilt
+    angle = np.degrees(np.arccos(np.clip((np.trace(ref.level) - 1) / 2, -1, 1)))
+    assert angle == pytest.approx(np.degrees(np.arccos(normal[2])), abs=1e-9)
+    a = tuple(rng.normal(size=2))
+    targets = ref.targets(a, np.zeros(3), np.zeros(3))
+    # the plate's normal, turned with the hands, is the specific force's direction
+    (_, R1), R10 = targets[0], base._rotations[0]
+    turned = (R1 @ R10.T) @ normal
+    specific = np.array([a[0], a[1], GRAVITY])
+    np.testing.assert_allclose(turned, specific / np.linalg.norm(specific), atol=1e-12)
+
+
 def test_the_tilt_is_bounded_and_bad_gains_are_refused():
     R = tilt_toward(np.array([100.0, 0.0]), 10.0)
     assert np.degrees(np.arccos(R[2, 2])) == pytest.approx(10.0)

@@ -92,9 +92,18 @@ class TrayGains:
             raise ValueError(f"max_tilt_deg must be in (0, 90), got {self.max_tilt_deg!r}")
 
 
+def leveling_rotation(normal: Array) -> Array:
+    """The smallest rotation taking the unit vector ``normal`` to ``e_z``."""
+    n = np.asarray(normal, dtype=float) / np.linalg.norm(normal)
+    return tilt_toward(np.array([-n[0], -n[1]]) * GRAVITY / n[2], 90.0)
+
+
 class TrayReference:
     """The targets of the hands that hold the tray (module docstring): made from their reset
-    poses in the axle frame and the plate centre's, then :meth:`targets` each control step."""
+    poses in the axle frame, the plate centre's and the plate's normal, then :meth:`targets`
+    each control step. A tray that rests tilted on the hand at reset (a free tray on Krang's
+    finger plates, 2.9 deg) is levelled first: the targets turn by ``R_tilt R_level``, with
+    ``R_level`` the smallest rotation taking the reset normal to the vertical."""
 
     def __init__(
         self,
@@ -102,9 +111,13 @@ class TrayReference:
         hand_positions: Sequence[Array],
         hand_rotations: Sequence[Array],
         gains: TrayGains,
+        normal: Array = (0.0, 0.0, 1.0),
     ) -> None:
         if len(hand_positions) != len(hand_rotations) or not hand_positions:
             raise ValueError("one reset position and rotation per hand, at least one hand")
+        if not np.asarray(normal, dtype=float)[2] > 0:
+            raise ValueError(f"the plate's normal must point up, got {normal!r}")
+        self.level = leveling_rotation(np.asarray(normal, dtype=float))
         self.pivot = np.array(pivot, dtype=float)
         self._arms = [np.array(p, dtype=float) - self.pivot for p in hand_positions]
         self._rotations = [np.array(R, dtype=float) for R in hand_rotations]
@@ -127,10 +140,12 @@ class TrayReference:
     def targets(
         self, plan_acceleration: tuple[float, float], drift: Array, drift_rate: Array
     ) -> list[tuple[Array, Array]]:
-        """Each hand's target ``(position, rotation)`` in the axle frame: its reset pose turned
-        by the tilt toward ``a_d - g`` about the plate's centre at its reset place."""
+        """Each hand's target ``(position, rotation)`` in the axle frame: its reset pose
+        levelled and turned by the tilt toward ``a_d - g``, about the plate's centre at its
+        reset place."""
         a = self.desired_acceleration(plan_acceleration, drift, drift_rate)
-        self.tilt = R = tilt_toward(a, self.gains.max_tilt_deg)
+        self.tilt = tilt_toward(a, self.gains.max_tilt_deg)
+        R = self.tilt @ self.level
         return [
             (self.pivot + R @ arm, R @ rotation)
             for arm, rotation in zip(self._arms, self._rotations, strict=True)
