@@ -1,6 +1,8 @@
 """The "traditional" decoupled Krang controllers the paper compares against: the wheels
 balance the whole robot as one inverted pendulum, the upper body is held at its posture by
-joint PD with gravity compensation (``controllers.low_level.posture``), blind to balance.
+joint PD with gravity compensation (``controllers.low_level.posture``), blind to balance; the
+hold takes over from the reset state, stopping the joints' reset velocities over
+``posture_stop_time_s`` (``controllers.baselines.stopping_hold``).
 
 * :class:`DecoupledController` (registry ``decoupled``): Krang 2014 as published
   (docs/AUTHORS_CONFIG.md §5.2). It balances about ``theta_ref = 0``, ``thetad_ref = 0`` and
@@ -46,6 +48,7 @@ from numpy.typing import NDArray
 
 from controllers.baselines.lqr import dlqr, zero_order_hold
 from controllers.baselines.minimum_jerk import GoalReference
+from controllers.baselines.stopping_hold import StoppingHold
 from controllers.high_level.planning import Plan, PlanConfig, plan_to_goal
 from controllers.low_level.posture import PostureHold
 from controllers.policy import ModelChoice, PolicyBase, TaskInfo, plan_counters
@@ -170,6 +173,9 @@ class DecoupledConfig:
             ``-heading_gain_amps`` in BAL_LO's spin-position slot (module docstring).
         plan: the offline plan whose ``x``, ``xd`` (and ``psi``, ``psid``) are tracked.
         posture_frequency_hz, posture_damping_ratio: the joint PD holding the upper body.
+        posture_stop_time_s: how long the hold takes to stop the joints' reset velocities
+            (``controllers.baselines.stopping_hold``; 0 stops them in one step), as in
+            ``decoupled-mpc`` (docs/controllers.md §3).
     """
 
     model: ModelChoice = "nominal"
@@ -181,6 +187,7 @@ class DecoupledConfig:
     plan: PlanConfig = field(default_factory=PlanConfig)
     posture_frequency_hz: float = 5.0
     posture_damping_ratio: float = 1.0
+    posture_stop_time_s: float = 0.1
 
     def __post_init__(self) -> None:
         if len(self.gains_amps) != 6 or not np.all(np.isfinite(self.gains_amps)):
@@ -212,7 +219,9 @@ class DecoupledController(PolicyBase):
 
     def __init__(self, robot: RobotModel, task: TaskInfo, config: DecoupledConfig) -> None:
         super().__init__(robot, task, config)
-        self._posture = PostureHold(config.posture_frequency_hz, config.posture_damping_ratio)
+        self._posture = StoppingHold(
+            config.posture_frequency_hz, config.posture_damping_ratio, config.posture_stop_time_s
+        )
         self.plan: Plan | None = None
         self._heading_amps = 0.0
         self._spin_clamped_steps = 0
@@ -268,7 +277,7 @@ class DecoupledController(PolicyBase):
             cfg.torque_per_amp * currents.wheels[0],
             cfg.torque_per_amp * currents.wheels[1],
         )
-        action = self.assemble(wheels, self._posture.torques(robot))
+        action = self.assemble(wheels, self._posture.torques(robot, t=t))
         applied = self.finish(action)
         self._step += 1
         self._recorder.record(
@@ -334,6 +343,8 @@ class DecoupledLQRConfig:
         max_spin_acceleration: peak heading acceleration of that reference (rad/s^2).
         posture_frequency_hz, posture_damping_ratio: the joint PD holding the upper body, set per
             joint from its inertia at reset (``Kp = A_jj w^2``, ``Kd = 2 zeta A_jj w``).
+        posture_stop_time_s: how long the hold takes to stop the joints' reset velocities (as
+            ``DecoupledConfig``'s).
     """
 
     model: ModelChoice = "nominal"
@@ -351,6 +362,7 @@ class DecoupledLQRConfig:
     max_spin_acceleration: float = 0.5
     posture_frequency_hz: float = 5.0
     posture_damping_ratio: float = 1.0
+    posture_stop_time_s: float = 0.1
 
     def __post_init__(self) -> None:
         if self.reference not in ("plan", "minimum_jerk"):
@@ -373,7 +385,9 @@ class DecoupledLQRController(PolicyBase):
         self._planar = robot.layout.planar
         self._K = np.zeros((0, 0))
         self._reference: Callable[[float], dict[str, float]] | None = None
-        self._posture = PostureHold(config.posture_frequency_hz, config.posture_damping_ratio)
+        self._posture = StoppingHold(
+            config.posture_frequency_hz, config.posture_damping_ratio, config.posture_stop_time_s
+        )
         self.plan: Plan | None = None
 
     # ----------------------------------------------------------------- reset
@@ -488,7 +502,7 @@ class DecoupledLQRController(PolicyBase):
         u = -self._K @ np.append(error, self._integral)
         self._integral += x_error * self.task.control_dt
         wheels = (0.5 * u[0], 0.5 * u[0]) if self._planar else (u[0], u[1])
-        applied = self.finish(self.assemble(wheels, self._posture.torques(robot)))
+        applied = self.finish(self.assemble(wheels, self._posture.torques(robot, t=t)))
         self._step += 1
         self._recorder.record(
             t=t,
