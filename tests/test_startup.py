@@ -99,13 +99,12 @@ def test_velocity_stop_profile() -> None:
         stop(-1e-3)
 
 
-@pytest.mark.parametrize("controller", ["decoupled", "decoupled-lqr", "decoupled-mpc"])
-def test_the_holds_reference_starts_at_the_reset_state(controller: str) -> None:
-    """The reference's initial position and velocity are the reset's joint positions and
-    velocities (the reset's noise, nonzero), as the env made them."""
+def test_the_holds_reference_starts_at_the_reset_state() -> None:
+    """decoupled-mpc: the reference's initial position and velocity are the reset's joint
+    positions and velocities (the reset's noise, nonzero), as the env made them."""
     env = gym.make("wip_gym/KrangTray-v0")
     observation, info = env.reset(seed=3)
-    policy = registry.make_policy(controller, env)
+    policy = registry.make_policy("decoupled-mpc", env)
     policy.reset(observation, info)
     hold = policy._posture
     assert isinstance(hold, StoppingHold) and hold.stop is not None
@@ -119,6 +118,23 @@ def test_the_holds_reference_starts_at_the_reset_state(controller: str) -> None:
     assert np.abs(v).min() > 0 and np.abs(v).max() <= wip_env(env).reset_noise_scale
     np.testing.assert_array_equal(a, 0.0)
     assert hold.stop.duration == policy.config.posture_stop_time_s == 0.1
+    env.close()
+
+
+@pytest.mark.parametrize("controller", ["decoupled", "decoupled-lqr"])
+def test_the_5_hz_holds_stop_in_one_step(controller: str) -> None:
+    """decoupled and decoupled-lqr keep the step stop (their 5 Hz step shows in no episode's
+    friction use): from t = 0 their reference is the reset posture at rest."""
+    env = gym.make("wip_gym/PlanarTray-v0")
+    observation, info = env.reset(seed=3)
+    policy = registry.make_policy(controller, env)
+    policy.reset(observation, info)
+    hold = policy._posture
+    assert isinstance(hold, StoppingHold) and hold.stop is not None
+    assert hold.stop.duration == policy.config.posture_stop_time_s == 0.0
+    q, v, a = hold.stop(0.0)
+    np.testing.assert_array_equal(q, hold.posture)
+    np.testing.assert_array_equal(v, 0.0)
     env.close()
 
 

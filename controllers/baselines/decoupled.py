@@ -1,8 +1,9 @@
 """The "traditional" decoupled Krang controllers the paper compares against: the wheels
 balance the whole robot as one inverted pendulum, the upper body is held at its posture by
-joint PD with gravity compensation (``controllers.low_level.posture``), blind to balance; the
-hold takes over from the reset state, stopping the joints' reset velocities over
-``posture_stop_time_s`` (``controllers.baselines.stopping_hold``).
+joint PD with gravity compensation (``controllers.low_level.posture``), blind to balance. The
+hold stops the joints' reset velocities in one step (``posture_stop_time_s = 0``: at 5 Hz that
+step shows in no episode's cup friction use; ``decoupled-mpc``'s 20 Hz hold stops them over
+0.1 s, docs/controllers.md §3).
 
 * :class:`DecoupledController` (registry ``decoupled``): Krang 2014 as published
   (docs/AUTHORS_CONFIG.md §5.2). It balances about ``theta_ref = 0``, ``thetad_ref = 0`` and
@@ -174,8 +175,8 @@ class DecoupledConfig:
         plan: the offline plan whose ``x``, ``xd`` (and ``psi``, ``psid``) are tracked.
         posture_frequency_hz, posture_damping_ratio: the joint PD holding the upper body.
         posture_stop_time_s: how long the hold takes to stop the joints' reset velocities
-            (``controllers.baselines.stopping_hold``; 0 stops them in one step), as in
-            ``decoupled-mpc`` (docs/controllers.md §3).
+            (``controllers.baselines.stopping_hold``): 0, in one step, as ``PostureHold``; at
+            5 Hz the step shows in no episode's cup friction use (docs/controllers.md §3).
     """
 
     model: ModelChoice = "nominal"
@@ -187,7 +188,7 @@ class DecoupledConfig:
     plan: PlanConfig = field(default_factory=PlanConfig)
     posture_frequency_hz: float = 5.0
     posture_damping_ratio: float = 1.0
-    posture_stop_time_s: float = 0.1
+    posture_stop_time_s: float = 0.0
 
     def __post_init__(self) -> None:
         if len(self.gains_amps) != 6 or not np.all(np.isfinite(self.gains_amps)):
@@ -343,8 +344,8 @@ class DecoupledLQRConfig:
         max_spin_acceleration: peak heading acceleration of that reference (rad/s^2).
         posture_frequency_hz, posture_damping_ratio: the joint PD holding the upper body, set per
             joint from its inertia at reset (``Kp = A_jj w^2``, ``Kd = 2 zeta A_jj w``).
-        posture_stop_time_s: how long the hold takes to stop the joints' reset velocities (as
-            ``DecoupledConfig``'s).
+        posture_stop_time_s: how long the hold takes to stop the joints' reset velocities: 0,
+            in one step (as ``DecoupledConfig``'s).
     """
 
     model: ModelChoice = "nominal"
@@ -362,7 +363,7 @@ class DecoupledLQRConfig:
     max_spin_acceleration: float = 0.5
     posture_frequency_hz: float = 5.0
     posture_damping_ratio: float = 1.0
-    posture_stop_time_s: float = 0.1
+    posture_stop_time_s: float = 0.0
 
     def __post_init__(self) -> None:
         if self.reference not in ("plan", "minimum_jerk"):
