@@ -123,8 +123,8 @@ def test_the_holds_reference_starts_at_the_reset_state() -> None:
 
 @pytest.mark.parametrize("controller", ["decoupled", "decoupled-lqr"])
 def test_the_5_hz_holds_stop_in_one_step(controller: str) -> None:
-    """decoupled and decoupled-lqr keep the step stop (their 5 Hz step shows in no episode's
-    friction use): from t = 0 their reference is the reset posture at rest."""
+    """decoupled and decoupled-lqr keep the step stop (their 5 Hz step does not show in the
+    cup's friction peak): from t = 0 their reference is the reset posture at rest."""
     env = gym.make("wip_gym/PlanarTray-v0")
     observation, info = env.reset(seed=3)
     policy = registry.make_policy(controller, env)

@@ -2,8 +2,8 @@
 balance the whole robot as one inverted pendulum, the upper body is held at its posture by
 joint PD with gravity compensation (``controllers.low_level.posture``), blind to balance. The
 hold stops the joints' reset velocities in one step (``posture_stop_time_s = 0``: at 5 Hz that
-step shows in no episode's cup friction use; ``decoupled-mpc``'s 20 Hz hold stops them over
-0.1 s, docs/controllers.md §3).
+step does not show in the cup's friction peak on the default scenario or the paper's Krang;
+``decoupled-mpc``'s 20 Hz hold stops them over 0.1 s, docs/controllers.md §3).
 
 * :class:`DecoupledController` (registry ``decoupled``): Krang 2014 as published
   (docs/AUTHORS_CONFIG.md §5.2). It balances about ``theta_ref = 0``, ``thetad_ref = 0`` and
@@ -176,7 +176,7 @@ class DecoupledConfig:
         posture_frequency_hz, posture_damping_ratio: the joint PD holding the upper body.
         posture_stop_time_s: how long the hold takes to stop the joints' reset velocities
             (``controllers.baselines.stopping_hold``): 0, in one step, as ``PostureHold``; at
-            5 Hz the step shows in no episode's cup friction use (docs/controllers.md §3).
+            5 Hz the step does not show in the cup's friction peak (docs/controllers.md §3).
     """
 
     model: ModelChoice = "nominal"
