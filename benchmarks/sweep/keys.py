@@ -29,7 +29,8 @@ def validate_key(
         raise ValueError(
             f"unknown key {key!r}: expected env.<argument>, plan.<field> or <controller>.<path>"
         )
-    configs = {name: registry.default_config(name, preset) for name in controllers}
+    controller_preset = presets.controller_preset(preset)
+    configs = {name: registry.default_config(name, controller_preset) for name in controllers}
     settings = overrides.valid_settings(env_id, configs)
     if key not in settings:
         if head not in ("env", "plan", *controllers):
@@ -53,6 +54,9 @@ PRESETS: tuple[str, ...] = presets.PRESET_NAMES
 
 
 def validate_preset(preset: str | None, env_id: str) -> None:
-    """ValueError naming ``preset`` unless the episode runner has it (None: no preset)."""
-    if preset is not None and preset not in PRESETS:
-        raise ValueError(f"unknown preset {preset!r} for {env_id}; valid: {list(PRESETS)}")
+    """ValueError naming ``preset`` unless the episode runner has it (None: no preset; several
+    names joined by commas compose, ``benchmarks.presets``)."""
+    try:
+        presets.preset_names(preset)
+    except ValueError as error:
+        raise ValueError(f"{error} (for {env_id})") from None
