@@ -8,8 +8,9 @@ module changes it in a task's ``MjSpec`` before it is compiled:
   goal marker sits on it.
 * **bumps** (``bump_height``, ``bump_spacing``, ``bump_width``): boxes across the path, their
   flat tops ``bump_height`` above the floor surface, ``bump_width`` long along x, every
-  ``bump_spacing`` metres along the floor surface from the start (none at the start), from 2 m
-  behind it to 5 m beyond the goal, 5 m to each side of the path. They lie on the slope.
+  ``bump_spacing`` metres along the floor surface from the start (none at the start), over the
+  course from start to goal and 5 m beyond either end, 5 m to each side of the path. They lie
+  on the slope.
 
 The bumps meet the **wheels only**: contype 8 and conaffinity 0, and the wheel collision geoms
 get conaffinity bit 8 (the robot's links keep theirs, so a link passes through a bump and a
@@ -31,10 +32,8 @@ import numpy as np
 #: the collision bit the bumps and the wheels share (the robot uses 1 and 2, the cup and the
 #: free tray 4)
 BUMP_COLLISION_BIT = 8
-#: bumps run from this far behind the start to this far beyond the goal, and this far to each
-#: side of the path (m)
-BUMPS_BEHIND = 2.0
-BUMPS_BEYOND_GOAL = 5.0
+#: bumps run this far beyond the course's ends (start and goal) and to each side of the path (m)
+BUMPS_MARGIN = 5.0
 BUMPS_HALF_LENGTH = 5.0
 #: how deep a bump's box reaches below the floor surface (m): no gap at its foot on any slope
 BUMP_FOOTING = 0.02
@@ -111,12 +110,12 @@ def _slope_quat(alpha: float) -> np.ndarray:
 
 def bump_positions(options: FloorOptions, goal: tuple[float, float]) -> list[float]:
     """Where the bumps' centres are along the floor surface from the start (m): every
-    ``bump_spacing`` from ``BUMPS_BEHIND`` behind the start to ``BUMPS_BEYOND_GOAL`` beyond the
-    goal's x, none at the start. ``ValueError`` beyond ``MAX_BUMPS``."""
+    ``bump_spacing``, none at the start, ``BUMPS_MARGIN`` beyond the start and the goal's x
+    either way. ``ValueError`` beyond ``MAX_BUMPS``."""
     if options.bump_height == 0.0:
         return []
-    ahead = max(goal[0], 0.0) + BUMPS_BEYOND_GOAL
-    behind = max(-goal[0], 0.0) + BUMPS_BEHIND
+    ahead = max(goal[0], 0.0) + BUMPS_MARGIN
+    behind = max(-goal[0], 0.0) + BUMPS_MARGIN
     n_ahead = int(math.floor(ahead / options.bump_spacing))
     n_behind = int(math.floor(behind / options.bump_spacing))
     if n_ahead + n_behind > MAX_BUMPS:
