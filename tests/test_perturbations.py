@@ -125,6 +125,19 @@ def test_a_delayed_action_acts_exactly_that_many_steps_later(env_id: str) -> Non
         np.testing.assert_array_equal(applied, zero if k < d else actions[k - d])
 
 
+def test_the_delay_line_keeps_its_own_copy_of_each_action() -> None:
+    """A policy may write each action into the same array: the line holds what was given."""
+    env = _make(PLANAR, action_delay_steps=2)
+    env.reset(seed=1)
+    actions = _actions(env, 10, 6)
+    buffer = np.zeros(env.action_space.shape)
+    for k, a in enumerate(actions):
+        buffer[:] = a
+        env.step(buffer)
+        if k >= 2:
+            np.testing.assert_array_equal(env.unwrapped.data.ctrl, actions[k - 2])
+
+
 def test_action_jitter_draws_each_steps_delay_from_its_range() -> None:
     env = _make(PLANAR, action_delay_steps=1, action_delay_jitter_steps=2)
     env.reset(seed=5)

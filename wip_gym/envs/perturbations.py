@@ -367,7 +367,7 @@ class Perturber:
         """The torques applied this step for the policy's ``action``: the action delay line's
         output, plus the torque noise, saturated at the actuators' limits (the motor cannot
         give more; only the noise can reach past them, the policy's action is checked)."""
-        applied = self._action_line.push(action)
+        applied = self._action_line.push(action.copy())  # the caller may reuse its array
         if self.settings.torque_noise > 0:
             noise = self._streams[TORQUE_STREAM].standard_normal(len(applied))
             applied = np.clip(applied + noise * self._torque_sigma, self._ctrl_low, self._ctrl_high)
