@@ -273,6 +273,7 @@ class Perturber:
             else None
         )
         self._obs_line = DelayLine(s.obs_delay_steps, s.obs_delay_jitter_steps)
+        self._obs_delayed = s.obs_delay_steps > 0 or s.obs_delay_jitter_steps > 0
         self._action_line = DelayLine(s.action_delay_steps, s.action_delay_jitter_steps)
         self._torque_sigma = s.torque_noise * np.maximum(
             np.abs(model.actuator_ctrlrange[:, 0]), np.abs(model.actuator_ctrlrange[:, 1])
@@ -385,6 +386,8 @@ class Perturber:
                 )
             qpos, qvel = self.sensors.sense(observation["qpos"], observation["qvel"], first)
             sensed = {**observation, "qpos": qpos, "qvel": qvel}
+        if not self._obs_delayed:  # the sensed observation's arrays are fresh already
+            return sensed
         if first:
             self._obs_line.reset(sensed, self._streams[OBS_DELAY_STREAM])
             return _copy(sensed)

@@ -111,36 +111,14 @@ class SensorFigures:
     joint_step: float
 
 
-def _quat_mul(a: Array, b: Array) -> Array:
-    w1, x1, y1, z1 = a
-    w2, x2, y2, z2 = b
-    return np.array(
-        [
-            w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
-            w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
-        ]
-    )
-
-
-def rotation_quat(vector: Array) -> Array:
-    """The unit quaternion of the rotation vector ``vector`` (axis times angle, rad)."""
-    angle = float(np.linalg.norm(vector))
+def rotation_quat(x: float, y: float, z: float) -> tuple[float, float, float, float]:
+    """The unit quaternion ``(w, x, y, z)`` of the rotation vector ``(x, y, z)`` (axis times
+    angle, rad)."""
+    angle = math.sqrt(x * x + y * y + z * z)
     if angle == 0.0:
-        return np.array([1.0, 0.0, 0.0, 0.0])
-    return np.concatenate(([math.cos(angle / 2)], math.sin(angle / 2) * vector / angle))
-
-
-def _base_rotation(quat: Array) -> Array:
-    w, x, y, z = quat
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
+        return (1.0, 0.0, 0.0, 0.0)
+    k = math.sin(angle / 2) / angle
+    return (math.cos(angle / 2), k * x, k * y, k * z)
 
 
 class Sensors:
@@ -157,15 +135,15 @@ class Sensors:
         self._steps = np.array([figures.wheel_step] * 2 + [figures.joint_step] * len(lay.body_qpos))
         self._offsets = np.zeros(len(self._steps))
         self._previous = np.zeros(len(self._steps))
-        self._attitude_bias = np.zeros(3)
-        self._gyro_bias = np.zeros(3)
+        self._attitude_bias_floats: tuple[float, ...] = (0.0, 0.0)
+        self._gyro_bias_floats: tuple[float, ...] = (0.0, 0.0, 0.0)
         self._yaw_drift = 0.0
         self._rng = np.random.default_rng(0)
-        #: the last observation's errors, for inspection and tests: attitude (roll, pitch,
-        #: yaw) about the heading frame (rad), gyro (rad/s, the base frame; planar: pitch in
-        #: [1]), encoder readings minus the true angles (rad), wheels first
-        self.last_attitude_error = np.zeros(3)
-        self.last_gyro_error = np.zeros(3)
+        #: the last observation's errors, for inspection: attitude (roll, pitch, yaw) about
+        #: the heading frame (rad), gyro (rad/s, the base frame; planar: pitch in [1]),
+        #: encoder readings minus the true angles (rad), wheels first
+        self.last_attitude_error: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        self.last_gyro_error: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self.last_encoder_error = np.zeros(len(self._steps))
 
     def _read(self, angles: Array) -> Array:
@@ -178,9 +156,9 @@ class Sensors:
         offsets from ``rng`` (the sensors' own stream, kept for :meth:`sense`)."""
         f = self.figures
         self._rng = rng
-        self._attitude_bias = rng.normal(0.0, 1.0, 3) * f.attitude_bias
-        self._attitude_bias[2] = 0.0  # the heading's error grows from the gyro's bias
-        self._gyro_bias = rng.normal(0.0, 1.0, 3) * f.gyro_bias
+        # roll and pitch; the heading's error grows from the gyro's bias
+        self._attitude_bias_floats = tuple((rng.normal(0.0, 1.0, 2) * f.attitude_bias).tolist())
+        self._gyro_bias_floats = tuple((rng.normal(0.0, 1.0, 3) * f.gyro_bias).tolist())
         self._offsets = rng.uniform(-0.5, 0.5, len(self._steps)) * self._steps
         self._yaw_drift = 0.0
         angles = qpos[self._encoder_qpos]
@@ -188,50 +166,60 @@ class Sensors:
 
     def sense(self, qpos: Array, qvel: Array, first: bool = False) -> tuple[Array, Array]:
         """The sensed ``(qpos, qvel)`` of the true robot state (new arrays). ``first``: the
-        reset's observation (the heading's drift starts there)."""
-        lay, f, rng = self.layout, self.figures, self._rng
+        reset's observation (the heading's drift starts there). Scalar arithmetic for the IMU
+        (a dozen small NumPy calls cost more than the step's physics)."""
+        lay, f = self.layout, self.figures
         qpos = qpos.copy()
         qvel = qvel.copy()
-        white = rng.standard_normal(6)
-        gyro_error = self._gyro_bias + white[3:] * f.gyro_noise
-        attitude_error = self._attitude_bias + white[:3] * f.attitude_noise
+        n0, n1, n2, n3, n4, n5 = self._rng.standard_normal(6).tolist()
+        bx, by, bz = self._gyro_bias_floats
+        gyro = (bx + n3 * f.gyro_noise, by + n4 * f.gyro_noise, bz + n5 * f.gyro_noise)
+        roll_bias, pitch_bias = self._attitude_bias_floats
+        noise = f.attitude_noise
+        roll, pitch, yaw = roll_bias + n0 * noise, pitch_bias + n1 * noise, n2 * noise
         o, v = lay.root_qpos, lay.root_dof
-        if lay.planar:
-            attitude_error[0] = attitude_error[2] = 0.0
-            gyro_error[0] = gyro_error[2] = 0.0
-        else:
-            quat = qpos[o + 3 : o + 7]
-            rotation = _base_rotation(quat)
-            if not first:
-                # the integrated gyro's heading: its bias's world-z rate over the step
-                self._yaw_drift += float(rotation[2] @ self._gyro_bias) * self.dt
-            attitude_error[2] += self._yaw_drift
-        angles = qpos[self._encoder_qpos]
+        encoders, dofs = self._encoder_qpos, self._encoder_dof
+        angles = qpos[encoders]
         readings = self._read(angles)
         rates = (readings - self._previous) / self.dt
         encoder_error = readings - angles
         self._previous = readings
         if lay.planar:
-            pitch_error = attitude_error[1]
-            rate_error = gyro_error[1]
-            qpos[o + 2] += pitch_error
-            qvel[v + 2] += rate_error
+            roll = yaw = 0.0
+            gyro = (0.0, gyro[1], 0.0)
+            qpos[o + 2] += pitch
             # odometry: r times the error of the absolute wheel angle
-            rolled = 0.5 * (encoder_error[0] + encoder_error[1]) + pitch_error
-            wheel_rates = qvel[self._encoder_dof[:2]]
-            rolled_rate = 0.5 * float(np.sum(rates[:2] - wheel_rates)) + rate_error
-            qpos[o] += lay.wheel_radius * rolled
-            qvel[v] += lay.wheel_radius * rolled_rate
+            e_left, e_right = encoder_error[0], encoder_error[1]
+            r_left, r_right = rates[0] - qvel[dofs[0]], rates[1] - qvel[dofs[1]]
+            qpos[o] += lay.wheel_radius * (0.5 * (e_left + e_right) + pitch)
+            qvel[v] += lay.wheel_radius * (0.5 * (r_left + r_right) + gyro[1])
+            qvel[v + 2] += gyro[1]
         else:
-            psi = math.atan2(-rotation[0, 1], rotation[1, 1])
+            w, x, y, z = qpos[o + 3 : o + 7].tolist()
+            if not first:
+                # the integrated gyro's heading: its bias's world-z rate over the step (the
+                # base rotation's third row times the bias)
+                self._yaw_drift += (
+                    2 * (x * z - w * y) * bx
+                    + 2 * (y * z + w * x) * by
+                    + (1 - 2 * (x * x + y * y)) * bz
+                ) * self.dt
+            yaw += self._yaw_drift
+            psi = math.atan2(-2 * (x * y - w * z), 1 - 2 * (x * x + z * z))
             c, s = math.cos(psi), math.sin(psi)
-            ex, ey, ez = attitude_error
-            world = np.array([c * ex - s * ey, s * ex + c * ey, ez])
-            qpos[o + 3 : o + 7] = _quat_mul(rotation_quat(world), quat)
-            qvel[v + 3 : v + 6] += gyro_error
-        qpos[self._encoder_qpos] = readings
-        qvel[self._encoder_dof] = rates
-        self.last_attitude_error = attitude_error
-        self.last_gyro_error = gyro_error
+            ew, ex, ey, ez = rotation_quat(c * roll - s * pitch, s * roll + c * pitch, yaw)
+            qpos[o + 3 : o + 7] = (
+                ew * w - ex * x - ey * y - ez * z,
+                ew * x + ex * w + ey * z - ez * y,
+                ew * y - ex * z + ey * w + ez * x,
+                ew * z + ex * y - ey * x + ez * w,
+            )
+            qvel[v + 3] += gyro[0]
+            qvel[v + 4] += gyro[1]
+            qvel[v + 5] += gyro[2]
+        qpos[encoders] = readings
+        qvel[dofs] = rates
+        self.last_attitude_error = (roll, pitch, yaw)
+        self.last_gyro_error = gyro
         self.last_encoder_error = encoder_error
         return qpos, qvel
