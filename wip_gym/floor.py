@@ -135,9 +135,9 @@ def check_start_clear(options: FloorOptions, wheel_radius: float) -> None:
     reach = math.sqrt(2.0 * wheel_radius * h - h * h)
     if options.bump_spacing - options.bump_width / 2 <= reach:
         raise ValueError(
-            f"bumps {options.bump_spacing} m apart and {options.bump_width} m wide touch the "
-            f"wheels at the start (a wheel of radius {wheel_radius} m meets a "
-            f"{options.bump_height} m edge {reach:.3f} m from its centre)"
+            f"bump_spacing {options.bump_spacing} and bump_width {options.bump_width} put "
+            f"bumps that touch the wheels at the start (a wheel of radius {wheel_radius} m "
+            f"meets a {options.bump_height} m edge {reach:.3f} m from its centre)"
         )
 
 
