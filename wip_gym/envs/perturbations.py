@@ -31,6 +31,7 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from wip_gym.envs.draws import Draws
 from wip_gym.envs.sensors import SensorModel, Sensors
 from wip_gym.floor import FloorOptions, axle_lift, check_start_clear, shape_floor
 from wip_gym.robot_model import RobotLayout
@@ -218,7 +219,7 @@ class DelayLine:
     def __init__(self, delay: int, jitter: int) -> None:
         self.delay, self.jitter = delay, jitter
         self._items: deque[Any] = deque(maxlen=delay + jitter + 1)
-        self._rng: np.random.Generator | None = None
+        self._jitter: Draws | None = None
         #: the delay of the last item pushed out (control steps)
         self.last_delay = delay
 
@@ -226,14 +227,19 @@ class DelayLine:
         """Fill the line with ``initial``; ``rng``: the stream of the jitter."""
         self._items.clear()
         self._items.extend([initial] * (self.delay + self.jitter + 1))
-        self._rng = rng
+        high = self.jitter + 1
+        self._jitter = (
+            Draws(rng, lambda r, n: r.integers(0, high, n))
+            if self.jitter and rng is not None
+            else None
+        )
 
     def push(self, item: Any) -> Any:
         """Put ``item`` in; return the one due now."""
         self._items.appendleft(item)
         delay = self.delay
-        if self.jitter and self._rng is not None:
-            delay += int(self._rng.integers(0, self.jitter + 1))
+        if self._jitter is not None:
+            delay += self._jitter()
         self.last_delay = delay
         return self._items[delay]
 
@@ -296,6 +302,7 @@ class Perturber:
         self._nominal_frictionloss = model.dof_frictionloss.copy()
         self._nominal_friction = model.geom_friction.copy()
         self._seeded_from: np.random.Generator | None = None
+        self._torque_draws: Draws | None = None
         self._streams: dict[int, np.random.Generator] = {}
 
     # ------------------------------------------------------------------ reset
@@ -326,6 +333,12 @@ class Perturber:
             self._streams = {tag: _stream(entropy, key, tag) for tag in tags}
             self._seeded_from = env_rng
         self._action_line.reset(self._zero_action, self._streams[ACTION_DELAY_STREAM])
+        nu = len(self._zero_action)
+        self._torque_draws = (
+            Draws(self._streams[TORQUE_STREAM], lambda r, n: r.standard_normal((n, nu)))
+            if self.settings.torque_noise > 0
+            else None
+        )
 
     def perturb_model(self, model: mujoco.MjModel) -> None:
         """Draw the episode's model errors into ``model`` (after the env has restored and
@@ -369,8 +382,8 @@ class Perturber:
         output, plus the torque noise, saturated at the actuators' limits (the motor cannot
         give more; only the noise can reach past them, the policy's action is checked)."""
         applied = self._action_line.push(action.copy())  # the caller may reuse its array
-        if self.settings.torque_noise > 0:
-            noise = self._streams[TORQUE_STREAM].standard_normal(len(applied))
+        if self._torque_draws is not None:
+            noise = np.array(self._torque_draws())
             applied = np.clip(applied + noise * self._torque_sigma, self._ctrl_low, self._ctrl_high)
         return np.asarray(applied, dtype=np.float64)
 

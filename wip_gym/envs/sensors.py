@@ -39,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from wip_gym.envs.draws import Draws
 from wip_gym.robot_model import RobotLayout
 
 Array = NDArray[np.float64]
@@ -139,6 +140,7 @@ class Sensors:
         self._gyro_bias_floats: tuple[float, ...] = (0.0, 0.0, 0.0)
         self._yaw_drift = 0.0
         self._rng = np.random.default_rng(0)
+        self._white = Draws(self._rng, lambda r, n: r.standard_normal((n, 6)))
         #: the last observation's errors, for inspection: attitude (roll, pitch, yaw) about
         #: the heading frame (rad), gyro (rad/s, the base frame; planar: pitch in [1]),
         #: encoder readings minus the true angles (rad), wheels first
@@ -156,6 +158,7 @@ class Sensors:
         offsets from ``rng`` (the sensors' own stream, kept for :meth:`sense`)."""
         f = self.figures
         self._rng = rng
+        self._white = Draws(rng, lambda r, n: r.standard_normal((n, 6)))
         # roll and pitch; the heading's error grows from the gyro's bias
         self._attitude_bias_floats = tuple((rng.normal(0.0, 1.0, 2) * f.attitude_bias).tolist())
         self._gyro_bias_floats = tuple((rng.normal(0.0, 1.0, 3) * f.gyro_bias).tolist())
@@ -171,7 +174,7 @@ class Sensors:
         lay, f = self.layout, self.figures
         qpos = qpos.copy()
         qvel = qvel.copy()
-        n0, n1, n2, n3, n4, n5 = self._rng.standard_normal(6).tolist()
+        n0, n1, n2, n3, n4, n5 = self._white()
         bx, by, bz = self._gyro_bias_floats
         gyro = (bx + n3 * f.gyro_noise, by + n4 * f.gyro_noise, bz + n5 * f.gyro_noise)
         roll_bias, pitch_bias = self._attitude_bias_floats
