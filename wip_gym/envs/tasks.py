@@ -115,7 +115,7 @@ _COMMON = """
     | `progress_weight`, `ctrl_cost_weight` | 1.0, 0.1 | reward weights |
     | `fall_penalty`, `cup_loss_penalty` | 10.0, 10.0 | reward penalties |
     | `frame_skip` | 1 | MuJoCo steps (1 ms) per env step |
-    | `sensor_noise` | 0.0 | scale on the sensors' documented noise, biases and encoder steps (IMU attitude and gyro, wheel and joint encoders), 0 for the exact state; its own random stream (docs/realism.md §2) |
+    | `sensor_noise` | 0.0 | scale on the documented noise, biases and steps of the IMU and the encoders, 0 for the exact state (docs/realism.md §2) |
     | `obs_delay_steps` | 0 | control steps by which the observation arrives late (until the first arrives, the reset's) |
     | `obs_delay_jitter_steps` | 0 | each step's observation delay is `obs_delay_steps` plus a uniform integer in `[0, j]` |
     | `action_delay_steps` | 0 | control steps by which the action is applied late (zero torque before the first arrives) |
