@@ -11,13 +11,20 @@ dropped):
 
 - ``single``: ``gymnasium.make(id)`` stepped and reset when it ends, as a user's loop does;
 - ``native``: ``gymnasium.make_vec(id, num_envs=N)``, the env's own vector env (threads: the
-  cores this process may use);
+  cores this process may use); ``native1``: the same on one thread (``num_threads=1``);
 - ``sync``, ``async``: ``make_vec(..., vectorization_mode="sync" | "async")``.
 
 A vector env's rate is ``N`` times its vector steps per second (its sub-envs' steps); each
 contender's ratio in a round is its rate over the single env's in the same round, and the
 figure is the median of the rounds' ratios (the machine's load drifts between rounds; a round
 is short). The actions are drawn before the clock starts (one table, replayed in turn).
+
+``--split`` measures instead where a sub-env's step goes (this thread's CPU time, one thread):
+the single env's step and the native vector env's per sub-env, and the part of the latter in
+``mujoco.mj_step`` (which releases the GIL; the env's compiled measures release it too and are
+counted with the rest, so the split's GIL share is an upper bound). The bounds it prints: one
+thread, single over native; two threads, single over the larger of the GIL's part and half the
+step (a GIL-bound part can overlap only the other thread's physics).
 
 Two clocks: ``wall`` (``time.perf_counter``, the figure) and ``cpu`` (``time.process_time``:
 this process's CPU time, its threads summed, the ``async`` workers' not counted, so that
@@ -38,13 +45,14 @@ from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
+import mujoco
 import numpy as np
 
 import wip_gym  # noqa: F401  (registers the envs)
 from wip_gym.vector.env import available_cores
 
 ENVS = ("wip_gym/WIP-v0", "wip_gym/Planar-v0", "wip_gym/PlanarTray-v0", "wip_gym/KrangTray-v0")
-CONTENDERS = ("single", "native", "sync", "async")
+CONTENDERS = ("single", "native", "native1", "sync", "async")
 ACTIONS = ("zero", "random")
 TABLE_STEPS = 512  # rows of the action table, replayed in turn
 
@@ -101,6 +109,8 @@ class Vector:
 def make_contender(name: str, env_id: str, n: int, actions: np.ndarray) -> Single | Vector:
     if name == "single":
         return Single(env_id, actions)
+    if name == "native1":
+        return Vector(gym.make_vec(env_id, num_envs=n, num_threads=1), actions)
     mode = {"native": None, "sync": "sync", "async": "async"}[name]
     return Vector(gym.make_vec(env_id, num_envs=n, vectorization_mode=mode), actions)
 
@@ -161,6 +171,55 @@ def measure(
     return result
 
 
+def gil_split(env_id: str, n: int, steps: int = 400) -> dict[str, float]:
+    """Microseconds of this thread's CPU per sub-env step (zero torques): ``single``,
+    ``native`` (one thread) and ``native_physics`` (its ``mujoco.mj_step`` calls), with the
+    bounds of the module's docstring."""
+    clock = time.thread_time
+    inside = [0.0]
+    step = mujoco.mj_step
+
+    def timed_step(*args: Any) -> None:
+        start = clock()
+        step(*args)
+        inside[0] += clock() - start
+
+    vec = gym.make_vec(env_id, num_envs=n, num_threads=1)
+    single = gym.make(env_id)
+    try:
+        vec.reset(seed=0)
+        single.reset(seed=0)
+        zeros = np.zeros(vec.action_space.shape)
+        for _ in range(50):
+            vec.step(zeros)
+        mujoco.mj_step = timed_step  # the envs call it through the module
+        try:
+            start = clock()
+            for _ in range(steps):
+                vec.step(zeros)
+            native = (clock() - start) / (steps * n) * 1e6
+            physics = inside[0] / (steps * n) * 1e6
+            start = clock()
+            for _ in range(steps * n):
+                _, _, terminated, truncated, _ = single.step(zeros[0])
+                if terminated or truncated:
+                    single.reset()
+            alone = (clock() - start) / (steps * n) * 1e6
+        finally:
+            mujoco.mj_step = step
+    finally:
+        vec.close()
+        single.close()
+    held = native - physics
+    return {
+        "single_us": alone,
+        "native_us": native,
+        "native_physics_us": physics,
+        "one_thread_bound": alone / native,
+        "two_thread_bound": alone / max(held, native / 2),
+    }
+
+
 def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--env", nargs="+", default=list(ENVS))
@@ -168,9 +227,30 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     parser.add_argument("--num-envs", type=int, default=8)
     parser.add_argument("--rounds", type=int, default=7, help="the first is a warm-up")
     parser.add_argument("--block", type=float, default=0.5, help="seconds per contender")
-    parser.add_argument("--contenders", nargs="+", default=list(CONTENDERS[1:]))
+    parser.add_argument(
+        "--contenders",
+        nargs="+",
+        default=["native", "sync", "async"],
+        choices=CONTENDERS[1:],
+        help="besides single (native1: the native env on one thread)",
+    )
+    parser.add_argument("--split", action="store_true", help="where a sub-env's step goes")
     parser.add_argument("--json", type=Path)
     args = parser.parse_args(argv)
+    if args.split:
+        splits = []
+        for env_id in args.env:
+            split = {"env": env_id, **gil_split(env_id, args.num_envs)}
+            splits.append(split)
+            print(
+                f"{env_id:<24}single {split['single_us']:5.1f} us  native {split['native_us']:5.1f}"
+                f" us (mj_step {split['native_physics_us']:5.1f} us)  bounds: one thread "
+                f"{split['one_thread_bound']:.2f}, two {split['two_thread_bound']:.2f}",
+                flush=True,
+            )
+        if args.json:
+            args.json.write_text(json.dumps(splits, indent=2) + "\n")
+        return splits
     if args.rounds < 2 or args.block <= 0 or args.num_envs < 1:
         parser.error("--rounds must be >= 2, --block > 0, --num-envs >= 1")
     cores = available_cores()

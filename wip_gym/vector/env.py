@@ -32,6 +32,10 @@ from wip_gym.vector.infos import InfoBatcher
 from wip_gym.vector.threads import ParallelLoop
 
 _MODES = {mode.value: mode for mode in AutoresetMode}
+#: the default's most threads: a sub-env's step holds the GIL for about half its time (its
+#: Python; MuJoCo's step and the env's compiled measures release it), so a third thread finds
+#: it taken (docs/vector.md §3)
+MAX_THREADS = 2
 
 
 def available_cores() -> int:
@@ -179,7 +183,8 @@ class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArr
         autoreset_mode: ``NextStep`` (the default, as Gymnasium's), ``SameStep`` or
             ``Disabled`` (an ``AutoresetMode`` or its value), with Gymnasium's semantics.
         num_threads: threads that step the sub-envs (the caller's included); default: the
-            cores this process may use (``taskset`` respected), at most ``num_envs``.
+            cores this process may use (``taskset`` respected), at most :data:`MAX_THREADS`
+            and ``num_envs``.
         copy: return fresh observation arrays at every call (True, as Gymnasium's vector
             envs) or the same buffers, overwritten by the next call.
         **env_kwargs: the single env's arguments (``gymnasium.make(env_id, **env_kwargs)``);
@@ -206,7 +211,7 @@ class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArr
                 "render() (a frame per sub-env), or watch one env with `wip-bench view` "
                 "(docs/videos.md §6)"
             )
-        threads = available_cores() if num_threads is None else num_threads
+        threads = min(available_cores(), MAX_THREADS) if num_threads is None else num_threads
         if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
             raise ValueError(f"num_threads must be a positive integer, got {num_threads!r}")
         mode = _autoreset_mode(autoreset_mode)
