@@ -12,10 +12,11 @@ sub-env, zeros (or None) where a sub-env did not supply the key, with a boolean 
 step's info (every step of a wip env has the same). Right after its step each sub-env's values
 are read in one call (:meth:`InfoBatcher.write`, ``operator.itemgetter``); :meth:`InfoBatcher.
 batch` then makes the step's floats one array, its bools another, each other key one, and the
-masks are rows of one block of ``True``: a few conversions per step instead of one assignment
-per key and sub-env. Sub-envs whose info has other keys (a reset's info, a same-step
-autoreset's final info) are added to that by Gymnasium's ``_add_info``, and a step that does
-not fit at all goes through ``_add_info`` entirely, sub-env by sub-env.
+masks are rows of one block of ``True`` (fresh at every step, as Gymnasium's): a few
+conversions per step instead of one assignment per key and sub-env. Sub-envs whose info has
+other keys (a reset's info, a same-step autoreset's final info) are added to that by
+Gymnasium's ``_add_info``, and a step that does not fit at all goes through ``_add_info``
+entirely, sub-env by sub-env.
 """
 
 from __future__ import annotations
@@ -94,7 +95,7 @@ class InfoBatcher:
         # weakly: the vector env's threads reach this batcher and must not keep the env alive
         self._add_info_of = weakref.WeakMethod(add_info)
         self._layout: InfoLayout | None = None
-        self._masks: dict[str, np.ndarray] = {}
+        self._mask_names: tuple[str, ...] = ()  # "_" + each key of the layout
         self._rows: list[Row | None] = [None] * num_envs
         self._count = -1  # the layout's number of keys
 
@@ -114,12 +115,8 @@ class InfoBatcher:
         """Take the layout of ``info`` for the next steps."""
         layout = InfoLayout.of(info)
         self._layout = layout
-        self._masks = {}
         self._count = -1 if layout is None else len(layout.keys)
-        if layout is not None:
-            block = np.ones((len(layout.keys), self.num_envs), dtype=np.bool_)
-            block.flags.writeable = False  # shared by the steps: read them, do not write them
-            self._masks = {"_" + key: block[k] for k, key in enumerate(layout.keys)}
+        self._mask_names = () if layout is None else tuple("_" + key for key in layout.keys)
 
     def batch(
         self,
@@ -143,7 +140,8 @@ class InfoBatcher:
         if not finals and layout is not None and None not in rows and self._typed(infos[0]):
             batched = self._arrays(rows, range(n))  # type: ignore[arg-type]
             if batched is not None:  # the common step: every sub-env at once
-                batched.update(self._masks)
+                masks = np.ones((len(self._mask_names), n), dtype=np.bool_)  # one block
+                batched.update(zip(self._mask_names, masks, strict=True))
                 return batched
         ended = {index: (observation, info) for index, observation, info in finals}
         fitting = [i for i in range(n) if rows[i] is not None and i not in ended]
