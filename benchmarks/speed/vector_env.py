@@ -10,8 +10,8 @@ runs in turn for ``--block`` seconds, ``--rounds`` times (the first round is a w
 dropped):
 
 - ``single``: ``gymnasium.make(id)`` stepped and reset when it ends, as a user's loop does;
-- ``native``: ``gymnasium.make_vec(id, num_envs=N)``, the env's own vector env (threads: the
-  cores this process may use); ``native1``: the same on one thread (``num_threads=1``);
+- ``native``: ``gymnasium.make_vec(id, num_envs=N)``, the env's own vector env (one thread);
+  ``threads``: the same with a thread per core this process may use (``num_threads``);
 - ``sync``, ``async``: ``make_vec(..., vectorization_mode="sync" | "async")``.
 
 A vector env's rate is ``N`` times its vector steps per second (its sub-envs' steps); each
@@ -30,7 +30,7 @@ Two clocks: ``wall`` (``time.perf_counter``, the figure) and ``cpu`` (``time.pro
 this process's CPU time, its threads summed, the ``async`` workers' not counted, so that
 contender gets none). On one core shared with other processes the wall clock counts their
 turns too; the CPU ratio of ``native`` and ``sync`` is then the steadier estimate of the same
-figure. With more than one core the CPU ratio of a threaded ``native`` is its work, not its
+figure. With more than one core the CPU ratio of ``threads`` is its work, not its
 speed.
 """
 
@@ -52,7 +52,7 @@ import wip_gym  # noqa: F401  (registers the envs)
 from wip_gym.vector.env import available_cores
 
 ENVS = ("wip_gym/WIP-v0", "wip_gym/Planar-v0", "wip_gym/PlanarTray-v0", "wip_gym/KrangTray-v0")
-CONTENDERS = ("single", "native", "native1", "sync", "async")
+CONTENDERS = ("single", "native", "threads", "sync", "async")
 ACTIONS = ("zero", "random")
 TABLE_STEPS = 512  # rows of the action table, replayed in turn
 
@@ -109,8 +109,9 @@ class Vector:
 def make_contender(name: str, env_id: str, n: int, actions: np.ndarray) -> Single | Vector:
     if name == "single":
         return Single(env_id, actions)
-    if name == "native1":
-        return Vector(gym.make_vec(env_id, num_envs=n, num_threads=1), actions)
+    if name == "threads":
+        threads = min(available_cores(), n)
+        return Vector(gym.make_vec(env_id, num_envs=n, num_threads=threads), actions)
     mode = {"native": None, "sync": "sync", "async": "async"}[name]
     return Vector(gym.make_vec(env_id, num_envs=n, vectorization_mode=mode), actions)
 
@@ -184,7 +185,7 @@ def gil_split(env_id: str, n: int, steps: int = 400) -> dict[str, float]:
         step(*args)
         inside[0] += clock() - start
 
-    vec = gym.make_vec(env_id, num_envs=n, num_threads=1)
+    vec = gym.make_vec(env_id, num_envs=n)
     single = gym.make(env_id)
     try:
         vec.reset(seed=0)
@@ -232,7 +233,7 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
         nargs="+",
         default=["native", "sync", "async"],
         choices=CONTENDERS[1:],
-        help="besides single (native1: the native env on one thread)",
+        help="besides single (threads: the native env on a thread per core)",
     )
     parser.add_argument("--split", action="store_true", help="where a sub-env's step goes")
     parser.add_argument("--json", type=Path)

@@ -7,7 +7,7 @@ randomisation, a payload; its own time limit), reset with seed ``S + i`` by ``re
 so that it equals the single env bit for bit, through autoresets. What it saves over
 Gymnasium's ``SyncVectorEnv`` is the batching around the sub-envs' steps: observations are
 written row by row into the batch's arrays, infos are batched a few conversions per step
-(``wip_gym.vector.infos``), and on more than one core threads overlap one sub-env's physics
+(``wip_gym.vector.infos``); with ``num_threads`` > 1, threads overlap one sub-env's physics
 (which releases the GIL) with another's Python (``wip_gym.vector.threads``).
 """
 
@@ -32,10 +32,11 @@ from wip_gym.vector.infos import InfoBatcher
 from wip_gym.vector.threads import ParallelLoop
 
 _MODES = {mode.value: mode for mode in AutoresetMode}
-#: the default's most threads: a sub-env's step holds the GIL for about half its time (its
-#: Python; MuJoCo's step and the env's compiled measures release it), so a third thread finds
-#: it taken (docs/vector.md §3)
-MAX_THREADS = 2
+#: the default number of threads: one. A sub-env's step holds the GIL for about half its time
+#: (its Python; MuJoCo's step and the env's compiled measures release it) and hands it over
+#: four times, so two threads can at best bring it to that half, and measured on a shared
+#: 2-core machine they were slower than one (docs/vector.md §3)
+DEFAULT_THREADS = 1
 
 
 def available_cores() -> int:
@@ -182,9 +183,8 @@ class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArr
             see :func:`make_sub_env`).
         autoreset_mode: ``NextStep`` (the default, as Gymnasium's), ``SameStep`` or
             ``Disabled`` (an ``AutoresetMode`` or its value), with Gymnasium's semantics.
-        num_threads: threads that step the sub-envs (the caller's included); default: the
-            cores this process may use (``taskset`` respected), at most :data:`MAX_THREADS`
-            and ``num_envs``.
+        num_threads: threads that step the sub-envs (the caller's included; at most
+            ``num_envs``); default :data:`DEFAULT_THREADS`.
         copy: return fresh observation arrays at every call (True, as Gymnasium's vector
             envs) or the same buffers, overwritten by the next call.
         **env_kwargs: the single env's arguments (``gymnasium.make(env_id, **env_kwargs)``);
@@ -211,7 +211,7 @@ class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArr
                 "render() (a frame per sub-env), or watch one env with `wip-bench view` "
                 "(docs/videos.md §6)"
             )
-        threads = min(available_cores(), MAX_THREADS) if num_threads is None else num_threads
+        threads = DEFAULT_THREADS if num_threads is None else num_threads
         if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
             raise ValueError(f"num_threads must be a positive integer, got {num_threads!r}")
         mode = _autoreset_mode(autoreset_mode)
