@@ -5,7 +5,9 @@ own; errors; close."""
 from __future__ import annotations
 
 import gc
+import json
 import threading
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -16,6 +18,7 @@ from gymnasium.vector import AutoresetMode, SyncVectorEnv
 from gymnasium.wrappers.vector import RecordEpisodeStatistics
 
 import wip_gym
+from benchmarks.speed import vector_env as vector_bench
 from wip_gym.vector import WIPVectorEnv
 from wip_gym.vector.infos import InfoBatcher
 
@@ -270,6 +273,22 @@ def test_rgb_frames_and_gymnasium_vector_wrappers() -> None:
     assert truncated.all() and info["_episode"].all()
     np.testing.assert_array_equal(info["episode"]["l"], [3, 3])
     vec.close()
+
+
+def test_the_benchmark_runs_and_reports_ratios(tmp_path: Path) -> None:
+    """The speed benchmark's plumbing (no timing is asserted: speed is measured in
+    benchmarks/, docs/vector.md §3)."""
+    out = tmp_path / "bench.json"
+    flags = ["--env", "wip_gym/WIP-v0", "--action", "zero", "--num-envs", "2", "--rounds", "2"]
+    flags += ["--block", "0.05", "--contenders", "native", "sync", "--json", str(out)]
+    results = vector_bench.main(flags)
+    (result,) = json.loads(out.read_text())
+    assert result == json.loads(json.dumps(results[0]))
+    assert set(result["wall"]["ratio_to_single"]) == {"native", "sync"}
+    assert all(r > 0 for r in result["wall"]["ratio_to_single"].values())
+    assert len(result["wall"]["steps_per_s"]["single"]) == 1  # the warm-up round dropped
+    split = vector_bench.gil_split("wip_gym/WIP-v0", 2, steps=20)
+    assert 0 < split["native_physics_us"] < split["native_us"]
 
 
 # ---------------------------------------------------------------------- the info batching
