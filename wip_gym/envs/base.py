@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 
 from wip_gym.assets import mjcf_path
 from wip_gym.camera import COMPUTED_CAMERAS
+from wip_gym.display import require_display
 from wip_gym.envs import measures as ms
 from wip_gym.envs.measures import (  # noqa: F401  (the cup's and tray's thresholds, here too)
     CUP_PLATE_GAP,
@@ -283,6 +284,8 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         self._fall_angle = fall_angle
         self._weights = (progress_weight, ctrl_cost_weight, fall_penalty, cup_loss_penalty)
 
+        if kwargs.get("render_mode") == "human":  # a window: GLFW aborts the process without one
+            require_display("render_mode='human'")
         # render(): the camera (wip_gym.camera: "follow", "tray" or an MJCF camera) and overlay
         self._render_camera = kwargs.pop("camera_name", None) or "follow"
         self._render_overlay = bool(kwargs.pop("render_overlay", False))
