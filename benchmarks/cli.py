@@ -6,6 +6,8 @@ wip-bench solvers --json out/solvers.json
 wip-bench profile --env KrangTray-v0 --controller unified --json out/profile.json
 wip-bench sweep benchmarks/sweeps/claim_map.toml --out out/claim_map
 wip-bench render out/compare --camera tray --size 640x480
+wip-bench view --env PlanarTray-v0 --controller unified
+wip-bench view --replay out/compare/recording_unified.npz
 
 ``--import MODULE`` (repeatable) on compare, profile and sweep imports a module that registers
 controllers (``controllers.registry``) before the command reads its arguments; compare's and the
@@ -19,7 +21,7 @@ import argparse
 import os
 import sys
 
-from benchmarks import compare, figures, render
+from benchmarks import compare, figures, render, view
 from benchmarks.speed import profile, solvers
 from benchmarks.sweep import cli as sweep_cli
 from controllers import registry
@@ -64,6 +66,10 @@ def build_parser() -> argparse.ArgumentParser:
         "render", help="re-render a recorded compare run's videos without simulating"
     )
     render.add_arguments(render_parser)
+    view_parser = commands.add_parser(
+        "view", help="a controller driving an env, or a recording, in MuJoCo's viewer"
+    )
+    view.add_arguments(view_parser)
     for name in IMPORT_COMMANDS:
         add_import_argument(commands.choices[name])
     return parser
@@ -90,6 +96,8 @@ def main(argv: list[str] | None = None) -> int:
             return sweep_cli.run(args)
         elif args.command == "render":
             render.run(args)
+        elif args.command == "view":
+            view.run(args)
     except ValueError as error:
         parser.error(str(error))  # exits with status 2 and the message
     except BrokenPipeError:  # the reader went away (`... --list-keys | head`): not an error

@@ -12,7 +12,10 @@ note and ``summary.json`` lists them under ``keys_not_applied``. ``--import MODU
 are imported by the workers too.
 
 Outputs in ``--out``: ``episodes.jsonl`` (one line per episode: ``benchmarks.metrics``, the
-controller's ``counters``, timing) and ``summary.json``:
+controller's ``counters``, timing), with ``--record-transitions`` one Minari dataset per
+controller of every episode's observations, actions, rewards, terminations and truncations
+(``datasets/wip_gym/<env name>/<controller>-v0``, ``benchmarks.transitions``), and
+``summary.json``:
 
     {"env", "preset", "overrides": {key: value}, "keys_not_applied": {key: [controller]},
      "scenario": {every env argument in effect, "env", "duration_s", "control_dt_s",
@@ -61,6 +64,7 @@ from benchmarks.scenario import (
 )
 from benchmarks.seeding import episode_seed
 from benchmarks.statistics import describe, rate
+from benchmarks.transitions import episode_file, require_minari, write_datasets
 from controllers import registry
 from controllers.optimizer import jax_setup
 
@@ -124,6 +128,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--jobs", type=int, default=1)
     add_video_arguments(parser, default_kind=None)  # --video [each|grid|both] of the 1st episode
+    parser.add_argument(
+        "--record-transitions",
+        action="store_true",
+        help="write every episode's observations, actions, rewards, terminations and "
+        "truncations as a Minari dataset per controller (OUT/datasets; needs wip-gym[data])",
+    )
     parser.add_argument("--out", default="out/compare")
 
 
@@ -163,6 +173,8 @@ def spec_from_args(args: argparse.Namespace) -> RunSpec:
     if not (np.isfinite(args.duration) and args.duration > 0):
         raise ValueError(f"--duration must be positive, got {args.duration}")
     check_task_flags(env_id, args.goal, args.cup_friction)
+    if getattr(args, "record_transitions", False):
+        require_minari()
     for flag, value in (("--payload", args.payload), ("--payload-time", args.payload_time)):
         if value is not None and (not np.isfinite(value) or value < 0):
             raise ValueError(f"{flag} must be finite and >= 0, got {value}")
@@ -395,6 +407,7 @@ def run(args: argparse.Namespace) -> dict[str, Any] | None:
     for name in names:
         for i, seed in enumerate(seeds):
             record = str(recording_file(out, name)) if (videos and i == 0) else None
+            transitions = str(episode_file(out, name, i)) if args.record_transitions else None
             tasks.append(
                 (
                     len(tasks),
@@ -406,6 +419,7 @@ def run(args: argparse.Namespace) -> dict[str, Any] | None:
                     args.duration,
                     record,
                     videos.fps if videos else None,
+                    transitions,
                 )
             )
     # videos render from the recordings in another process while the next episodes run
@@ -436,10 +450,19 @@ def run(args: argparse.Namespace) -> dict[str, Any] | None:
         mine = [k for k, r in enumerate(results) if r["controller"] == name]
         stats = summarize([results[k] for k in mine], [outcomes[k][1] for k in mine])
         summary["controllers"][name] = {"config": config_dict(spec.configs[name]), **stats}
+    if args.record_transitions:
+        indices = {name: list(range(args.episodes)) for name in names}
+        datasets = write_datasets(out, spec.env_id, spec.env_kwargs, indices)
+        summary["datasets"] = {"root": str(out / "datasets"), "ids": datasets}
     with open(out / "summary.json", "w") as f:
         json.dump(summary, f, indent=2)
     print(format_table(summary))
     print(f"\nwrote {out / 'summary.json'} and {out / 'episodes.jsonl'}")
+    if args.record_transitions:
+        print(
+            f"datasets (Minari; MINARI_DATASETS_PATH={out / 'datasets'}): "
+            + ", ".join(summary["datasets"]["ids"].values())
+        )
     if jobs is not None:
         rendered = jobs.finish(names)
         for video in rendered["videos"]:

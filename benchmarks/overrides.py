@@ -37,7 +37,7 @@ import json
 import math
 import types
 import typing
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import cache
 from typing import Any
@@ -347,7 +347,8 @@ class RunSpec:
         env_id: the registered env. env_kwargs: the arguments passed to ``gym.make`` (those
             the preset, the flags and the overrides set; the rest are the env's defaults).
         configs: controller name -> its resolved config dataclass, in run order.
-        preset: the preset's name or None. overrides: the ``--set`` keys and parsed values.
+        preset: the preset's name (composed presets joined by commas) or None.
+        overrides: the ``--set`` keys and parsed values.
         skipped: preset env arguments this env does not accept (logged, not applied).
         not_applied: ``plan.*`` key -> the controllers of the run it leaves as they are (they
             have no offline plan; :func:`keys_not_applied`).
@@ -438,19 +439,22 @@ def _apply(
 def resolve_run(
     env_id: str,
     controllers: Iterable[str],
-    preset: str | None = None,
+    preset: str | Sequence[str] | None = None,
     env_flags: Mapping[str, Any] | None = None,
     controller_flags: Mapping[str, Any] | None = None,
     overrides: Mapping[str, Any] | None = None,
     ignore_other_controllers: bool = False,
 ) -> RunSpec:
-    """Resolve a run: defaults, then ``preset``, then the named flags (``env_flags``: env
+    """Resolve a run: defaults, then ``preset`` (one name or several composed in order,
+    ``benchmarks.presets``), then the named flags (``env_flags``: env
     arguments; ``controller_flags``: fields set on every controller's config, e.g.
     ``model``), then ``overrides`` (``--set`` keys and parsed values, in order). Raises
     ``OverrideError`` naming the first bad key."""
     names = list(controllers)
+    preset = presets.canonical(preset)
     preset_env, skipped = presets.env_arguments(preset, env_id, env_settings(env_id))
-    configs = {name: registry.default_config(name, preset=preset) for name in names}
+    controller_preset = presets.controller_preset(preset)
+    configs = {name: registry.default_config(name, preset=controller_preset) for name in names}
     env_kwargs: dict[str, Any] = dict(preset_env)
     settings = env_settings(env_id)
     for name, value in (env_flags or {}).items():

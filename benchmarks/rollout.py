@@ -19,7 +19,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol, SupportsFloat
 
 import gymnasium as gym
 import numpy as np
@@ -50,6 +50,21 @@ StepHook = Callable[[gym.Env, dict[str, Any], int], None]
 ProgressHook = Callable[[float], None]
 
 
+class TransitionHook(Protocol):
+    """Sees the episode's stream (``benchmarks.transitions.TransitionRecorder``)."""
+
+    def on_reset(self, observation: dict[str, Any]) -> None: ...
+
+    def on_step(
+        self,
+        action: NDArray[Any],
+        observation: dict[str, Any],
+        reward: SupportsFloat,
+        terminated: bool,
+        truncated: bool,
+    ) -> None: ...
+
+
 class EpisodeError(RuntimeError):
     """An episode that raised while it ran (a controller's or the env's ValueError, e.g. a NaN
     action): a failure of the run, not of the command's arguments, so the CLI shows its
@@ -76,6 +91,7 @@ def rollout(
     on_step: StepHook | None = None,
     progress: ProgressHook | None = None,
     keep_env: bool = False,
+    on_transition: TransitionHook | None = None,
 ) -> Episode:
     """Run ``controller`` (with its resolved ``config``) on ``gym.make(env_id, **env_kwargs)``
     reset with ``seed`` for ``duration`` simulated seconds, or until the env terminates.
@@ -87,6 +103,8 @@ def rollout(
         progress: called with the simulated time so far (s) every ``PROGRESS_INTERVAL_S``
             and at the end.
         keep_env: leave the env open and return it in ``Episode.env``.
+        on_transition: given the reset's observation (``on_reset``) and each step's action,
+            observation, reward, termination and truncation (``on_step``), to record them.
     """
     if not (np.isfinite(duration) and duration > 0):
         raise ValueError(f"duration must be positive, got {duration}")
@@ -105,6 +123,8 @@ def rollout(
         metrics = EpisodeMetrics(dt, info, observation, low, high)
         if on_step is not None:
             on_step(env, info, 0)
+        if on_transition is not None:
+            on_transition.on_reset(observation)
         steps = int(round(duration / dt))
         report_every = max(1, int(round(PROGRESS_INTERVAL_S / dt)))
         loop_time = 0.0
@@ -115,7 +135,7 @@ def rollout(
                 try:
                     action = policy(observation)
                     tock = time.perf_counter()
-                    observation, _, terminated, truncated, info = env.step(action)
+                    observation, reward, terminated, truncated, info = env.step(action)
                 except ValueError as error:  # not a usage error: say where the episode failed
                     raise EpisodeError(
                         f"{controller} on {env_id} (seed {seed}) failed at step {n} "
@@ -123,6 +143,8 @@ def rollout(
                     ) from error
                 loop_time += time.perf_counter() - tick
                 metrics.update(info, observation, action, tock - tick)
+                if on_transition is not None:
+                    on_transition.on_step(action, observation, reward, terminated, truncated)
                 if on_step is not None:
                     on_step(env, info, n)
                 if progress is not None and n % report_every == 0:

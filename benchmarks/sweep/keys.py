@@ -35,7 +35,8 @@ def validate_key(
         raise ValueError(
             f"unknown key {key!r}: expected env.<argument>, plan.<field> or <controller>.<path>"
         )
-    configs = {name: registry.default_config(name, preset) for name in controllers}
+    controller_preset = presets.controller_preset(preset)
+    configs = {name: registry.default_config(name, controller_preset) for name in controllers}
     settings = overrides.valid_settings(env_id, configs)
     if key not in settings:
         if head not in ("env", "plan", *controllers):
@@ -61,9 +62,12 @@ PRESETS: tuple[str, ...] = presets.PRESET_NAMES
 
 
 def validate_preset(preset: str | None, env_id: str) -> None:
-    """ValueError naming ``preset`` unless the episode runner has it (None: no preset)."""
-    if preset is not None and preset not in PRESETS:
-        raise ValueError(f"unknown preset {preset!r} for {env_id}; valid: {list(PRESETS)}")
+    """ValueError naming ``preset`` unless the episode runner has it (None: no preset; several
+    names joined by commas compose, ``benchmarks.presets``)."""
+    try:
+        presets.preset_names(preset)
+    except ValueError as error:
+        raise ValueError(f"{error} (for {env_id})") from None
 
 
 def keys_not_applied(
@@ -71,7 +75,10 @@ def keys_not_applied(
 ) -> dict[str, tuple[str, ...]]:
     """The ``plan.*`` keys among ``keys`` and the controllers they leave as they are (no
     offline plan): ``benchmarks.overrides.keys_not_applied`` of the sweep's controllers."""
-    configs = {name: registry.default_config(name, preset) for name in controllers}
+    configs = {
+        name: registry.default_config(name, presets.controller_preset(preset))
+        for name in controllers
+    }
     return overrides.keys_not_applied(configs, keys)
 
 
