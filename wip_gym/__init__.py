@@ -19,12 +19,12 @@ import os
 if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
     os.environ.setdefault("MUJOCO_GL", "egl")
 
-# numba's caches of wip_gym and controllers keyed on all their compiled sources, not each on
-# its own file (a caller compiled with an edited callee of another file would load the old
-# code): before any of their compiled functions is defined
-from wip_gym.compiled_cache import install as _install_compiled_cache  # noqa: E402
+# numba's cache in a directory keyed on the packages' compiled sources and the modules they
+# import (a caller compiled with an edited callee of another file would load the old code):
+# before any of their compiled functions is defined
+from wip_gym.compiled_cache import configure as _configure_compiled_cache  # noqa: E402
 
-_install_compiled_cache()
+_configure_compiled_cache()
 
 from wip_gym.registration import ENV_IDS, register_envs  # noqa: E402
 from wip_gym.robot_model import RobotModel, WIPMParameters  # noqa: E402
