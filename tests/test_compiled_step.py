@@ -305,67 +305,20 @@ def test_the_step_table_refuses_a_kernel_of_other_rows() -> None:
 
 
 @pytest.mark.parametrize("name", ["krang", "planar7"])
-def test_the_robot_update_through_its_table_equals_the_call_with_arguments(name: str) -> None:
-    """``RobotModel.update`` calls ``robot_update_at`` (its arrays in one table): the same
-    results, to the bit, as ``robot_update`` with each array passed, on a second model; the
-    properties are copies that stay as they were after the next update."""
-    from wip_gym.minimal_kernels import UPDATE_SCALARS, robot_update
-
-    robot, reference = RobotModel(_load(name)), RobotModel(_load(name))
-    r = reference
+def test_the_robot_updates_properties_are_copies_of_its_table(name: str) -> None:
+    """``RobotModel.update`` writes its table's buffers (``minimal_kernels.UPDATE``): the
+    scalars, the WIPM state and the properties are theirs, and the properties are copies that
+    stay as they were after the next update."""
+    robot = RobotModel(_load(name))
     rng = np.random.default_rng(27)
     kept = None
     for dynamics in (True, False, True):
         qpos, qvel = robot.full_state(*random_minimal_state(robot, rng))
         robot.update(qpos, qvel, dynamics=dynamics)
-        r._qpos_in[:], r._qvel_in[:] = qpos, qvel
-        scalars, com, J_com, J_theta = (
-            np.zeros(len(UPDATE_SCALARS)),
-            np.zeros(3),
-            np.zeros((3, r.layout.n_min)),
-            np.zeros(r.layout.n_min),
-        )
-        A, h, B = np.zeros_like(r._A_buffer), np.zeros_like(r._h_buffer), np.zeros_like(r._B_buffer)
-        robot_update(
-            r.model._address,
-            r.data._address,
-            r._qpos_in,
-            r._qvel_in,
-            r._mj_qpos,
-            r._mj_qvel,
-            r._mj_xmat,
-            r._mj_xpos,
-            r._mj_xipos,
-            r._mj_qfrc_passive,
-            r._mj_body_mass,
-            r._mj_subtree_mass,
-            r._bodies,
-            r._body_ids,
-            r._layout_ints,
-            r._body_qpos,
-            r._body_dof,
-            r.layout.wheel_radius,
-            r._q,
-            r._nu,
-            r._J,
-            r._J_pattern,
-            r._Jdot_nu,
-            r._jacp,
-            r._jac_wheels,
-            r._jac_origin,
-            r._M,
-            r._bias,
-            r._S,
-            scalars,
-            com,
-            J_com,
-            J_theta,
-            A,
-            h,
-            B,
-            dynamics,
-        )
-        psi, psid, c, s, mass, theta, thetad, x, xd, axle_x, axle_y = scalars.tolist()
+        buffers = robot.update_buffers()
+        psi, psid, c, s, mass, theta, thetad, x, xd, axle_x, axle_y = buffers[
+            "robot_scalars"
+        ].tolist()
         assert (robot.theta, robot.thetad, robot.body_mass, robot.psi) == (theta, thetad, mass, psi)
         np.testing.assert_array_equal(
             robot.wipm_state(),
@@ -373,21 +326,15 @@ def test_the_robot_update_through_its_table_equals_the_call_with_arguments(name:
             if robot.layout.planar
             else [x, psi, theta, xd, psid, thetad, axle_x, axle_y],
         )
-        np.testing.assert_array_equal(robot.com, com)
-        np.testing.assert_array_equal(robot.J_com, J_com)
-        np.testing.assert_array_equal(robot.J_theta, J_theta)
-        np.testing.assert_array_equal(robot.q, r._q)
-        np.testing.assert_array_equal(robot.nu, r._nu)
-        np.testing.assert_array_equal(robot.J_tf, r._J)
+        np.testing.assert_array_equal(robot.J_theta, buffers["J_theta"])
         np.testing.assert_array_equal(
             robot.heading_rotation, [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
         )
         assert robot.has_dynamics == dynamics
         if dynamics:
-            np.testing.assert_array_equal(robot.A, A)
-            np.testing.assert_array_equal(robot.h, h)
-            np.testing.assert_array_equal(robot.B, B)
-            assert robot.A is robot.A  # one copy per update
+            np.testing.assert_array_equal(robot.A, buffers["A"])
+            np.testing.assert_array_equal(robot.h, buffers["h"])
+            assert robot.A is robot.A and robot.A is not buffers["A"]  # one copy per update
             if kept is not None:
                 # what a caller kept from an earlier update is as it was
                 for array, value in zip(kept[0], kept[1], strict=True):

@@ -136,8 +136,9 @@ def cache_base() -> Path:
 def configure(root: Path = ROOT, packages: Sequence[str] = PACKAGES) -> Path:
     """Point numba's cache at ``cache_base() / source_fingerprint(root, packages)`` for the
     functions defined from now on (module docstring); returns the directory."""
-    import numba
+    from numba.core import config
 
     directory = cache_base() / source_fingerprint(root, packages)
-    numba.config.CACHE_DIR = str(directory)
+    # numba's setting, set from NUMBA_CACHE_DIR when numba is imported (hence untyped)
+    config.CACHE_DIR = str(directory)  # type: ignore[attr-defined]
     return directory

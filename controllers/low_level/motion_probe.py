@@ -149,11 +149,10 @@ class MotionProbe:
         self._memo.clear()
 
     def idealise(self, robot: RobotModel) -> None:
-        """:func:`idealise` for ``robot``'s current state (the MuJoCo part of :meth:`update`)."""
+        """:func:`idealise` for ``robot``'s current state, through MuJoCo's Python bindings
+        (the same calls in the same order: the same results to the bit)."""
         x, y = robot.data.xpos[self._base, :2].tolist()
-        idealise(
-            self.model._address,
-            self.data._address,
+        idealised_state(
             robot.q,
             robot.nu,
             x,
@@ -165,9 +164,12 @@ class MotionProbe:
             self._wheel_separation,
             self._qpos[: self._nq],
             self._qvel[: self._nv],
-            self.qacc0,
-            robot.Jdot_tf_nu,
         )
+        m, d = self.model, self.data
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)
+        mujoco.mj_comVel(m, d)
+        self.qacc0[:] = robot.Jdot_tf_nu
 
     def _point(self, position: Array, body: int) -> tuple[Vec, Vec, Vec, Vec]:
         """Linear velocity, drift acceleration, angular velocity, angular drift (world) of a

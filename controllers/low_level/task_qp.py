@@ -233,7 +233,7 @@ class TaskQP:
     def _compiled_stack(self, robot: RobotModel, tasks: Sequence[Task]) -> CompiledTaskStack | None:
         """The compiled stack of this task list (made on its first step), or None when the
         settings or a task's kind ask for the Python path."""
-        if not self.settings.compiled_tasks:
+        if not self.settings.compiled_tasks or not robot.fast_path:
             return None
         stack = self._stack
         if stack is not None and stack.matches(tasks):

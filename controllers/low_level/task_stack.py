@@ -470,10 +470,11 @@ class CompiledTaskStack:
         self._site_bodies = m.site_bodyid[self.site_ids].astype(np.int64)
         # stack_rows' leading arguments: the models' addresses and the probe's constants, then
         # (after Jdot_tf nu) the probe's qpos and qacc and the sites' bodies
+        model_address, data_address = mjc.addresses(m, robot.data)
         self._probe_constants = (
-            m._address,
-            robot.data._address,
-            pd._address,
+            model_address,
+            data_address,
+            mjc.addresses(m, pd)[1],
             probe._layout_ints,
             probe._body_qpos,
             probe._body_dof,

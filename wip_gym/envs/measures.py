@@ -2,7 +2,8 @@
 
 ``WIPEnv._measure`` makes one call of :func:`env_measures`, which runs MuJoCo's kinematics and
 subtree passes on the env's data, reads its contacts through addresses taken once per MjData
-(:func:`contact_layout`; the count is ``data.ncon``, passed in) and then :func:`step_measures`,
+(``mujoco_c.contact_layout``; the count is ``data.ncon``, passed in) and then
+:func:`step_measures`,
 which computes, from the data's arrays, every number of the step's observation, reward and
 info into a preallocated float buffer (indices below): the robot's measures (``psi``, ``x``,
 ``theta`` ... of ``RobotModel``), the goal distance, the fall, the end effector's drift, and on
@@ -25,6 +26,8 @@ import numpy as np
 from numba import carray, njit, types
 
 from wip_gym import mujoco_c as mjc
+from wip_gym.array_table import float64_view, int32_pointer
+from wip_gym.mujoco_c import contact_layout
 from wip_gym.scene import CUP_HALF_HEIGHT, CUP_RADIUS, TRAY_HALF_SIZE
 
 #: a cup counts as upright while its axis is within this angle of the tray's normal (deg)
@@ -283,29 +286,10 @@ T_CONTACT_GEOM, T_CONTACT_FRAME, T_CONTACT_STRIDE, T_CONTACT_CAPACITY = 18, 19, 
 N_TABLE = 22
 
 
-def contact_layout(data: Any) -> tuple[int, int, int, int]:
-    """Where ``data``'s contacts are: the addresses of the first contact's ``geom`` and ``frame``,
-    the size of MuJoCo's ``mjContact`` (bytes) and a bound on their count (the arena's size over
-    that: the arena also holds the constraints and the stack, so fewer fit). MuJoCo
-    keeps the contacts at the start of the arena, which is allocated once per MjData
-    (``mj_resetData`` and ``mj_step`` do not move it; ``tests/test_step_measures.py`` checks
-    this along episodes), so the layout is taken once and compiled code reads the first
-    ``data.ncon`` contacts through it instead of the bindings' per-step views (four Python
-    objects and four arrays to unbox, about 3 us)."""
-    contact = data.contact
-    geom, frame = contact.geom, contact.frame
-    if geom.strides[0] != frame.strides[0] or geom.dtype != np.int32:
-        raise RuntimeError(
-            f"unexpected mjContact layout: {geom.dtype}, {geom.strides}, {frame.strides}"
-        )
-    stride = int(geom.strides[0])
-    return int(geom.ctypes.data), int(frame.ctypes.data), stride, int(data.narena) // stride
-
-
 def address_table(model: Any, data: Any) -> np.ndarray:
     """The table of :func:`env_measures`: the addresses of ``model``, ``data`` and the arrays
     :func:`step_measures` reads (MuJoCo allocates them once per MjModel/MjData: the table is
-    valid while both live), their sizes, and the contacts' layout (:func:`contact_layout`)."""
+    valid while both live), their sizes, and the contacts' layout (``mujoco_c.contact_layout``)."""
     arrays = (
         data.qpos,
         data.qvel,
@@ -320,9 +304,12 @@ def address_table(model: Any, data: Any) -> np.ndarray:
         model.body_subtreemass,
         model.body_mass,
     )
+    for i, array in enumerate(arrays):
+        if array.dtype != np.float64 or not array.flags.c_contiguous:
+            raise ValueError(f"array {i} of the env's table is not C-contiguous float64")
     table = np.zeros(N_TABLE, np.int64)
-    table[T_MODEL], table[T_DATA] = model._address, data._address
-    table[T_ARRAYS : T_ARRAYS + len(arrays)] = mjc.float64_addresses(arrays)
+    table[T_MODEL], table[T_DATA] = mjc.addresses(model, data)
+    table[T_ARRAYS : T_ARRAYS + len(arrays)] = [array.ctypes.data for array in arrays]
     table[T_NQ], table[T_NV], table[T_NBODY], table[T_NSITE] = (
         model.nq,
         model.nv,
@@ -338,8 +325,8 @@ def gather_contacts(
     table: np.ndarray, ncon: int, forces: bool
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The first ``ncon`` contacts of the data of ``table`` (:func:`address_table`), read
-    through :func:`contact_layout`: their geom pairs, frames and, if ``forces``, the first three
-    entries of ``mj_contactForce`` (normal, tangent 1, tangent 2 in the contact frame; zeros
+    through ``mujoco_c.contact_layout``: their geom pairs, frames and, if ``forces``, the first
+    three entries of ``mj_contactForce`` (normal, tangent 1, tangent 2 in the contact frame; zeros
     otherwise). Raises if ``ncon`` is more than the arena holds (it must be ``data.ncon``)."""
     if ncon < 0 or ncon > table[T_CONTACT_CAPACITY]:
         raise ValueError("ncon must be data.ncon: more contacts than the data's arena holds")
@@ -350,9 +337,9 @@ def gather_contacts(
     result = np.empty(6)
     stride = table[T_CONTACT_STRIDE]
     for i in range(ncon):
-        pair = carray(mjc.int32_pointer(np.uint64(table[T_CONTACT_GEOM] + i * stride)), 2)
+        pair = carray(int32_pointer(np.uint64(table[T_CONTACT_GEOM] + i * stride)), 2)
         geom[i, 0], geom[i, 1] = pair[0], pair[1]
-        frame[i] = mjc.float64_view(table[T_CONTACT_FRAME] + i * stride, (9,))
+        frame[i] = float64_view(table[T_CONTACT_FRAME] + i * stride, (9,))
         if forces:
             mjc.mj_contactForce(model, data, i, result.ctypes.data)
             force[i, 0], force[i, 1], force[i, 2] = result[0], result[1], result[2]
@@ -378,7 +365,7 @@ def env_measures(
     a = T_ARRAYS
 
     def view(i: int, shape: tuple[int, ...]) -> np.ndarray:
-        return mjc.float64_view(table[a + i], shape)
+        return float64_view(table[a + i], shape)
 
     step_measures(
         view(0, (table[T_NQ],)),
