@@ -137,6 +137,16 @@ class TableSpec:
         return table
 
 
+def field_offsets(name: str, fields: Sequence[tuple[str, int]]) -> tuple[Any, int]:
+    """A vector's layout declared once: ``fields`` as ``(name, length)`` pairs in order give a
+    namedtuple of each field's first index (a module-level constant compiled code folds, as
+    :attr:`TableSpec.index`) and the vector's length."""
+    names = [field for field, _ in fields]
+    offsets = np.cumsum([0, *(length for _, length in fields)])
+    index_type = namedtuple(f"{name.title().replace('_', '')}Offsets", names)  # type: ignore[misc]
+    return index_type(*(int(offset) for offset in offsets[:-1])), int(offsets[-1])
+
+
 def _pointer_intrinsic(element: types.Type) -> Any:
     """An intrinsic ``(element *) address`` for compiled code, for ``numba.carray``: a view of a
     buffer whose address was taken once."""
