@@ -300,7 +300,7 @@ def test_reduced_qp_equals_full_dynamics_qp(robot: RobotModel, fraction: float) 
         J = np.vstack([task.jacobian(robot) for task in tasks])
         w = np.concatenate([task.weights() for task in tasks])
         np.testing.assert_allclose(T, w[:, None] * (J @ iso.E), rtol=1e-12, atol=1e-12)
-        np.testing.assert_allclose(qp._jdot_nu(robot, tasks), _jdot_nu(robot, tasks), atol=1e-9)
+        np.testing.assert_allclose(qp.jdot_nu(robot, tasks), _jdot_nu(robot, tasks), atol=1e-9)
     if fraction < 1.0:
         assert max(active_counts) > 0, "the tight case should have an active torque limit"
     print(f"fraction {fraction}: qdd {worst_qdd:.1e}, tau {worst_tau:.1e}, active {active_counts}")

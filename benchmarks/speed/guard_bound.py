@@ -49,20 +49,19 @@ def cut_down_solve(policy: Any) -> None:
     """Replace ``policy.qp.solve`` on the instance by the bound (module docstring). The QP's
     compiled stack and table must be made already (after the first steps)."""
     qp = policy.qp
-    stack, table, kernel, weights_out = qp._stack, qp._table, qp.kernel, qp._w
-    if stack is None or table is None:
-        raise RuntimeError("the task QP has no compiled stack or table yet: step it first")
-    weights, advance = stack.weights, stack.observer_advance
+    stack, kernel = qp._stack, qp.kernel
+    if stack is None:
+        raise RuntimeError("the task QP has no compiled stack yet: step it first")
+    table = stack.table
     solve = qp.solve
 
-    def bound(robot: Any, iso: Any, tasks: Any) -> QPSolution:
-        advance.fill(1)
-        weights_out[:] = weights
+    def bound(robot: Any, iso: Any, tasks: Any, constraints: Any = ()) -> QPSolution:
+        stack.prepare(robot)
         if rows_and_kernel(table.rows):
             k = kernel
             return QPSolution(k.x, k.nu_dot, k.generalized, k.actuators, True, 0)
-        stack.memoise_observers(robot, qp._target)
-        return solve(robot, iso, tasks)
+        stack.memoise_observers(robot)
+        return solve(robot, iso, tasks, constraints)
 
     qp.solve = bound
 

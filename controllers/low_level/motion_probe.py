@@ -21,6 +21,8 @@ ignores; the finite difference never saw them, and neither does this.
 
 from __future__ import annotations
 
+from typing import Any
+
 import mujoco
 import numpy as np
 from numba import njit
@@ -94,7 +96,8 @@ class MotionProbe:
     """World velocities and drift accelerations (``nu_dot = 0``) at ``full_state(q, nu)``.
 
     Call :meth:`update` once per control step after ``robot.update``; then
-    :meth:`site_motion`, :meth:`origin_motion`, :meth:`com_motion` and :meth:`relative_drift`
+    :meth:`site_motion`, :meth:`body_point_motion`, :meth:`point_motion`, :meth:`origin_motion`,
+    :meth:`com_motion` and :meth:`relative_drift`
     read it (memoised). Three-vectors are tuples of Python floats: at this size scalar
     arithmetic costs a tenth of a NumPy call.
     """
@@ -171,9 +174,10 @@ class MotionProbe:
         mujoco.mj_comVel(m, d)
         self.qacc0[:] = robot.Jdot_tf_nu
 
-    def _point(self, position: Array, body: int) -> tuple[Vec, Vec, Vec, Vec]:
-        """Linear velocity, drift acceleration, angular velocity, angular drift (world) of a
-        point attached to ``body``: ``jac qvel`` and ``jac qacc_0 + jacDot qvel``."""
+    def point_motion(self, position: Array, body: int) -> tuple[Vec, Vec, Vec, Vec]:
+        """Linear velocity, drift acceleration, angular velocity, angular drift (world) of the
+        point at world ``position`` (at the probe's state) attached to ``body``: ``jac qvel``
+        and ``jac qacc_0 + jacDot qvel``."""
         m, d, jac, jac_dot = self.model, self.data, self._jac, self._jac_dot
         mujoco.mj_jac(m, d, jac[:3], jac[3:], position, body)
         mujoco.mj_jacDot(m, d, jac_dot[:3], jac_dot[3:], position, body)
@@ -187,7 +191,22 @@ class MotionProbe:
         key = ("site", site)
         if key not in self._memo:
             position = self._site_xpos[site]
-            v, a, w, w_dot = self._point(position, int(self._site_body[site]))
+            v, a, w, w_dot = self.point_motion(position, int(self._site_body[site]))
+            p = position.tolist()
+            self._memo[key] = ((p[0], p[1], p[2]), v, a, w, w_dot)
+        return self._memo[key]  # type: ignore[return-value]
+
+    def body_point_motion(
+        self, body: int, offset: Any = (0.0, 0.0, 0.0)
+    ) -> tuple[Vec, Vec, Vec, Vec, Vec]:
+        """:meth:`site_motion` for a point fixed on a body, ``offset`` in the body's frame (as
+        ``controllers.low_level.tasks.body_point_in_axle_frame`` takes it)."""
+        offset = np.asarray(offset, dtype=float)
+        key = ("body", body, *offset.tolist())
+        if key not in self._memo:
+            d = self.data
+            position = d.xpos[body] + d.xmat[body].reshape(3, 3) @ offset
+            v, a, w, w_dot = self.point_motion(position, body)
             p = position.tolist()
             self._memo[key] = ((p[0], p[1], p[2]), v, a, w, w_dot)
         return self._memo[key]  # type: ignore[return-value]
@@ -197,7 +216,7 @@ class MotionProbe:
         key = "origin"
         if key not in self._memo:
             origin = self._xpos[self._base]
-            v, a, _, _ = self._point(origin, self._base)
+            v, a, _, _ = self.point_motion(origin, self._base)
             p = origin.tolist()
             self._memo[key] = ((p[0], p[1], p[2]), v, a)
         return self._memo[key]  # type: ignore[return-value]
