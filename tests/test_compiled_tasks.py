@@ -489,5 +489,5 @@ def test_a_site_or_column_out_of_range_is_refused_by_name() -> None:
     fresh, _ = _paths(robot)
     posture.joint_weights = weights[1:]
     for qp in (fresh, python):
-        with pytest.raises(ValueError, match="task 'posture': .*one per column"):
+        with pytest.raises(ValueError, match=r"task 'posture': joint weights .*\(one per row"):
             qp.solve(robot, None, tasks)

@@ -123,7 +123,7 @@ def before_kernel(layout: KernelLayout, robot_layout: Any) -> Callable[..., Any]
     from types import SimpleNamespace  # noqa: PLC0415
 
     from controllers.low_level.isolated_dynamics import isolated_dynamics  # noqa: PLC0415
-    from controllers.low_level.task_qp import feasible_unconstrained_minimiser  # noqa: PLC0415
+    from controllers.low_level.qp_solver import feasible_unconstrained_minimiser  # noqa: PLC0415
 
     M = layout.actuator_map
     n = layout.n_min - 1

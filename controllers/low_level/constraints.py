@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 
 from controllers.low_level import compiled_tasks as ct
 from controllers.low_level.motion_probe import MotionProbe
-from controllers.low_level.tasks import per_column
+from controllers.low_level.tasks import floats
 from wip_gym.robot_model import RobotModel
 
 Array = NDArray[np.float64]
@@ -75,14 +75,16 @@ class AccelerationBound(Constraint):
         return np.zeros(len(self.columns))  # G is constant
 
     def bounds(self, robot: RobotModel) -> tuple[Array, Array]:
+        count = len(self.columns)
         return (
-            np.array(per_column(self, self.lower, "lower bounds")),
-            np.array(per_column(self, self.upper, "upper bounds")),
+            np.array(floats(self.lower, count, self, "lower bounds")),
+            np.array(floats(self.upper, count, self, "upper bounds")),
         )
 
     def parameters(self) -> list[float]:
         """``(lower bounds, upper bounds)``, one of each per column."""
+        count = len(self.columns)
         return [
-            *per_column(self, self.lower, "lower bounds"),
-            *per_column(self, self.upper, "upper bounds"),
+            *floats(self.lower, count, self, "lower bounds"),
+            *floats(self.upper, count, self, "upper bounds"),
         ]

@@ -35,19 +35,19 @@ Two paths fill the QP (docs/DESIGN.md §3), held equal by the tests:
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import numpy as np
 import proxsuite
 from numpy.typing import NDArray
-from scipy.linalg.lapack import dposv
 
 from controllers.low_level.compiled_step import rows_and_kernel
 from controllers.low_level.isolated_dynamics import IsolatedDynamics
 from controllers.low_level.kernel import KernelLayout, LowLevelKernel, solution_terms
 from controllers.low_level.motion_probe import MotionProbe
+from controllers.low_level.qp_solver import QPSettings, start_proxqp
 from controllers.low_level.task_stack import (
     CompiledTaskStack,
     check_indices,
@@ -60,28 +60,6 @@ from wip_gym.wheel_torques import generalized_to_wheel_matrix
 
 Array = NDArray[np.float64]
 _SOLVED = proxsuite.proxqp.QPSolverOutput.PROXQP_SOLVED
-
-
-@dataclass(frozen=True)
-class QPSettings:
-    """Attributes:
-    regularization: ``eps`` on ``||qdd||^2`` (keeps the Hessian positive definite).
-    eps_abs: ProxQP's absolute tolerance. Its default (1e-5 on the KKT residual) can stop
-        with constraint errors of order 1e-3 N m here; 1e-9 gives answers that are right.
-    limit_horizon: ``h`` of the joint-limit acceleration bounds (s).
-    max_iterations: ProxQP's iteration cap (its default, 10000, lets an infeasible QP run for
-        a minute before it gives up; a feasible one here takes under 20).
-    unconstrained_first: try the unconstrained minimiser before ProxQP (module docstring).
-    compiled_tasks: the compiled path where it applies (module docstring); False: always the
-        readable one (the reference it is tested against).
-    """
-
-    regularization: float = 1e-6
-    eps_abs: float = 1e-9
-    limit_horizon: float = 0.05
-    max_iterations: int = 1000
-    unconstrained_first: bool = True
-    compiled_tasks: bool = True
 
 
 class QPSolution(NamedTuple):
@@ -113,38 +91,6 @@ def actuator_map(robot: RobotModel) -> Array:
     return M
 
 
-def feasible_unconstrained_minimiser(
-    H: Array, g: Array, C: Array, lower: Array, upper: Array
-) -> Array | None:
-    """``x = -H^-1 g`` (one LAPACK Cholesky solve; ``H`` is symmetric positive definite, being
-    regularised) when it meets every constraint: then it is the convex QP's exact optimum.
-    None otherwise (the QP needs a solver)."""
-    _, x, info = dposv(H, -g)
-    if info != 0 or not np.isfinite(x).all():
-        return None
-    Cx = C @ x
-    return x if (Cx >= lower).all() and (Cx <= upper).all() else None
-
-
-def start_proxqp(
-    H: Array, g: Array, C: Array, lower: Array, upper: Array, settings: QPSettings
-) -> proxsuite.proxqp.dense.QP:
-    """A dense ProxQP object for this QP, configured as ``settings`` says, solved once, and
-    set to warm start every later ``update`` + ``solve`` from the previous result."""
-    qp = proxsuite.proxqp.dense.QP(len(g), 0, len(C))
-    qp.settings.eps_abs = settings.eps_abs
-    qp.settings.eps_rel = 0.0
-    # no preconditioner: its scaling, computed once from the first H and kept by update(),
-    # stalls badly conditioned task weightings (a weight-100 theta task alone never converged
-    # with it)
-    qp.settings.max_iter = settings.max_iterations
-    qp.init(H, g, None, None, C, lower, upper, compute_preconditioner=False)
-    qp.solve()
-    # warm start only once a previous result exists (ProxQP 0.8 crashes otherwise)
-    qp.settings.initial_guess = proxsuite.proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
-    return qp
-
-
 class TaskQP:
     """Assemble and solve the task QP for one robot (see the module docstring)."""
 
@@ -156,18 +102,29 @@ class TaskQP:
         self.torque_high = np.asarray(torque_high, dtype=float)
         self.M_act = actuator_map(robot)
         lay, m = robot.layout, robot.model
-        limited = [
-            (lay.index_q1 + j, lay.index_q1 + 1 + j, *m.jnt_range[m.dof_jntid[dof]])
-            for j, dof in enumerate(lay.body_dof)
-            if m.jnt_limited[m.dof_jntid[dof]]
-        ]  # the joint-limit rows: qdd column, minimal index, range
-        columns, indices, q_min, q_max = (
-            (np.array(v) for v in zip(*limited, strict=True))
-            if limited
-            else (np.zeros(0, int), np.zeros(0, int), np.zeros(0), np.zeros(0))
+        limited = np.array(
+            [
+                (lay.index_q1 + j, lay.index_q1 + 1 + j, *m.jnt_range[m.dof_jntid[dof]])
+                for j, dof in enumerate(lay.body_dof)
+                if m.jnt_limited[m.dof_jntid[dof]]
+            ]
+        ).reshape(-1, 4)  # the joint-limit rows: qdd column, minimal index, range
+        # the kernel's constants (its row counts and torque-limit arrays set when it is made)
+        self._layout = KernelLayout(
+            n_min=lay.n_min,
+            index_q1=lay.index_q1 - 1,
+            wheel_radius=float(lay.wheel_radius),
+            actuator_map=self.M_act,
+            torque_low=self.torque_low,
+            torque_high=self.torque_high,
+            limit_columns=limited[:, 0].astype(int),
+            limit_indices=limited[:, 1].astype(int),
+            limit_min=limited[:, 2].copy(),
+            limit_max=limited[:, 3].copy(),
+            limit_horizon=settings.limit_horizon,
+            regularization=settings.regularization,
+            rows=0,
         )
-        self._limits = (columns.astype(int), indices.astype(int), q_min, q_max)
-        self._index_q1, self._wheel_radius = lay.index_q1 - 1, float(lay.wheel_radius)
         self.n = lay.n_min - 1
         self._qp: proxsuite.proxqp.dense.QP | None = None
         # whether ProxQP solved a step since the start or its last failure: only then is the
@@ -184,32 +141,21 @@ class TaskQP:
         self._terms_ready = False  # the compiled call computed what the minimiser implies
         self.compiled = False  # whether the last step took the compiled path
 
-    def _kernel_for(self, rows: int, constraint_rows: int, n_min: int) -> LowLevelKernel:
+    def _kernel_for(self, rows: int, constraint_rows: int) -> LowLevelKernel:
         """The kernel for these row counts and the current torque-limit arrays (made anew
         when any differs)."""
         k = self.kernel
         if (
             k is None
-            or (k.layout.rows, k.layout.constraint_rows, k.layout.n_min)
-            != (rows, constraint_rows, n_min)
+            or (k.layout.rows, k.layout.constraint_rows) != (rows, constraint_rows)
             or k.layout.torque_low is not self.torque_low
             or k.layout.torque_high is not self.torque_high
         ):
-            columns, indices, q_min, q_max = self._limits
             k = self.kernel = LowLevelKernel(
-                KernelLayout(
-                    n_min=n_min,
-                    index_q1=self._index_q1,
-                    wheel_radius=self._wheel_radius,
-                    actuator_map=self.M_act,
+                dataclasses.replace(
+                    self._layout,
                     torque_low=self.torque_low,
                     torque_high=self.torque_high,
-                    limit_columns=columns,
-                    limit_indices=indices,
-                    limit_min=q_min,
-                    limit_max=q_max,
-                    limit_horizon=self.settings.limit_horizon,
-                    regularization=self.settings.regularization,
                     rows=rows,
                     constraint_rows=constraint_rows,
                 )
@@ -238,9 +184,7 @@ class TaskQP:
             return None
         check_indices([*tasks, *constraints], robot.model.nsite, robot.layout.n_min)
         kernel = self._kernel_for(
-            sum(rows_of(unwrap(task)[0]) for task in tasks),
-            sum(rows_of(c) for c in constraints),
-            robot.layout.n_min,
+            sum(rows_of(unwrap(task)[0]) for task in tasks), sum(map(rows_of, constraints))
         )
         self._stack = CompiledTaskStack(robot, self.motion, kernel, tasks, constraints)
         return self._stack
@@ -262,29 +206,20 @@ class TaskQP:
         # MuJoCo's Jacobian calls read past their arrays on a bad site id (a negative one
         # would pass NumPy's indexing): the same checks as a compiled stack's
         check_indices([*tasks, *constraints], robot.model.nsite, robot.layout.n_min)
-        blocks = [task.jacobian(robot) for task in tasks]
-        fences = [constraint.jacobian(robot) for constraint in constraints]
-        k = self._kernel_for(
-            sum(len(b) for b in blocks), sum(len(f) for f in fences), robot.layout.n_min
-        )
+        n = len(tasks)
+        blocks = [item.jacobian(robot) for item in (*tasks, *constraints)]
+        k = self._kernel_for(sum(map(len, blocks[:n])), sum(map(len, blocks[n:])))
         self.motion.update(robot)
         start = 0
-        for task, block in zip(tasks, blocks, strict=True):
-            stop = start + len(block)
-            k.J[start:stop] = block
-            k.target[start:stop] = task.reference_acceleration(robot)
-            k.w[start:stop] = task.weights()
-            k.jdot_nu[start:stop] = self._drift(task)
-            start = stop
+        for task, block in zip(tasks, blocks[:n], strict=True):
+            rows, start = slice(start, start + len(block)), start + len(block)
+            k.J[rows], k.target[rows] = block, task.reference_acceleration(robot)
+            k.w[rows], k.jdot_nu[rows] = task.weights(), self._drift(task)
         start = 0
-        for constraint, block in zip(constraints, fences, strict=True):
-            stop = start + len(block)
-            k.G[start:stop] = block
-            k.constraint_lower[start:stop], k.constraint_upper[start:stop] = constraint.bounds(
-                robot
-            )
-            k.constraint_bias[start:stop] = self._drift(constraint)
-            start = stop
+        for constraint, block in zip(constraints, blocks[n:], strict=True):
+            rows, start = slice(start, start + len(block)), start + len(block)
+            k.G[rows], k.constraint_bias[rows] = block, self._drift(constraint)
+            k.constraint_lower[rows], k.constraint_upper[rows] = constraint.bounds(robot)
         return k
 
     def jdot_nu(self, robot: RobotModel, items: Sequence[Any]) -> Array:
@@ -295,13 +230,12 @@ class TaskQP:
 
     def _drift(self, item: Any) -> Array:
         """An object's ``jdot_nu`` from the motion probe (updated at this state)."""
-        exact = getattr(item, "jdot_nu", None)
-        if exact is None:
+        if not hasattr(item, "jdot_nu"):
             raise ValueError(
                 f"task {getattr(item, 'name', item)!r} has no jdot_nu(probe): "
                 "every task of the QP needs its exact Jdot nu"
             )
-        return np.asarray(exact(self.motion))
+        return np.asarray(item.jdot_nu(self.motion))
 
     def _run_kernel(
         self,

@@ -20,8 +20,10 @@ The disturbance observers keep their state in one array of this stack
 
 from __future__ import annotations
 
+import operator
 import struct
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
+from itertools import chain
 from typing import Any
 
 import numpy as np
@@ -37,6 +39,8 @@ from wip_gym.array_table import ArrayTable
 from wip_gym.robot_model import RobotModel
 
 Array = NDArray[np.float64]
+_task, _site = operator.attrgetter("task"), operator.attrgetter("site")
+_columns, _memory = operator.attrgetter("columns"), operator.attrgetter("memory")
 
 
 def unwrap(task: object) -> tuple[Any, DisturbanceRejectingTask | None]:
@@ -141,20 +145,24 @@ class CompiledTaskStack:
                 f" constraint rows; the stack has {sum(rows[:n_tasks])} and {sum(rows[n_tasks:])}"
             )
         self.robot, self.kernel = robot, kernel
-        # the structure serves() compares: each object, a wrapper's task, site and columns
-        self._expected = [
-            (task, inner_task, *structure(inner_task))
-            for task, (inner_task, _) in zip(self.tasks, inner, strict=True)
-        ] + [(c, c, *structure(c)) for c in self.constraints]
+        # the structure serves() compares: the objects in order, each wrapper's task, each
+        # site and each column list as built
+        self._objects = [*self.tasks, *self.constraints]
+        self._wrappers = [task for task, (_, o) in zip(self.tasks, inner, strict=True) if o]
+        self._wrapped = [inner_task for inner_task, o in inner if o]
+        self._site_items = [item for item in items if getattr(item, "site", None) is not None]
+        self._site_ids = list(map(_site, self._site_items))
+        self._column_items = [i for i in items if getattr(i, "columns", None) is not None]
+        self._columns = self._column_bytes(self._column_items)
         # the per-step copy: each item's parameters() and how many it gives
-        self._sources: list[tuple[Callable[[], list[float]], int, object]] = []
+        self._items: list[Any] = items
+        self._getters = [item.parameters for item in items]
+        self._counts = [len(get()) for get in self._getters]
         sites: list[int] = []
         table_items = np.full((len(items), ITEM_FIELDS), -1, dtype=np.int64)
         columns: list[int] = []
         task_row = constraint_row = parameter = 0
-        for k, item in enumerate(items):
-            count = len(item.parameters())
-            self._sources.append((item.parameters, count, item))
+        for k, (item, count) in enumerate(zip(items, self._counts, strict=True)):
             row = table_items[k]
             row[ITEM.kind] = compiled_kind(item)
             row[ITEM.row] = task_row if k < n_tasks else constraint_row
@@ -271,6 +279,8 @@ class CompiledTaskStack:
             start = int(self.items[k, ITEM.row])
             self._observers.append((observer.cache_key, start, start + rows[k], observer, view))
         self._observer_keys = frozenset(key for key, *_ in self._observers)
+        self._observed = [observer for *_, observer, _ in self._observers]
+        self._views = [view for *_, view in self._observers]
         self._advanced = dict.fromkeys(self._observer_keys, ADVANCED_IN_MEMORY)
         self._all_advance = True
 
@@ -282,41 +292,42 @@ class CompiledTaskStack:
         constraints: Sequence[object],
     ) -> bool:
         """Whether this stack serves these lists on this robot and kernel: the same objects in
-        order, each observer's task, each site and each column as when it was built."""
-        expected = self._expected
-        if (
-            robot is not self.robot
-            or kernel is not self.kernel
-            or len(tasks) + len(constraints) != len(expected)
-        ):
-            return False
-        for item, (item0, inner, site, columns) in zip(
-            (*tasks, *constraints), expected, strict=True
-        ):
-            if item is not item0 or (item is not inner and item.task is not inner):  # type: ignore[attr-defined]
-                return False
-            if site is not None and inner.site != site:
-                return False
-            if columns is not None and np.asarray(inner.columns).tobytes() != columns:
-                return False
-        return True
+        order, each observer's task, each site and each column list as when it was built."""
+        return (
+            robot is self.robot
+            and kernel is self.kernel
+            and len(tasks) + len(constraints) == len(self._objects)
+            and all(
+                map(operator.is_, (*tasks, *constraints) if constraints else tasks, self._objects)
+            )
+            and all(map(operator.is_, map(_task, self._wrappers), self._wrapped))
+            and list(map(_site, self._site_items)) == self._site_ids
+            and self._column_bytes(self._column_items) == self._columns
+        )
+
+    @staticmethod
+    def _column_bytes(items: list[Any]) -> list[bytes]:
+        """Each item's columns' bytes (as built: the stack reads them once)."""
+        try:
+            return list(map(np.ndarray.tobytes, map(_columns, items)))
+        except TypeError:  # columns given as a list, not an array
+            return [np.asarray(item.columns).tobytes() for item in items]
 
     def prepare(self, robot: RobotModel) -> None:
         """Before the compiled call: each object's current parameters into the table (the
         per-step copy), and whether each observer advances at this state (not if it did
         already, on this stack's path or the readable one)."""
-        values: list[float] = []
-        for parameters, count, item in self._sources:
-            given = parameters()
-            if len(given) != count:
-                raise ValueError(
-                    f"task {getattr(item, 'name', type(item).__name__)!r}: {len(given)} "
-                    f"parameters where its compiled rows were built for {count} (a target or "
-                    "weights of another size: build the task anew)"
-                )
-            values += given
+        given = [parameters() for parameters in self._getters]
+        if list(map(len, given)) != self._counts:
+            for values, count, item in zip(given, self._counts, self._items, strict=True):
+                if len(values) != count:
+                    raise ValueError(
+                        f"task {getattr(item, 'name', type(item).__name__)!r}: {len(values)} "
+                        f"parameters where its compiled rows were built for {count} (a target "
+                        "or weights of another size: build the task anew)"
+                    )
         try:
-            self._pack(self._parameter_bytes, 0, *values)
+            self._pack(self._parameter_bytes, 0, *chain.from_iterable(given))
         except struct.error as error:
             raise ValueError(f"a task's parameters are not all numbers: {error}") from error
         if not self._observers:
@@ -332,7 +343,7 @@ class CompiledTaskStack:
     def owns_its_observers(self) -> bool:
         """Whether every observer's memory is still this stack's (another stack built on the
         same tasks adopts them: their readable path then reads that stack's memory)."""
-        return all(observer.memory is view for *_, observer, view in self._observers)
+        return all(map(operator.is_, map(_memory, self._observed), self._views))
 
     def memoise_observers(self, robot: RobotModel) -> None:
         """After the compiled call: an observer advances once per state, so each is marked as

@@ -110,27 +110,32 @@ class DesiredMotion(PDTask):
         """``(kp, kv, desired value, rate, acceleration, weight)``."""
         state = self.__dict__
         first, second, third = self.desired_names
-        return [self.kp, self.kv, state[first], state[second], state[third], state["weight"]]
+        return [
+            state["kp"],
+            state["kv"],
+            state[first],
+            state[second],
+            state[third],
+            state["weight"],
+        ]
 
 
-def per_column(task: Any, values: Any, what: str) -> list[float]:
-    """``values`` for each of a posture-like task's columns: one per column, or one for all
-    (``ValueError`` naming the task otherwise)."""
-    count = len(task.columns)
-    array = np.atleast_1d(np.asarray(values, dtype=float))
-    if array.ndim != 1 or array.size not in (1, count):
-        raise ValueError(
-            f"task {getattr(task, 'name', type(task).__name__)!r}: {count} columns and {what} "
-            f"of shape {np.shape(values)} (one per column, or one for all)"
-        )
-    return array.tolist() * count if array.size == 1 and count != 1 else array.tolist()
-
-
-def _three(value: Any) -> list[float]:
-    """A weight for three rows: one number for all, or three."""
-    if isinstance(value, float | int):
-        return [value, value, value]
-    return list(np.broadcast_to(np.asarray(value, dtype=float), (3,)).tolist())
+def floats(values: Any, count: int, task: Any, what: str) -> list[float]:
+    """``values`` as ``count`` floats (row-major): an array of that many numbers, or one
+    number for all (``ValueError`` naming the task and ``what`` otherwise). A task's
+    ``parameters()`` give theirs so, at every step: an array's ``tolist`` first, the cheap
+    case."""
+    if type(values) is np.ndarray and values.size == count:
+        return (values if values.ndim == 1 else values.ravel()).tolist()  # type: ignore[no-any-return]
+    if type(values) is float:
+        return [values] * count
+    array = np.asarray(values, dtype=float)
+    if array.size == count or array.size == 1:
+        return array.ravel().tolist() * (count if array.size == 1 and count != 1 else 1)  # type: ignore[no-any-return]
+    raise ValueError(
+        f"task {getattr(task, 'name', type(task).__name__)!r}: {what} of shape "
+        f"{np.shape(values)} for {count} rows (one per row, or one for all)"
+    )
 
 
 def _skew(v: Array) -> Array:
@@ -323,8 +328,12 @@ class FramePositionTask(PDTask):
 
     def parameters(self) -> list[float]:
         """``(kp, kv, target (3), weights (3))``."""
-        target = np.asarray(self.target, dtype=float).reshape(3).tolist()
-        return [self.kp, self.kv, *target, *_three(self.weight)]
+        return [
+            self.kp,
+            self.kv,
+            *floats(self.target, 3, self, "target"),
+            *floats(self.weight, 3, self, "weight"),
+        ]
 
     def jacobian(self, robot: RobotModel) -> Array:
         return site_in_axle_frame(robot, self.site)[2]
@@ -364,8 +373,12 @@ class FrameOrientationTask(PDTask):
 
     def parameters(self) -> list[float]:
         """``(kp, kv, target (3 x 3, row-major), weights (3))``."""
-        target = np.asarray(self.target, dtype=float).reshape(9).tolist()
-        return [self.kp, self.kv, *target, *_three(self.weight)]
+        return [
+            self.kp,
+            self.kv,
+            *floats(self.target, 9, self, "target"),
+            *floats(self.weight, 3, self, "weight"),
+        ]
 
     def jacobian(self, robot: RobotModel) -> Array:
         return site_in_axle_frame(robot, self.site)[3]
@@ -408,11 +421,12 @@ class PostureTask(PDTask):
 
     def parameters(self) -> list[float]:
         """``(kp, kv, targets, weights)``, one target and one weight per column."""
+        count = len(self.columns)
         return [
             self.kp,
             self.kv,
-            *per_column(self, self.target, "targets"),
-            *per_column(self, self.joint_weights, "joint weights"),
+            *floats(self.target, count, self, "targets"),
+            *floats(self.joint_weights, count, self, "joint weights"),
         ]
 
     def jacobian(self, robot: RobotModel) -> Array:
@@ -427,7 +441,7 @@ class PostureTask(PDTask):
         return robot.nu[self.columns]  # the posture is held still
 
     def weights(self) -> Array:
-        return np.array(per_column(self, self.joint_weights, "joint weights"))
+        return np.array(floats(self.joint_weights, len(self.columns), self, "joint weights"))
 
     def jdot_nu(self, probe: MotionProbe) -> Array:
         return np.zeros(len(self.columns))  # J is constant
