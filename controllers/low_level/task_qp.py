@@ -43,7 +43,6 @@ import numpy as np
 import proxsuite
 from numpy.typing import NDArray
 
-from controllers.low_level.compiled_step import rows_and_kernel
 from controllers.low_level.isolated_dynamics import IsolatedDynamics
 from controllers.low_level.kernel import KernelLayout, LowLevelKernel, solution_terms
 from controllers.low_level.motion_probe import MotionProbe
@@ -252,10 +251,7 @@ class TaskQP:
         stack = self._compiled_stack(robot, tasks, constraints) if iso is None else None
         self.compiled = stack is not None
         if stack is not None:
-            stack.prepare(robot)
-            feasible: bool = rows_and_kernel(stack.table.rows)
-            stack.memoise_observers(robot)
-            self._terms_ready = feasible
+            self._terms_ready = feasible = stack.step(robot)
             return feasible
         self._terms_ready = False
         k = self._readable_rows(robot, tasks, constraints)

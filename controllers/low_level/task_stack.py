@@ -30,6 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from controllers.low_level import compiled_tasks as ct
+from controllers.low_level.compiled_step import rows_and_kernel
 from controllers.low_level.compiled_tasks import ITEM, ITEM_FIELDS, STEP
 from controllers.low_level.disturbance_tasks import ADVANCED_IN_MEMORY, DisturbanceRejectingTask
 from controllers.low_level.kernel import LowLevelKernel
@@ -283,6 +284,7 @@ class CompiledTaskStack:
         self._views = [view for *_, view in self._observers]
         self._advanced = dict.fromkeys(self._observer_keys, ADVANCED_IN_MEMORY)
         self._all_advance = True
+        self._flags_set = True  # observer_advance is all ones
 
     def serves(
         self,
@@ -313,10 +315,21 @@ class CompiledTaskStack:
         except TypeError:  # columns given as a list, not an array
             return [np.asarray(item.columns).tobytes() for item in items]
 
+    def step(self, robot: RobotModel) -> bool:
+        """One control step on this stack's table: :meth:`prepare`, the compiled call
+        (``compiled_step.rows_and_kernel``), :meth:`memoise_observers`; whether the kernel's
+        unconstrained minimiser is feasible."""
+        self.prepare(robot)
+        feasible: bool = rows_and_kernel(self.table.rows)
+        if self._observers:
+            self.memoise_observers(robot)
+        return feasible
+
     def prepare(self, robot: RobotModel) -> None:
         """Before the compiled call: each object's current parameters into the table (the
-        per-step copy), and whether each observer advances at this state (not if it did
-        already, on this stack's path or the readable one)."""
+        per-step copy: one ``parameters()`` call per object, one pack of all the numbers), and
+        whether each observer advances at this state (not if it did already, on this stack's
+        path or the readable one)."""
         given = [parameters() for parameters in self._getters]
         if list(map(len, given)) != self._counts:
             for values, count, item in zip(given, self._counts, self._items, strict=True):
@@ -334,11 +347,14 @@ class CompiledTaskStack:
             return
         cache = robot.cache
         self._all_advance = self._observer_keys.isdisjoint(cache)
-        if self._all_advance:
-            self.observer_advance.fill(1)  # the common case: none has advanced at this state
+        if self._all_advance:  # the common case: none has advanced at this state
+            if not self._flags_set:
+                self.observer_advance.fill(1)
+                self._flags_set = True
         else:
             for slot, (key, *_) in enumerate(self._observers):
                 self.observer_advance[slot] = key not in cache
+            self._flags_set = False
 
     def owns_its_observers(self) -> bool:
         """Whether every observer's memory is still this stack's (another stack built on the
@@ -353,8 +369,6 @@ class CompiledTaskStack:
         this state). An observer another stack has adopted since gets a copy of its rows of
         ``target`` instead, and one whose readable path advanced it at this state keeps its own
         entry."""
-        if not self._observers:
-            return
         cache = robot.cache
         if self._all_advance and self.owns_its_observers():
             cache.update(self._advanced)  # the common case: one dict update

@@ -120,6 +120,14 @@ class DesiredMotion(PDTask):
         ]
 
 
+def _three(task: Any) -> list[float] | tuple[float, float, float]:
+    """A three-row task's weights: one number for all (the common case, first), or three."""
+    weight = task.weight
+    if type(weight) is float:
+        return weight, weight, weight
+    return floats(weight, 3, task, "weight")
+
+
 def floats(values: Any, count: int, task: Any, what: str) -> list[float]:
     """``values`` as ``count`` floats (row-major): an array of that many numbers, or one
     number for all (``ValueError`` naming the task and ``what`` otherwise). A task's
@@ -328,12 +336,7 @@ class FramePositionTask(PDTask):
 
     def parameters(self) -> list[float]:
         """``(kp, kv, target (3), weights (3))``."""
-        return [
-            self.kp,
-            self.kv,
-            *floats(self.target, 3, self, "target"),
-            *floats(self.weight, 3, self, "weight"),
-        ]
+        return [self.kp, self.kv, *floats(self.target, 3, self, "target"), *_three(self)]
 
     def jacobian(self, robot: RobotModel) -> Array:
         return site_in_axle_frame(robot, self.site)[2]
@@ -373,12 +376,7 @@ class FrameOrientationTask(PDTask):
 
     def parameters(self) -> list[float]:
         """``(kp, kv, target (3 x 3, row-major), weights (3))``."""
-        return [
-            self.kp,
-            self.kv,
-            *floats(self.target, 9, self, "target"),
-            *floats(self.weight, 3, self, "weight"),
-        ]
+        return [self.kp, self.kv, *floats(self.target, 9, self, "target"), *_three(self)]
 
     def jacobian(self, robot: RobotModel) -> Array:
         return site_in_axle_frame(robot, self.site)[3]
