@@ -15,7 +15,7 @@ A C declaration that does not match the library corrupts memory instead of raisi
 *fast path* is used only on the releases in :data:`VERIFIED_RELEASES`, whose ``mujoco.h``
 declares every function as :data:`DECLARATIONS` does and on which ``tests/test_mujoco_c.py``
 and a smoke of every env and controller passed (``tools/verify_mujoco_releases.py``;
-docs/robot_model.md §5). Elsewhere, or when switched off (``WIP_GYM_FAST_PATH=0``, or
+docs/robot_model.md §3). Elsewhere, or when switched off (``WIP_GYM_FAST_PATH=0``, or
 :func:`set_fast_path`), the robot model, the controllers' task QP and the env step take their
 readable path through MuJoCo's Python bindings (:func:`fast_path` decides, when such an object
 is made), and one warning says what that costs.
@@ -43,10 +43,10 @@ FAST_PATH_ENV = "WIP_GYM_FAST_PATH"
 is made, or at :func:`set_fast_path` ``(None)``)."""
 
 READABLE_COST = (
-    "about 4 times slower control step of the unified controller and about 2 times slower env "
-    "step (docs/robot_model.md §5)"
+    "measured about 5 times slower in the unified controller's control step, 3 times in the "
+    "env step, 4 times in their closed loop (docs/robot_model.md §3)"
 )
-"""What the readable path costs, as measured (docs/robot_model.md §5): the warning's words."""
+"""What the readable path costs, as measured (docs/robot_model.md §3): the warning's words."""
 
 _ptr = types.uint64  # a pointer, passed as its address
 _int = types.intc

@@ -529,7 +529,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         work), are switched on from a cup's loss to the next reset: the cup (or the free tray)
         on the floor is an island of its own, and one joint solve stops when the robot's
         forces have converged, leaving the cup's up to 1e-4 m/s off where the solve by islands
-        converges each (docs/performance.md §24). Only the island flag is touched, only if it
+        converges each (docs/performance.md). Only the island flag is touched, only if it
         is set at the loss, and only what this switched on is switched off at the reset: a
         user's own setting stands. ``model.opt`` shows the change."""
         bit = int(mujoco.mjtDisableBit.mjDSBL_ISLAND)
