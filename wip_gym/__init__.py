@@ -9,6 +9,11 @@
 | ``wip_gym/PlanarTray-v0`` | 7-DOF planar humanoid | drive to x carrying a cup on a tray |
 | ``wip_gym/Krang-v0`` | Golem Krang, 19 DOF | drive to a goal (X, Y) |
 | ``wip_gym/KrangTray-v0`` | Golem Krang, 19 DOF | drive to (X, Y) carrying a cup on a tray |
+
+On every MuJoCo release from 3.10 to 3.17: the per-step computation calls MuJoCo's C functions
+from compiled code where their declarations were verified (``wip_gym.mujoco_c``), and MuJoCo's
+Python bindings elsewhere, or everywhere with ``WIP_GYM_FAST_PATH=0`` or
+``wip_gym.set_fast_path(False)`` (docs/robot_model.md §3).
 """
 
 from __future__ import annotations
@@ -26,6 +31,7 @@ from wip_gym.compiled_cache import configure as _configure_compiled_cache  # noq
 
 _configure_compiled_cache()
 
+from wip_gym.mujoco_c import set_fast_path  # noqa: E402
 from wip_gym.registration import ENV_IDS, register_envs  # noqa: E402
 from wip_gym.robot_model import RobotModel, WIPMParameters  # noqa: E402
 from wip_gym.scene import SceneOptions, build_model  # noqa: E402
@@ -39,4 +45,5 @@ __all__ = [
     "WIPMParameters",
     "build_model",
     "register_envs",
+    "set_fast_path",
 ]
