@@ -6,14 +6,23 @@ Settings resolve in the order defaults, ``--preset``, named flags, ``--set`` (se
 ``benchmarks.overrides``; ``--list-keys`` prints every key). Two progress bars: episodes, and
 the simulated seconds of all episodes (it moves inside a long episode).
 
-Outputs in ``--out``: ``episodes.jsonl`` (one line per episode: ``benchmarks.metrics``, the
-controller's ``counters``, timing) and ``summary.json``:
+A ``plan.*`` key applies to every controller with an offline plan and leaves the others as
+they are (``benchmarks.overrides.keys_not_applied``, the sweep's rule too): the run prints a
+note and ``summary.json`` lists them under ``keys_not_applied``. ``--import MODULE`` modules
+are imported by the workers too.
 
-    {"env", "preset", "overrides": {key: value},
+Outputs in ``--out``: ``episodes.jsonl`` (one line per episode: ``benchmarks.metrics``, the
+controller's ``counters``, timing), with ``--record-transitions`` one Minari dataset per
+controller of every episode's observations, actions, rewards, terminations and truncations
+(``datasets/wip_gym/<env name>/<controller>-v0``, ``benchmarks.transitions``), and
+``summary.json``:
+
+    {"env", "preset", "overrides": {key: value}, "keys_not_applied": {key: [controller]},
      "scenario": {every env argument in effect, "env", "duration_s", "control_dt_s",
                   "episodes", "seed", "seeds", "controllers", "preset"},
      "controllers": {name: {"config": {...resolved config...}, "episodes": n,
                             "<flag>_rate": {"rate", "ci95": [low, high], "n"} | null,
+                            "outcomes": {outcome: episodes},
                             "<metric>": {"mean", "std", "min", "max", "n"} | null,
                             "counters": {name: {"mean", "std", "min", "max", "n"}},
                             "control_time_ms": {"mean", "std", "min", "max", "p99"}}}}
@@ -35,6 +44,7 @@ import numpy as np
 from tqdm import tqdm
 
 from benchmarks.episode import compare_episode
+from benchmarks.metrics import outcome_counts
 from benchmarks.overrides import (
     RunSpec,
     config_dict,
@@ -54,11 +64,12 @@ from benchmarks.scenario import (
 )
 from benchmarks.seeding import episode_seed
 from benchmarks.statistics import describe, rate
+from benchmarks.transitions import episode_file, require_minari, write_datasets
 from controllers import registry
 from controllers.optimizer import jax_setup
 
 DEFAULT_ENV = "wip_gym/PlanarTray-v0"
-RATES = ("success", "goal_reached", "cup_kept", "tray_kept", "fell")
+RATES = ("success", "carried", "goal_reached", "cup_kept", "tray_kept", "fell")
 METRICS = (
     "time_to_goal_s",
     "final_goal_error_m",
@@ -71,6 +82,7 @@ METRICS = (
     "tray_slip_distance_m",
     "max_cup_tilt_deg",
     "cup_lost_at_s",
+    "outcome_time_s",
     "time_at_actuator_limit_s",
     "sim_time_s",
     "real_time_factor",
@@ -82,8 +94,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--env", default=DEFAULT_ENV, help="env id (wip_gym/NAME or NAME)")
     parser.add_argument(
         "--controllers",
-        default=",".join(registry.controller_names()),
-        help=f"comma-separated, from {registry.controller_names()}",
+        help="comma-separated registry names (default: every registered controller: "
+        f"{', '.join(registry.controller_names())}, and those of --import modules)",
     )
     parser.add_argument("--episodes", type=int, default=1)
     parser.add_argument("--seed", type=int, default=0)
@@ -93,7 +105,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "(repeatable; see --list-keys)",
     )
     parser.add_argument(
-        "--list-keys", action="store_true", help="print every --set key, its type and default"
+        "--list-keys",
+        action="store_true",
+        help="print every --set key: its type, default and what it means",
     )
     parser.add_argument("--goal", type=float, nargs="+", metavar=("X", "Y"))
     parser.add_argument(
@@ -114,6 +128,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--jobs", type=int, default=1)
     add_video_arguments(parser, default_kind=None)  # --video [each|grid|both] of the 1st episode
+    parser.add_argument(
+        "--record-transitions",
+        action="store_true",
+        help="write every episode's observations, actions, rewards, terminations and "
+        "truncations as a Minari dataset per controller (OUT/datasets; needs wip-gym[data])",
+    )
     parser.add_argument("--out", default="out/compare")
 
 
@@ -134,11 +154,18 @@ def named_env_flags(args: argparse.Namespace) -> dict[str, Any]:
     return flags
 
 
+def controller_list(args: argparse.Namespace) -> list[str]:
+    """``--controllers``, or every registered controller (``--import`` modules included)."""
+    if args.controllers is None:
+        return registry.controller_names()
+    return parse_controllers(args.controllers)
+
+
 def spec_from_args(args: argparse.Namespace) -> RunSpec:
     """Validate the flags and resolve the run; raise ValueError naming the bad flag or key
     and the valid choices (nothing has run or been written yet)."""
     env_id = resolve_env_id(args.env)
-    names = parse_controllers(args.controllers)
+    names = controller_list(args)
     if args.episodes < 1:
         raise ValueError(f"--episodes must be >= 1, got {args.episodes}")
     if args.jobs < 1:
@@ -146,6 +173,8 @@ def spec_from_args(args: argparse.Namespace) -> RunSpec:
     if not (np.isfinite(args.duration) and args.duration > 0):
         raise ValueError(f"--duration must be positive, got {args.duration}")
     check_task_flags(env_id, args.goal, args.cup_friction)
+    if getattr(args, "record_transitions", False):
+        require_minari()
     for flag, value in (("--payload", args.payload), ("--payload-time", args.payload_time)):
         if value is not None and (not np.isfinite(value) or value < 0):
             raise ValueError(f"{flag} must be finite and >= 0, got {value}")
@@ -162,7 +191,7 @@ def list_keys(args: argparse.Namespace) -> str:
     """``--list-keys``: every key of this env and these controllers (defaults after the
     preset)."""
     env_id = resolve_env_id(args.env)
-    spec = resolve_run(env_id, parse_controllers(args.controllers), args.preset)
+    spec = resolve_run(env_id, controller_list(args), args.preset)
     return format_keys(valid_settings(env_id, spec.configs))
 
 
@@ -190,11 +219,13 @@ def scenario_record(spec: RunSpec, args: argparse.Namespace, seeds: list[int]) -
 
 def summarize(episodes: list[dict[str, Any]], control_times: list[np.ndarray]) -> dict[str, Any]:
     """Every metric over the episodes with its spread, every flag as a rate with its Wilson
-    95 % interval, the controller's counters, the control time over all steps."""
+    95 % interval, the episodes per outcome, the controller's counters, the control time over
+    all steps."""
     times = np.concatenate(control_times) * 1e3
     summary: dict[str, Any] = {"episodes": len(episodes)}
     for flag in RATES:
         summary[f"{flag}_rate"] = rate([e.get(flag) for e in episodes])
+    summary["outcomes"] = outcome_counts(episodes)
     for metric in METRICS:
         summary[metric] = describe([e.get(metric) for e in episodes])
     counter_names = sorted({k for e in episodes for k in e.get("counters", {})})
@@ -215,16 +246,25 @@ def _fmt(value: Any, spec: str) -> str:
     return "-" if value is None else format(value, spec)
 
 
+def _rate_with_interval(stat: dict[str, Any] | None) -> str:
+    """``0.80 [0.49,0.94]``: a rate and its Wilson 95 % interval; ``-`` when not reported."""
+    if stat is None:
+        return "-"
+    low, high = stat["ci95"]
+    return f"{stat['rate']:.2f} [{low:.2f},{high:.2f}]"
+
+
 def format_table(summary: dict[str, Any]) -> str:
     header = (
-        f"{'controller':<16}{'success':>8}{'goal':>6}{'cup':>6}{'fell':>6}"
-        f"{'t_goal s':>10}{'err m':>8}{'tilt deg':>10}{'fric use':>10}{'slip s':>8}"
+        f"{'controller':<16}{'carried [95% CI]':>18}{'success':>8}{'goal':>6}{'cup':>6}"
+        f"{'fell':>6}{'t_goal s':>10}{'err m':>8}{'tilt deg':>10}{'fric use':>10}{'slip s':>8}"
         f"{'slip cm':>9}{'ctrl ms':>9}{'RTF':>7}"
     )
     scenario = {k: summary["scenario"][k] for k in ("env", "goal", "duration_s", "preset")}
     lines = [
         f"{summary['env']}  {json.dumps(scenario)}  overrides {json.dumps(summary['overrides'])}",
-        "(means over episodes; fric use: peak, mean over episodes)",
+        "(rates over episodes, carried with its Wilson 95 % interval; means over episodes; "
+        "fric use: peak, mean over episodes)",
         header,
         "-" * len(header),
     ]
@@ -237,7 +277,8 @@ def format_table(summary: dict[str, Any]) -> str:
             return None if s[key] is None else s[key]["rate"]
 
         lines.append(
-            f"{name:<16}{_fmt(share('success_rate'), '.2f'):>8}"
+            f"{name:<16}{_rate_with_interval(s['carried_rate']):>18}"
+            f"{_fmt(share('success_rate'), '.2f'):>8}"
             f"{_fmt(share('goal_reached_rate'), '.2f'):>6}"
             f"{_fmt(share('cup_kept_rate'), '.2f'):>6}{_fmt(share('fell_rate'), '.2f'):>6}"
             f"{_fmt(mean('time_to_goal_s'), '.2f'):>10}{_fmt(mean('final_goal_error_m'), '.3f'):>8}"
@@ -247,6 +288,11 @@ def format_table(summary: dict[str, Any]) -> str:
             f"{_fmt(mean('cup_slip_distance_m', scale=100.0), '.2f'):>9}"
             f"{s['control_time_ms']['mean']:>9.3f}{mean('real_time_factor'):>7.2f}"
         )
+    outcomes = {
+        name: ", ".join(f"{kind} {n}" for kind, n in s["outcomes"].items())
+        for name, s in summary["controllers"].items()
+    }
+    lines += ["", "outcomes (episodes): " + "; ".join(f"{k}: {v}" for k, v in outcomes.items())]
     return "\n".join(lines)
 
 
@@ -283,8 +329,19 @@ class _SimulatedSeconds:
         self.bar.close()
 
 
+def _start_worker(imports: tuple[str, ...]) -> None:
+    """A spawned worker's start: the ``--import`` modules, whose controllers its episodes
+    make, and JAX's persistent compilation cache (``jax_setup.use_compilation_cache``)."""
+    registry.import_modules(imports)
+    jax_setup.use_compilation_cache()
+
+
 def _run_tasks(
-    tasks: list[tuple[Any, ...]], jobs: int, duration: float, on_done: Any = None
+    tasks: list[tuple[Any, ...]],
+    jobs: int,
+    duration: float,
+    on_done: Any = None,
+    imports: tuple[str, ...] = (),
 ) -> list[Any]:
     results: list[Any] = [None] * len(tasks)
     episodes_bar = tqdm(total=len(tasks), desc="episodes", unit="ep", position=0)
@@ -302,8 +359,11 @@ def _run_tasks(
         with context.Manager() as manager:
             reports = manager.Queue()
             with ProcessPoolExecutor(
-                max_workers=jobs, mp_context=context, initializer=jax_setup.configure
-            ) as pool:  # a spawned worker is an entry point: the solvers' JAX settings first
+                max_workers=jobs,
+                mp_context=context,
+                initializer=_start_worker,
+                initargs=(imports,),
+            ) as pool:
                 futures = {
                     pool.submit(compare_episode, *task, progress=reports): k
                     for k, task in enumerate(tasks)
@@ -335,6 +395,8 @@ def run(args: argparse.Namespace) -> dict[str, Any] | None:
         return None
     spec = spec_from_args(args)
     names = list(spec.configs)
+    for key, left in spec.not_applied.items():
+        print(f"note: {key} leaves {', '.join(left)} as configured (no offline plan)")
     env = gym.make(spec.env_id, max_episode_steps=-1, **spec.env_kwargs)
     videos = video_options(args, env.unwrapped.model)
     env.close()
@@ -345,6 +407,7 @@ def run(args: argparse.Namespace) -> dict[str, Any] | None:
     for name in names:
         for i, seed in enumerate(seeds):
             record = str(recording_file(out, name)) if (videos and i == 0) else None
+            transitions = str(episode_file(out, name, i)) if args.record_transitions else None
             tasks.append(
                 (
                     len(tasks),
@@ -356,6 +419,7 @@ def run(args: argparse.Namespace) -> dict[str, Any] | None:
                     args.duration,
                     record,
                     videos.fps if videos else None,
+                    transitions,
                 )
             )
     # videos render from the recordings in another process while the next episodes run
@@ -365,7 +429,10 @@ def run(args: argparse.Namespace) -> dict[str, Any] | None:
         if jobs is not None and tasks[k][7] is not None:
             jobs.submit(tasks[k][3])
 
-    outcomes = _run_tasks(tasks, args.jobs, args.duration, on_done=render_when_recorded)
+    imports = tuple(getattr(args, "imports", ()))
+    outcomes = _run_tasks(
+        tasks, args.jobs, args.duration, on_done=render_when_recorded, imports=imports
+    )
     episodes_done = time.perf_counter()
     results = [metrics for metrics, _ in outcomes]
     with open(out / "episodes.jsonl", "w") as f:
@@ -376,16 +443,26 @@ def run(args: argparse.Namespace) -> dict[str, Any] | None:
         "preset": spec.preset,
         "overrides": spec.overrides,
         "scenario": scenario_record(spec, args, seeds),
+        "keys_not_applied": {key: list(left) for key, left in spec.not_applied.items()},
         "controllers": {},
     }
     for name in names:
         mine = [k for k, r in enumerate(results) if r["controller"] == name]
         stats = summarize([results[k] for k in mine], [outcomes[k][1] for k in mine])
         summary["controllers"][name] = {"config": config_dict(spec.configs[name]), **stats}
+    if args.record_transitions:
+        indices = {name: list(range(args.episodes)) for name in names}
+        datasets = write_datasets(out, spec.env_id, spec.env_kwargs, indices)
+        summary["datasets"] = {"root": str(out / "datasets"), "ids": datasets}
     with open(out / "summary.json", "w") as f:
         json.dump(summary, f, indent=2)
     print(format_table(summary))
     print(f"\nwrote {out / 'summary.json'} and {out / 'episodes.jsonl'}")
+    if args.record_transitions:
+        print(
+            f"datasets (Minari; MINARI_DATASETS_PATH={out / 'datasets'}): "
+            + ", ".join(summary["datasets"]["ids"].values())
+        )
     if jobs is not None:
         rendered = jobs.finish(names)
         for video in rendered["videos"]:

@@ -22,11 +22,20 @@ Definitions (``dt`` the env step; "step" an env step after the reset):
 * ``max_cup_tilt_deg``: the peak angle between the cup's axis and the tray's normal, from
   ``info["cup_tilt_deg"]`` or, when absent, from the observation's ``cup_pose`` quaternion
   (``acos(1 - 2 (qx^2 + qy^2))``).
-* ``cup_kept``: on every step ``cup_on_tray`` and the cup upright (``info["cup_upright"]`` or
-  tilt at most ``UPRIGHT_DEG`` = 30 deg) and on the plate (``info["cup_on_plate"]`` when
-  present); ``cup_lost_at_s``: the first step it is not.
+* ``cup_kept``: on every step the tray on the hand (``info["tray_on_hand"]``, True when not
+  reported: welded) and the cup on it: ``cup_on_tray``, upright (``info["cup_upright"]`` or tilt
+  at most ``UPRIGHT_DEG`` = 30 deg) and on the plate (``info["cup_on_plate"]`` when present). A
+  cup that rides a dropped tray is not kept. ``cup_lost_at_s``: the first step it is not.
 * ``tray_kept``: ``info["tray_on_hand"]`` on every step (True when not reported: welded).
-* ``success``: reached the goal, did not fall, kept the cup and the tray.
+* ``outcome``: the episode's one outcome. In a tray task ``"carried"`` (on every step the robot
+  up, the tray on the hand and the cup on the plate, upright) or its first loss: ``"fell"``,
+  ``"tray_lost"``, ``"cup_lost"``; without a tray ``"balanced"`` (never fell) or ``"fell"``.
+  When losses first appear on the same step the cause is named: ``fell`` before ``tray_lost``
+  before ``cup_lost`` (``LOSS_ORDER``). ``outcome_time_s``: the time of that step (None when
+  carried or balanced). Only the first loss counts, so the outcome is the same whether the env
+  ends the episode at the loss or runs on (``terminate_on_cup_loss``).
+* ``carried``: ``outcome == "carried"``; None without a tray (so its rate is null, not 0).
+* ``success``: reached the goal and carried (without a tray: reached the goal, not fallen).
 * ``time_at_actuator_limit_s``: ``dt`` times the steps on which some torque is at its bound
   (within ``LIMIT_RTOL`` of it).
 """
@@ -34,7 +43,7 @@ Definitions (``dt`` the env step; "step" an env step after the reset):
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -45,6 +54,12 @@ STOP_SPEED_M_S = 0.05
 SLIP_USE = 0.99
 UPRIGHT_DEG = 30.0
 LIMIT_RTOL = 1e-6
+#: the losses in the order they are named when several first appear on the same step: the cause
+#: first (a fall drops the tray, a dropped tray takes the cup)
+LOSS_ORDER = ("fell", "tray_lost", "cup_lost")
+CARRIED = "carried"
+BALANCED = "balanced"  # the outcome of an episode without a tray that did not fall
+OUTCOMES = (CARRIED, BALANCED, *LOSS_ORDER)
 
 
 def time_to_goal(t: np.ndarray, distance: np.ndarray, speed: np.ndarray) -> float | None:
@@ -56,6 +71,25 @@ def time_to_goal(t: np.ndarray, distance: np.ndarray, speed: np.ndarray) -> floa
     failures = np.flatnonzero(~ok)
     first = 0 if len(failures) == 0 else failures[-1] + 1
     return float(t[first])
+
+
+def step_loss(fallen: bool, tray_on_hand: bool = True, cup_on_tray: bool = True) -> str | None:
+    """The loss one step shows, named by :data:`LOSS_ORDER` when it shows several (the cause
+    first); None when the robot is up, the tray on the hand and the cup on the plate."""
+    if fallen:
+        return "fell"
+    if not tray_on_hand:
+        return "tray_lost"
+    if not cup_on_tray:
+        return "cup_lost"
+    return None
+
+
+def outcome_counts(episodes: Sequence[Mapping[str, Any]]) -> dict[str, int]:
+    """Episodes per ``outcome``, for the outcomes that occur, in the order of :data:`OUTCOMES`
+    (an episode without one, recorded before outcomes existed, is not counted)."""
+    counts = {kind: sum(1 for e in episodes if e.get("outcome") == kind) for kind in OUTCOMES}
+    return {kind: n for kind, n in counts.items() if n}
 
 
 def path_length(points: NDArray[np.float64]) -> float:
@@ -109,6 +143,8 @@ class EpisodeMetrics:
         self._tray_kept: list[bool] = []
         self._at_limit = 0
         self._control_times: list[float] = []
+        self._loss: str | None = None  # the first loss and the step (1-based) it appeared on
+        self._loss_step = 0
         if self.has_cup:
             self._tilt.append(float(reset_info["tray_tilt_deg"]))
             self._cup_offset.append(np.array(reset_info["cup_offset"], dtype=float))
@@ -139,9 +175,11 @@ class EpisodeMetrics:
         the controller's compute time for that action)."""
         self._distance.append(float(info["goal_distance"]))
         self._speed.append(abs(float(info["xd"])))
-        self._fallen = self._fallen or bool(info["fallen"])
+        fallen = bool(info["fallen"])
+        self._fallen = self._fallen or fallen
         if self.has_ee:
             self._ee.append(float(info["ee_error"]))
+        on_hand, on_tray = True, True
         if self.has_cup:
             self._tilt.append(float(info["tray_tilt_deg"]))
             self._friction.append(float(info["cup_friction_use"]))
@@ -154,10 +192,14 @@ class EpisodeMetrics:
             upright = info.get("cup_upright")
             if upright is None:
                 upright = tilt is None or tilt <= UPRIGHT_DEG
-            kept = bool(info["cup_on_tray"]) and bool(upright)
-            kept = kept and bool(info.get("cup_on_plate", True))
-            self._kept.append(kept)
-            self._tray_kept.append(bool(info.get("tray_on_hand", True)))
+            on_tray = bool(info["cup_on_tray"]) and bool(upright)
+            on_tray = on_tray and bool(info.get("cup_on_plate", True))
+            on_hand = bool(info.get("tray_on_hand", True))
+            self._kept.append(on_tray and on_hand)  # a cup on a dropped tray is not kept
+            self._tray_kept.append(on_hand)
+        if self._loss is None:
+            self._loss = step_loss(fallen, on_hand, on_tray)
+            self._loss_step = len(self._distance)
         if action is not None and self._near_high is not None and self._near_low is not None:
             a = np.asarray(action, dtype=float)
             at_limit = (a >= self._near_high) | (a <= self._near_low)
@@ -194,13 +236,24 @@ class EpisodeMetrics:
             "time_at_actuator_limit_s": self._at_limit * dt if self._low is not None else None,
         }
         metrics.update(self._cup_metrics())
+        metrics.update(self._outcome())
+        carried = metrics["carried"]
         metrics["success"] = bool(
-            metrics["goal_reached"]
-            and not fell
-            and metrics["cup_kept"] is not False
-            and metrics["tray_kept"] is not False
+            metrics["goal_reached"] and not fell and (carried is None or carried)
         )
         return metrics
+
+    def _outcome(self) -> dict[str, Any]:
+        """``outcome``, ``outcome_time_s`` and ``carried`` (docs/metrics.md §1)."""
+        if self._loss is not None:
+            outcome, time = self._loss, self._loss_step * self.dt
+        else:
+            outcome, time = (CARRIED if self.has_cup else BALANCED), None
+        return {
+            "outcome": outcome,
+            "outcome_time_s": time,
+            "carried": (outcome == CARRIED) if self.has_cup else None,
+        }
 
     def _cup_metrics(self) -> dict[str, Any]:
         keys = (

@@ -9,9 +9,20 @@ from pathlib import Path
 import pytest
 
 from benchmarks.cli import main
+from benchmarks.key_docs import MAX_LENGTH
+from benchmarks.overrides import format_keys, resolve_run, valid_settings
 from benchmarks.rollout import without_timing
+from benchmarks.scenario import resolve_env_id
+from controllers import registry
 
-RATE_KEYS = {"success_rate", "goal_reached_rate", "cup_kept_rate", "tray_kept_rate", "fell_rate"}
+RATE_KEYS = {
+    "success_rate",
+    "carried_rate",
+    "goal_reached_rate",
+    "cup_kept_rate",
+    "tray_kept_rate",
+    "fell_rate",
+}
 METRIC_KEYS = {
     "time_to_goal_s",
     "final_goal_error_m",
@@ -24,12 +35,15 @@ METRIC_KEYS = {
     "tray_slip_distance_m",
     "max_cup_tilt_deg",
     "cup_lost_at_s",
+    "outcome_time_s",
     "time_at_actuator_limit_s",
     "sim_time_s",
     "real_time_factor",
     "setup_s",
 }
-SUMMARY_KEYS = {"config", "episodes", "counters", "control_time_ms"} | RATE_KEYS | METRIC_KEYS
+SUMMARY_KEYS = (
+    {"config", "episodes", "outcomes", "counters", "control_time_ms"} | RATE_KEYS | METRIC_KEYS
+)
 SPREAD = {"mean", "std", "min", "max", "n"}
 
 
@@ -75,7 +89,7 @@ def test_summary_schema_and_episode_lines(tmp_path: Path) -> None:
     assert set(stats) == SUMMARY_KEYS
     assert stats["episodes"] == 2
     assert stats["config"]["model"] == "nominal" and "plan" in stats["config"]
-    for key in METRIC_KEYS - {"time_to_goal_s", "cup_lost_at_s"}:
+    for key in METRIC_KEYS - {"time_to_goal_s", "cup_lost_at_s", "outcome_time_s"}:
         assert set(stats[key]) == SPREAD and stats[key]["n"] == 2, key
         assert stats[key]["min"] <= stats[key]["mean"] <= stats[key]["max"], key
     for key in RATE_KEYS:
@@ -84,6 +98,10 @@ def test_summary_schema_and_episode_lines(tmp_path: Path) -> None:
     assert all(set(v) == SPREAD for v in stats["counters"].values())
     assert stats["time_to_goal_s"] is None  # 0.3 s is too short to arrive
     lines = [json.loads(line) for line in (tmp_path / "episodes.jsonl").read_text().splitlines()]
+    # the rates and the outcome counts are those of the episodes' lines
+    assert [line["outcome"] for line in lines] == ["carried", "carried"]
+    assert stats["outcomes"] == {"carried": 2} and stats["carried_rate"]["rate"] == 1.0
+    assert stats["outcome_time_s"] is None  # no loss, no time
     assert [line["seed"] for line in lines] == [5, 6]
     # the summary's spread is that of the episodes' lines
     peaks = [line["max_cup_friction_use"] for line in lines]
@@ -92,12 +110,18 @@ def test_summary_schema_and_episode_lines(tmp_path: Path) -> None:
     assert lines[0]["max_cup_friction_use"] != lines[1]["max_cup_friction_use"]  # seeds differ
 
 
-def test_no_cup_metrics_are_null_without_a_tray(tmp_path: Path) -> None:
+def test_no_cup_metrics_are_null_without_a_tray(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     summary = run(
         tmp_path, "--env", "wip_gym/WIP-v0", "--controllers", "decoupled", "--duration", "0.2"
     )
     stats = summary["controllers"]["decoupled"]
     assert stats["cup_kept_rate"] is None and stats["max_cup_friction_use"] is None
+    assert stats["carried_rate"] is None  # no tray: nothing to carry, not a rate of 0
+    assert stats["outcomes"] == {"balanced": 1}
+    table = capsys.readouterr().out
+    assert "carried [95% CI]" in table and "outcomes (episodes): decoupled: balanced 1" in table
 
 
 @pytest.mark.parametrize(
@@ -173,7 +197,7 @@ def test_bad_overrides_exit_2_naming_the_key_and_write_nothing(
     assert not out.exists()
 
 
-def test_list_keys_prints_every_key_with_type_and_default(
+def test_list_keys_prints_every_key_with_type_default_and_description(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "out"
@@ -192,9 +216,25 @@ def test_list_keys_prints_every_key_with_type_and_default(
     rows = {
         line.split()[0]: line.split(None, 1)[1] for line in capsys.readouterr().out.splitlines()
     }
-    assert rows["env.cup_friction"].split() == ["float", "0.3"]
-    assert rows["env.goal"].endswith("[2.0, 0.0]")
+    assert rows["env.cup_friction"].split()[:3] == ["float", "0.3", "tray-cup"]
+    assert rows["env.goal"].split()[4:] == [
+        "[2.0,",
+        "0.0]",
+        "goal",
+        "x,",
+        "or",
+        "`(X,",
+        "Y)`",
+        "in",
+        "3-D",
+    ]
     assert rows["unified.ee_position_weight"].startswith("float")
+    # each from where it is documented: the env's Arguments table, the config's Attributes
+    assert rows["env.push_duration"].endswith("s the push lasts")
+    assert "  how aggressive the plan may be, independent of the cup" in rows["plan.a_max"]
+    assert rows["unified.high_level.mpc.ddp.second_order"].endswith(
+        "True: DDP with the ``V_x . f_xx, f_ux, f_uu`` terms; False: iLQR (the authors' choice)."
+    )
     for key in (
         "plan.a_max",
         "plan.q_position",
@@ -204,6 +244,17 @@ def test_list_keys_prints_every_key_with_type_and_default(
         assert key in rows, key
     assert not any(key.startswith("decoupled-mpc.") for key in rows)  # only these controllers
     assert not out.exists()
+
+
+@pytest.mark.parametrize("env_id", ["WIP-v0", "PlanarTray-v0", "KrangTray-v0"])
+def test_every_key_of_every_controller_has_a_one_line_description(env_id: str) -> None:
+    spec = resolve_run(resolve_env_id(env_id), registry.controller_names())
+    settings = valid_settings(spec.env_id, spec.configs)
+    undocumented = [key for key, setting in settings.items() if not setting.description]
+    assert not undocumented
+    for setting in settings.values():
+        assert "\n" not in setting.description and len(setting.description) <= MAX_LENGTH
+    assert len(format_keys(settings).splitlines()) == len(settings)
 
 
 def test_preset_paper_runs_and_records_its_settings(tmp_path: Path) -> None:

@@ -8,7 +8,13 @@ import math
 import numpy as np
 import pytest
 
-from benchmarks.metrics import EpisodeMetrics, path_length, tilt_from_quaternion
+from benchmarks.metrics import (
+    LOSS_ORDER,
+    EpisodeMetrics,
+    path_length,
+    step_loss,
+    tilt_from_quaternion,
+)
 from benchmarks.seeding import episode_seed
 from benchmarks.statistics import describe, rate, wilson_interval
 
@@ -102,6 +108,95 @@ def test_env_keys_take_precedence_when_present() -> None:
     assert result["cup_kept"] is False and result["cup_lost_at_s"] == pytest.approx(2 * DT)
     assert result["tray_kept"] is False
     assert result["max_cup_tilt_deg"] == 5.0
+
+
+def _stream(*steps: dict) -> dict:
+    """The metrics of a tray task's episode whose steps change the info row by ``steps``
+    (a free tray's keys present, the cup still on the plate's centre, at the goal)."""
+    base = {"tray_on_hand": True, "cup_upright": True, "cup_on_plate": True, "tray_offset": 0.0}
+
+    def row(change: dict) -> dict:
+        merged = {**base, **change}
+        merged["tray_offset"] = np.full(3, merged["tray_offset"])
+        return info((0.0, 0.0, 0.04), goal_distance=0.0, xd=0.0, **merged)
+
+    metrics = EpisodeMetrics(DT, row({}), UPRIGHT)
+    for change in steps:
+        metrics.update(row(change), UPRIGHT)
+    return metrics.result()
+
+
+def test_an_episode_kept_to_the_end_is_carried_and_its_success_needs_the_goal() -> None:
+    result = _stream({}, {}, {})
+    assert result["outcome"] == "carried" and result["outcome_time_s"] is None
+    assert result["carried"] is True
+    assert result["cup_kept"] is True and result["success"] is True
+    far = EpisodeMetrics(DT, info((0.0, 0.0, 0.04)), UPRIGHT)  # 1 m from the goal
+    far.update(info((0.0, 0.0, 0.04)), UPRIGHT)
+    assert far.result()["carried"] is True and far.result()["success"] is False
+
+
+@pytest.mark.parametrize(
+    ("steps", "outcome", "at_step"),
+    [
+        # one loss, then recovery or worse: the first one is the outcome
+        (({}, {"fallen": True}, {}), "fell", 2),
+        (({}, {"tray_on_hand": False}, {"tray_on_hand": True}), "tray_lost", 2),
+        (({}, {}, {"cup_on_plate": False}, {"fallen": True}), "cup_lost", 3),
+        (({"cup_upright": False}, {"tray_on_hand": False}), "cup_lost", 1),
+        (({}, {"tray_on_hand": False}, {"fallen": True, "cup_on_plate": False}), "tray_lost", 2),
+        # two or three losses first seen on one step: the cause is named
+        (({}, {"fallen": True, "tray_on_hand": False, "cup_on_plate": False}), "fell", 2),
+        (({}, {"fallen": True, "cup_upright": False}), "fell", 2),
+        (({"tray_on_hand": False, "cup_on_plate": False},), "tray_lost", 1),
+        (({"tray_on_hand": False, "cup_on_tray": False},), "tray_lost", 1),
+    ],
+)
+def test_the_outcome_is_the_first_loss_and_its_time(
+    steps: tuple[dict, ...], outcome: str, at_step: int
+) -> None:
+    result = _stream(*steps)
+    assert result["outcome"] == outcome
+    assert result["outcome_time_s"] == pytest.approx(at_step * DT)
+    assert result["carried"] is False and result["success"] is False
+    # the cup is not kept from the first step the tray leaves the hand or the cup the plate
+    # (a fall alone leaves it kept: that is the outcome's, and fell's, to say)
+    if outcome != "fell":
+        assert result["cup_kept"] is False
+        assert result["cup_lost_at_s"] == pytest.approx(at_step * DT)
+
+
+def test_a_cup_riding_a_dropped_tray_is_not_kept() -> None:
+    """The cup still upright on the plate in the tray's frame, the tray off the hand: lost."""
+    result = _stream({}, {"tray_on_hand": False, "tray_offset": -0.05}, {"tray_on_hand": False})
+    assert result["tray_kept"] is False and result["cup_kept"] is False
+    assert result["cup_lost_at_s"] == pytest.approx(2 * DT)
+    assert (result["outcome"], result["carried"], result["success"]) == ("tray_lost", False, False)
+    # the tray's slip path stops with the loss, like the cup's
+    assert result["tray_slip_distance_m"] == pytest.approx(0.05 * math.sqrt(3))
+
+
+def test_step_loss_names_the_cause_first() -> None:
+    assert step_loss(False) is None
+    assert LOSS_ORDER == ("fell", "tray_lost", "cup_lost")
+    for fallen, on_hand, on_tray in np.ndindex(2, 2, 2):
+        losses = (fallen, not on_hand, not on_tray)
+        shown = [name for name, lost in zip(LOSS_ORDER, losses, strict=True) if lost]
+        assert step_loss(bool(fallen), bool(on_hand), bool(on_tray)) == (shown or [None])[0]
+
+
+def test_without_a_tray_the_outcome_is_balanced_or_fell_and_carried_is_none() -> None:
+    reset = {"goal_distance": 0.0, "xd": 0.0, "fallen": False}
+    up = EpisodeMetrics(DT, reset)
+    up.update(reset)
+    assert up.result()["outcome"] == "balanced" and up.result()["carried"] is None
+    assert up.result()["success"] is True
+    down = EpisodeMetrics(DT, reset)
+    down.update(reset)
+    down.update({**reset, "fallen": True})
+    result = down.result()
+    assert (result["outcome"], result["outcome_time_s"]) == ("fell", pytest.approx(2 * DT))
+    assert result["carried"] is None and result["success"] is False
 
 
 def test_time_at_the_actuator_limit_and_goal_metrics() -> None:

@@ -14,8 +14,10 @@ from pathlib import Path
 import pytest
 import ray
 
+from benchmarks.metrics import OUTCOMES
 from benchmarks.rollout import run_configured_episode
 from benchmarks.sweep import runner
+from benchmarks.sweep.frontier import critical_value
 from benchmarks.sweep.runner import RAY_TEMP_DIR, run_sweep
 from benchmarks.sweep.spec import parse_spec
 from benchmarks.sweep.store import read_rows
@@ -32,6 +34,10 @@ seed = 3
 "env.cup_friction" = [0.2, 0.4]
 [random]
 "env.push_force" = { uniform = [-30.0, 30.0] }
+[[frontier]]
+axis = "env.cup_friction"
+toward = "low"
+rate = 0.5
 """
 # Metrics that are physics, not wall-clock time: equal on any worker.
 DETERMINISTIC = (
@@ -39,6 +45,9 @@ DETERMINISTIC = (
     "fell",
     "goal_reached",
     "cup_kept",
+    "outcome",
+    "outcome_time_s",
+    "carried",
     "success",
     "final_goal_error_m",
     "max_tray_tilt_deg",
@@ -101,9 +110,22 @@ def test_a_small_sweep_writes_every_row_and_the_summary(small_sweep):
             assert stats["stats"]["max_cup_friction_use"]["max"] == max(peaks)
             low, high = stats["success_ci95"]
             assert low <= stats["success_rate"] <= high
+            outcomes = [r["metrics"]["outcome"] for r in mine if r["controller"] == name]
+            assert set(outcomes) <= set(OUTCOMES) and "balanced" not in outcomes
+            assert stats["carried_rate"] == outcomes.count("carried") / 2
+            low, high = stats["carried_ci95"]
+            assert low <= stats["carried_rate"] <= high
+            assert sum(stats["outcomes"].values()) == 2
         assert cell["paired"][0]["n"] == 2
+    # the frontier: one row per controller (no other axis), from the cells' carried rates
+    assert [r["controller"] for r in summary["frontier"]] == ["decoupled", "unified"]
+    for row in summary["frontier"]:
+        rates = [c["controllers"][row["controller"]]["carried_rate"] for c in summary["cells"]]
+        assert row["rates"] == {"0.2": rates[0], "0.4": rates[1]} and row["fixed"] == {}
+        assert row["critical"] == critical_value([0.4, 0.2], rates[::-1], 0.5)
     assert json.loads((directory / "summary.json").read_text())["episodes_total"] == 8
-    assert "| env.cup_friction=0.2 | decoupled | 2 |" in (directory / "report.md").read_text()
+    report = (directory / "report.md").read_text()
+    assert "| env.cup_friction=0.2 | decoupled | 2 |" in report and "## Frontiers" in report
     assert (directory / "line_env.cup_friction.png").stat().st_size > 0
 
 
@@ -185,7 +207,7 @@ def test_workers_get_the_jax_settings_before_jax_starts(cluster, tmp_path):
     run_sweep(spec, tmp_path, workers=2, episode_fn=report_settings, progress=False)
     for row in read_rows(tmp_path):
         m = row["metrics"]
-        assert m["x64"] is True
+        assert m["x64"] is False  # the solvers scope float64 themselves (tests/test_jax_setup.py)
         assert "xla_cpu_small_while_loop_byte_threshold" in m["xla_flags"]
         assert "--xla_cpu_multi_thread_eigen=false" in m["xla_flags"]
         assert m["omp"] == m["openblas"] == "1"

@@ -119,14 +119,15 @@ def test_a_bad_spec_exits_2_names_the_problem_and_writes_nothing(case, tmp_path,
     assert not out.exists()
 
 
-def test_dry_run_prints_cells_count_and_estimate(tmp_path, capsys):
+def test_dry_run_prints_cells_and_count(tmp_path, capsys):
+    """Without calibration (the estimate: tests/test_sweep_frontier.py)."""
     path = tmp_path / "spec.toml"
     path.write_text(ISSUE_SPEC)
-    assert main(["sweep", str(path), "--dry-run", "--workers", "2"]) == 0
+    assert main(["sweep", str(path), "--dry-run", "--workers", "2", "--no-calibration"]) == 0
     text = capsys.readouterr().out
     assert "4 cells x 2 controllers x 2 seeds = 16 episodes" in text
     assert "env.cup_friction=0.4, env.goal=1.5" in text
-    assert "16 episodes to run on 2 workers: about" in text
+    assert "16 episodes to run on 2 workers (no time estimate" in text
     assert list(tmp_path.iterdir()) == [path]
 
 

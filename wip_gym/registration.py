@@ -1,4 +1,5 @@
-"""Gymnasium registration of the wip-gym environments (docs/DESIGN.md §6)."""
+"""Gymnasium registration of the wip-gym environments (docs/DESIGN.md §6) and their native
+vector envs (``gymnasium.make_vec``, docs/vector.md)."""
 
 from __future__ import annotations
 
@@ -17,6 +18,13 @@ ENV_IDS: dict[str, str] = {
 }
 
 
+def vector_entry_point(env_id: str) -> str:
+    """The vector env class of ``env_id``: ``wip_gym.vector.env:<task class>``, the task
+    class's name with ``Env`` made ``VectorEnv`` (``WIPDriveEnv`` -> ``WIPDriveVectorEnv``)."""
+    task_class = ENV_IDS[env_id].split(":")[1]
+    return "wip_gym.vector.env:" + task_class.removesuffix("Env") + "VectorEnv"
+
+
 def register_envs() -> None:
     """Register every environment (idempotent)."""
     for env_id, entry_point in ENV_IDS.items():
@@ -25,5 +33,6 @@ def register_envs() -> None:
         gymnasium.register(
             id=env_id,
             entry_point=entry_point,
+            vector_entry_point=vector_entry_point(env_id),
             max_episode_steps=int(round(EPISODE_SECONDS / CONTROL_DT)),
         )

@@ -1,8 +1,12 @@
 """``wip-bench sweep``: run a sweep spec on Ray, or report on a sweep directory.
 
 wip-bench sweep SPEC --out DIR [--address ADDRESS] [--workers N]
-wip-bench sweep SPEC --dry-run [--out DIR] [--workers N]
+wip-bench sweep SPEC --dry-run [--out DIR] [--workers N] [--no-calibration]
 wip-bench sweep --report DIR
+
+Exit status: 0 when every planned episode has an ``ok`` row; 1 when some failed (their rows,
+the summary and the report are written first; the rows hold the tracebacks); 130 after Ctrl-C;
+2 for a bad spec or bad arguments, before anything runs.
 """
 
 from __future__ import annotations
@@ -10,17 +14,11 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import statistics
 from pathlib import Path
 
+from benchmarks.sweep import estimate
+from benchmarks.sweep.keys import spec_keys_not_applied
 from benchmarks.sweep.spec import SpecError, SweepSpec, load_spec
-from benchmarks.sweep.store import read_rows
-
-# --dry-run's time estimate when the directory has no measured episodes: seconds of setup per
-# episode (env and controller construction, the offline plan) and a real-time factor of the
-# closed loop, both on the cautious side of what PlanarTray-v0 and KrangTray-v0 measure here.
-ASSUMED_SETUP_S = 2.0
-ASSUMED_REAL_TIME_FACTOR = 0.5
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -34,30 +32,33 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--dry-run", action="store_true", help="print the cells, episode count, time estimate"
     )
     parser.add_argument(
+        "--no-calibration",
+        action="store_true",
+        help="--dry-run without its calibration episodes (and so without a time estimate "
+        "unless --out holds finished episodes)",
+    )
+    parser.add_argument(
         "--report", metavar="DIR", help="write the report of a sweep directory and exit"
     )
 
 
-def estimate_seconds(
-    spec: SweepSpec, episodes: int, workers: int, directory: str | None
-) -> tuple[float, str]:
-    """Wall time of ``episodes`` on ``workers``: measured per-episode wall time in the
-    directory if it has rows, else the assumed setup and real-time factor."""
-    rows = read_rows(directory) if directory else []
-    walls = [r["wall_s"] for r in rows if r.get("status") == "ok"]
-    if walls:
-        per_episode = statistics.fmean(walls)
-        source = f"measured: mean {per_episode:.1f} s over {len(walls)} episodes in {directory}"
-    else:
-        per_episode = ASSUMED_SETUP_S + spec.duration / ASSUMED_REAL_TIME_FACTOR
-        source = (
-            f"assumed: {ASSUMED_SETUP_S:.0f} s setup + real-time factor "
-            f"{ASSUMED_REAL_TIME_FACTOR} per episode"
+def frontier_lines(spec: SweepSpec) -> list[str]:
+    """The frontiers as the report will compute them: each axis from easiest to hardest."""
+    lines = []
+    for f in spec.frontiers:
+        per_controller = len(spec.cells()) // len(spec.grid[f.axis])
+        order = " -> ".join(json.dumps(v) for v in f.easiest_first(spec.grid[f.axis]))
+        lines.append(
+            f"  frontier {f.axis}: carried rate >= {f.rate:g}, harder toward {f.toward} "
+            f"(easiest to hardest: {order}); {per_controller * len(spec.controllers)} rows "
+            f"(controllers x combinations of the other axes)"
         )
-    return episodes * per_episode / max(1, workers), source
+    return lines
 
 
-def dry_run(spec: SweepSpec, directory: str | None, workers: int | None) -> None:
+def dry_run(
+    spec: SweepSpec, directory: str | None, workers: int | None, calibrate: bool = True
+) -> None:
     from benchmarks.sweep.runner import plan_run
 
     cells = spec.cells()
@@ -76,16 +77,35 @@ def dry_run(spec: SweepSpec, directory: str | None, workers: int | None) -> None
             "  random per episode: "
             + ", ".join(f"{k} ~ {json.dumps(d.as_json())}" for k, d in spec.random.items())
         )
-    todo = len(spec.episodes())
+    for line in frontier_lines(spec):
+        print(line)
+    for key, left in spec_keys_not_applied(spec).items():
+        print(f"  {key} leaves {', '.join(left)} as configured (no offline plan)")
+    todo = spec.episodes()
     if directory and Path(directory).exists():
-        episodes, skipped, _ = plan_run(spec, directory)
-        todo = len(episodes)
+        todo, skipped, _ = plan_run(spec, directory)
         print(f"{skipped} episodes already in {directory} would be skipped")
     n_workers = workers or os.cpu_count() or 1
-    seconds, source = estimate_seconds(spec, todo, n_workers, directory)
+    measured = (
+        estimate.from_rows(len(todo), n_workers, directory)
+        if directory and Path(directory).exists()
+        else None
+    )
+    if measured is None and calibrate:
+        measured = estimate.from_calibration(spec, todo, estimate.calibrate(spec), n_workers)
+    if measured is None:
+        print(
+            f"{len(todo)} episodes to run on {n_workers} workers (no time estimate: "
+            f"--no-calibration and no finished episodes in --out)"
+        )
+        return
+    seconds, how = measured
+    for line in how:
+        print(line)
     print(
-        f"{todo} episodes to run on {n_workers} workers: about {seconds / 60:.0f} min "
-        f"({seconds / 3600:.1f} h; {source})"
+        f"{len(todo)} episodes to run on {n_workers} workers: about {seconds / 60:.0f} min "
+        f"({seconds / 3600:.1f} h; with a core per worker, after each worker's start; less "
+        f"where episodes end early)"
     )
 
 
@@ -109,11 +129,26 @@ def run(args: argparse.Namespace) -> int:
         raise SpecError(f"--workers must be >= 1, got {args.workers}")
     spec = load_spec(args.spec)
     if args.dry_run:
-        dry_run(spec, args.out, args.workers)
+        dry_run(spec, args.out, args.workers, calibrate=not args.no_calibration)
         return 0
     if not args.out:
         raise SpecError("--out DIR is required to run a sweep")
     from benchmarks.sweep.runner import run_sweep
 
-    summary = run_sweep(spec, args.out, address=args.address, workers=args.workers)
-    return 130 if summary["interrupted"] else 0
+    summary = run_sweep(
+        spec,
+        args.out,
+        address=args.address,
+        workers=args.workers,
+        imports=getattr(args, "imports", ()),
+    )
+    if summary["interrupted"]:
+        return 130
+    if summary["episodes_failed"]:
+        print(
+            f"{summary['episodes_failed']} episodes failed: their rows in "
+            f"{Path(args.out) / 'episodes.jsonl'} hold the tracebacks; run the same command "
+            "again to retry them"
+        )
+        return 1
+    return 0

@@ -9,11 +9,15 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from benchmarks.metrics import outcome_counts
+from benchmarks.sweep.frontier import frontier_rows, value_label
+from benchmarks.sweep.keys import spec_keys_not_applied
 from benchmarks.sweep.spec import SweepSpec
 from benchmarks.sweep.stats import (
     describe,
     paired_mean_difference,
     paired_success_difference,
+    rate,
     wilson_interval,
 )
 from benchmarks.sweep.store import latest_rows, read_rows
@@ -34,16 +38,43 @@ def _values(rows: list[dict[str, Any]], metric: str) -> list[float]:
     return [r["metrics"][metric] for r in rows if r["metrics"].get(metric) is not None]
 
 
+def _flag_rate(rows: list[dict[str, Any]], flag: str) -> tuple[float | None, list[float] | None]:
+    """The rate of ``flag`` over the rows that report it (``carried`` is None without a tray)
+    and its Wilson 95 % interval; (None, None) when none does."""
+    stat = rate([r["metrics"].get(flag) for r in rows])
+    return (None, None) if stat is None else (stat["rate"], stat["ci95"])
+
+
 def _controller_summary(rows: list[dict[str, Any]], failed: int) -> dict[str, Any]:
     n = len(rows)
     successes = sum(1 for r in rows if r["metrics"].get("success"))
+    carried, carried_ci = _flag_rate(rows, "carried")
+    goal, goal_ci = _flag_rate(rows, "goal_reached")
     return {
         "n": n,
         "n_failed": failed,
         "success_rate": successes / n if n else None,
         "success_ci95": list(wilson_interval(successes, n)) if n else None,
+        "carried_rate": carried,
+        "carried_ci95": carried_ci,
+        "goal_reached_rate": goal,
+        "goal_reached_ci95": goal_ci,
+        "outcomes": outcome_counts([r["metrics"] for r in rows]),
         "stats": {metric: describe(_values(rows, metric)) for metric in STAT_METRICS},
     }
+
+
+def _paired_rate(a: list[dict[str, Any]], b: list[dict[str, Any]], flag: str) -> Any:
+    """The paired difference of ``flag``'s rates over the pairs that both report it."""
+    pairs = [
+        (bool(x[flag]), bool(y[flag]))
+        for x, y in zip(a, b, strict=True)
+        if x.get(flag) is not None and y.get(flag) is not None
+    ]
+    if not pairs:
+        return None
+    estimate, interval = paired_success_difference([p[0] for p in pairs], [p[1] for p in pairs])
+    return {"n": len(pairs), "estimate": estimate, "ci95": list(interval)}
 
 
 def _paired(
@@ -62,6 +93,7 @@ def _paired(
         "b": b_name,
         "n": len(replicates),
         "success_rate_difference": {"estimate": estimate, "ci95": list(interval)},
+        "carried_rate_difference": _paired_rate(a, b, "carried"),
     }
     for metric in STAT_METRICS:
         pairs = [
@@ -136,10 +168,12 @@ def build_summary(
         "wall_s": run.get("wall_s"),
         "episodes_per_hour": run.get("episodes_per_hour"),
         "interrupted": bool(run.get("interrupted", False)),
+        "keys_not_applied": {k: list(v) for k, v in spec_keys_not_applied(spec).items()},
         "commits": commits,
         "mixed_commits": len(commits) > 1,
         "package_versions": sorted({str(r.get("package_version")) for r in rows.values()}),
         "cells": cells,
+        "frontier": frontier_rows(spec, cells),
     }
 
 
@@ -172,6 +206,8 @@ def format_markdown(summary: Mapping[str, Any], plots: list[str]) -> str:
         )
         + ".",
     ]
+    for key, left in summary["keys_not_applied"].items():
+        lines += ["", f"`{key}` leaves {', '.join(left)} as configured (no offline plan)."]
     if summary["mixed_commits"]:
         lines += [
             "",
@@ -180,47 +216,61 @@ def format_markdown(summary: Mapping[str, Any], plots: list[str]) -> str:
         ]
     lines += [
         "",
-        "Success rate with its 95 % Wilson interval; peak friction use, peak tray tilt (deg), "
-        "cup slip distance (m) and time to goal (s) as mean ± std over the episodes that ran.",
+        "Carried rate (the cup carried to the end: docs/metrics.md §1), success rate (carried "
+        "and at the goal) and goal-reached rate, each with its 95 % Wilson interval; the "
+        "episodes per outcome; peak friction use, peak tray tilt (deg), cup slip distance (m) "
+        "and time to goal (s) as mean ± std over the episodes that ran.",
         "",
-        "| cell | controller | n | failed | success | 95 % CI | friction use | tilt deg "
-        "| slip m | time to goal s |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| cell | controller | n | failed | carried | 95 % CI | success | 95 % CI | goal "
+        "| 95 % CI | outcomes | friction use | tilt deg | slip m | time to goal s |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
 
     def ms(stat: Any) -> str:
         return "-" if stat is None else f"{stat['mean']:.3f} ± {stat['std']:.3f}"
 
+    def interval(ci: Any) -> str:
+        return "-" if ci is None else f"[{ci[0]:.2f}, {ci[1]:.2f}]"
+
     for cell in summary["cells"]:
         label = _cell_label(cell["parameters"])
         for name, c in cell["controllers"].items():
-            ci = c["success_ci95"]
             s = c["stats"]
+            outcomes = ", ".join(f"{kind} {n}" for kind, n in c["outcomes"].items()) or "-"
             lines.append(
                 f"| {label} | {name} | {c['n']} | {c['n_failed']} "
-                f"| {_fmt(c['success_rate'], '.2f')} "
-                f"| {'-' if ci is None else f'[{ci[0]:.2f}, {ci[1]:.2f}]'} "
+                f"| {_fmt(c['carried_rate'], '.2f')} | {interval(c['carried_ci95'])} "
+                f"| {_fmt(c['success_rate'], '.2f')} | {interval(c['success_ci95'])} "
+                f"| {_fmt(c['goal_reached_rate'], '.2f')} | {interval(c['goal_reached_ci95'])} "
+                f"| {outcomes} "
                 f"| {ms(s['max_cup_friction_use'])} | {ms(s['max_tray_tilt_deg'])} "
                 f"| {ms(s['cup_slip_distance_m'])} | {ms(s['time_to_goal_s'])} |"
             )
+    lines += _frontier_markdown(summary["frontier"])
     lines += [
         "",
         "## Paired differences (a - b on the same seeds)",
         "",
-        "Success rate: Newcombe's interval for paired proportions; peak friction use: mean "
-        "difference with Student's t interval.",
+        "Carried and success rates: Newcombe's interval for paired proportions; peak friction "
+        "use: mean difference with Student's t interval.",
         "",
-        "| cell | a | b | pairs | success a - b | 95 % CI | friction use a - b | 95 % CI |",
-        "|---|---|---|---|---|---|---|---|",
+        "| cell | a | b | pairs | carried a - b | 95 % CI | success a - b | 95 % CI "
+        "| friction use a - b | 95 % CI |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for cell in summary["cells"]:
         label = _cell_label(cell["parameters"])
         for p in cell["paired"]:
+            c = p["carried_rate_difference"]
+            cci = None if c is None else c["ci95"]
             s = p["success_rate_difference"]
             f = p["max_cup_friction_use_difference"]
             fci = None if f is None else f["ci95"]
             lines.append(
-                f"| {label} | {p['a']} | {p['b']} | {p['n']} | {s['estimate']:+.2f} "
+                f"| {label} | {p['a']} | {p['b']} | {p['n']} "
+                f"| {'-' if c is None else format(c['estimate'], '+.2f')} "
+                f"| {'-' if cci is None else f'[{cci[0]:+.2f}, {cci[1]:+.2f}]'} "
+                f"| {s['estimate']:+.2f} "
                 f"| [{s['ci95'][0]:+.2f}, {s['ci95'][1]:+.2f}] "
                 f"| {'-' if f is None else format(f['mean'], '+.3f')} "
                 f"| {'-' if fci is None else f'[{fci[0]:+.3f}, {fci[1]:+.3f}]'} |"
@@ -228,6 +278,33 @@ def format_markdown(summary: Mapping[str, Any], plots: list[str]) -> str:
     if plots:
         lines += ["", "## Plots", ""] + [f"![{p}]({p})" for p in plots]
     return "\n".join(lines) + "\n"
+
+
+def _frontier_markdown(rows: list[dict[str, Any]]) -> list[str]:
+    """The frontier table (nothing without a ``[[frontier]]``)."""
+    if not rows:
+        return []
+    lines = [
+        "",
+        "## Frontiers",
+        "",
+        "Critical value: along the axis, the hardest value at which the carried rate is at "
+        "least the rate there and at every easier value; `-` when even the easiest falls short "
+        "(docs/sweeps.md §5). The axis is ordered as listed in the grid; harder toward `low` is "
+        "toward the first listed value. Carried rates in the listed order.",
+        "",
+        "| axis | harder toward | rate | fixed | controller | critical | carried rates |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for row in rows:
+        rates = ", ".join(f"{value}: {_fmt(r, '.2f')}" for value, r in row["rates"].items())
+        critical = "-" if row["critical"] is None else value_label(row["critical"])
+        lines.append(
+            f"| {row['axis']} | {row['toward']} | {row['rate']:.2f} "
+            f"| {_cell_label(row['fixed']) if row['fixed'] else '-'} | {row['controller']} "
+            f"| {critical} | {rates} |"
+        )
+    return lines
 
 
 def write_report(

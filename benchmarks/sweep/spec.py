@@ -7,7 +7,8 @@ Grammar (every table optional except the top-level keys marked required)::
     duration = 1.5                       # required: simulated seconds per episode (> 0)
     seeds = 2                            # required: replicates per cell (>= 1)
     seed = 7                             # the sweep's seed (>= 0; default 0)
-    preset = "paper"                     # a preset of the episode runner (default none)
+    preset = "paper"                     # a preset of the episode runner (default none);
+                                         # several compose: "paper,realistic" or a list
     timeout = 600                        # wall-clock limit per episode, s (default below)
     [set]                                # base overrides, any --set key: KEY = VALUE
     "env.mass_randomization" = 0.05
@@ -18,9 +19,16 @@ Grammar (every table optional except the top-level keys marked required)::
     [report]
     axes = ["env.cup_friction"]          # one or two grid axes for the plots (default: the
                                          # grid's axes if it has one or two; else no plots)
+    [[frontier]]                         # any number of them (benchmarks/sweep/frontier.py)
+    axis = "env.cup_friction"            # a grid axis with scalar values
+    toward = "low"                       # where the task gets harder along the listed values:
+                                         # "low" = toward the first listed, "high" = the last
+    rate = 0.9                           # the carried rate that counts as holding, in [0, 1]
 
 A key appears in at most one of ``[set]``, ``[grid]`` and ``[random]``. Values are JSON values
-(finite numbers, strings, booleans, arrays). Every problem raises :class:`SpecError` (a
+(finite numbers, strings, booleans, arrays). A frontier's axis is ordered as its values are
+listed; where it holds numbers they must increase along the list (so that "low" is both the
+first listed and the smallest number). Every problem raises :class:`SpecError` (a
 ``ValueError``: the CLI exits with status 2) naming the key.
 """
 
@@ -36,14 +44,18 @@ from typing import Any
 
 import gymnasium as gym
 
+from benchmarks import presets
 from benchmarks.scenario import resolve_env_id
 from benchmarks.sweep import keys as sweep_keys
 from benchmarks.sweep.seeding import cell_seed, episode_id, key_stream
 from controllers.registry import controller_names
+from wip_gym.envs.base import wip_env
 
 TOP_LEVEL = ("env", "controllers", "duration", "seeds", "seed", "preset", "timeout")
-TABLES = ("set", "grid", "random", "report")
+TABLES = ("set", "grid", "random", "report", "frontier")
 DISTRIBUTIONS = ("uniform", "loguniform", "choice")
+FRONTIER_KEYS = ("axis", "toward", "rate")
+TOWARD = ("low", "high")
 # Per-episode wall-clock limit unless the spec sets one: generous against a cold JAX compile
 # cache (tens of seconds per new problem) and a real-time factor well under 1.
 DEFAULT_TIMEOUT_BASE_S = 300.0
@@ -79,6 +91,24 @@ class Distribution:
 
 
 @dataclass(frozen=True)
+class Frontier:
+    """A ``[[frontier]]`` table: along the grid axis ``axis`` the task gets harder ``toward``
+    its ``"low"`` (first listed) or ``"high"`` (last listed) values; a carried rate of at least
+    ``rate`` counts as holding (docs/sweeps.md §5)."""
+
+    axis: str
+    toward: str
+    rate: float
+
+    def easiest_first(self, values: Sequence[Any]) -> list[Any]:
+        """The axis' listed ``values`` from the easiest to the hardest."""
+        return list(values) if self.toward == "high" else list(reversed(values))
+
+    def as_json(self) -> dict[str, Any]:
+        return {"axis": self.axis, "toward": self.toward, "rate": self.rate}
+
+
+@dataclass(frozen=True)
 class Episode:
     """One (cell, replicate, controller) of a sweep, everything resolved."""
 
@@ -105,6 +135,7 @@ class SweepSpec:
     grid: dict[str, tuple[Any, ...]] = field(default_factory=dict)
     random: dict[str, Distribution] = field(default_factory=dict)
     report_axes: tuple[str, ...] = ()
+    frontiers: tuple[Frontier, ...] = ()
     text: str = ""
 
     @property
@@ -208,6 +239,53 @@ def _distribution(key: str, value: Any) -> Distribution:
     return Distribution(kind, (low, high))
 
 
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _frontiers(tables: Any, grid: Mapping[str, Sequence[Any]]) -> tuple[Frontier, ...]:
+    """The ``[[frontier]]`` tables, each checked against the grid."""
+    if not isinstance(tables, list) or not all(isinstance(t, dict) for t in tables):
+        raise SpecError(
+            f"bad frontier {tables!r}: write each as a [[frontier]] table with "
+            f"{list(FRONTIER_KEYS)}"
+        )
+    frontiers = []
+    for number, table in enumerate(tables, 1):
+        name = f"[[frontier]] {number}"
+        unknown = [k for k in table if k not in FRONTIER_KEYS]
+        if unknown:
+            raise SpecError(f"unknown {name} keys {unknown}; valid: {list(FRONTIER_KEYS)}")
+        missing = [k for k in FRONTIER_KEYS if k not in table]
+        if missing:
+            raise SpecError(f"{name} has no {missing} (required: {list(FRONTIER_KEYS)})")
+        axis, toward, rate = table["axis"], table["toward"], table["rate"]
+        if axis not in grid:
+            raise SpecError(f"{name} axis {axis!r} is not a [grid] key; grid: {list(grid)}")
+        if toward not in TOWARD:
+            raise SpecError(f"{name} toward {toward!r} must be one of {list(TOWARD)}")
+        if not _is_number(rate) or not 0.0 <= rate <= 1.0:
+            raise SpecError(f"{name} rate {rate!r} must be a number in [0, 1]")
+        values = grid[axis]
+        unordered = [v for v in values if not isinstance(v, str | int | float)]
+        if unordered:
+            raise SpecError(
+                f"{name} axis {axis!r} cannot be ordered: {unordered} are not numbers, strings "
+                f"or booleans"
+            )
+        numbers = [v for v in values if _is_number(v)]
+        if any(a >= b for a, b in itertools.pairwise(numbers)):
+            raise SpecError(
+                f"{name} axis {axis!r} lists its numbers {numbers} out of increasing order: a "
+                f"frontier's axis is ordered as listed, so list them from low to high"
+            )
+        frontier = Frontier(axis, toward, float(rate))
+        if frontier in frontiers:
+            raise SpecError(f"{name} repeats an earlier frontier: {frontier.as_json()}")
+        frontiers.append(frontier)
+    return tuple(frontiers)
+
+
 def check_env_values(
     env_id: str, base: Mapping[str, Any], values: Mapping[str, Sequence[Any]]
 ) -> None:
@@ -226,6 +304,13 @@ def check_env_values(
             named = key or ", ".join(f"env.{k}" for k in kwargs) or env_id
             raise SpecError(f"bad value for {named}: {error}") from None
         env.close()
+
+
+def _has_tray(env_id: str) -> bool:
+    env = gym.make(env_id, max_episode_steps=-1)
+    has_tray = bool(wip_env(env).scene_options.tray)
+    env.close()
+    return has_tray
 
 
 def _check_key(key: str, env_id: str, controllers: Sequence[str], table: str) -> None:
@@ -271,10 +356,14 @@ def parse_spec(text: str, validate_env: bool = True) -> SweepSpec:
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise SpecError(f"bad value for 'seed': {seed!r} (an integer >= 0)")
     preset = data.get("preset")
-    if preset is not None and not isinstance(preset, str):
-        raise SpecError(f"bad value for 'preset': {preset!r} (a string)")
+    if preset is not None and not (
+        isinstance(preset, str)
+        or (isinstance(preset, list) and all(isinstance(p, str) for p in preset))
+    ):
+        raise SpecError(f"bad value for 'preset': {preset!r} (a name or an array of names)")
     try:
         sweep_keys.validate_preset(preset, env_id)
+        preset = presets.canonical(preset)
     except ValueError as error:
         raise SpecError(f"bad value for 'preset': {error}") from None
     timeout = data.get("timeout")
@@ -328,11 +417,14 @@ def parse_spec(text: str, validate_env: bool = True) -> SweepSpec:
             raise SpecError(f"[report] axis {axis!r} is not a [grid] key; grid: {list(grid)}")
     if len(set(axes)) != len(axes):
         raise SpecError(f"[report] names an axis twice: {axes}")
+    frontiers = _frontiers(data.get("frontier", []), grid)
 
     if validate_env:
         values: dict[str, Sequence[Any]] = dict(grid)
         values.update({k: d.extremes() for k, d in random.items()})
         check_env_values(env_id, base, values)
+        if frontiers and not _has_tray(env_id):
+            raise SpecError(f"[[frontier]] needs a carried rate, and {env_id} has no tray to carry")
     return SweepSpec(
         env=env_id,
         controllers=tuple(controllers),
@@ -345,6 +437,7 @@ def parse_spec(text: str, validate_env: bool = True) -> SweepSpec:
         grid=grid,
         random=random,
         report_axes=tuple(axes),
+        frontiers=frontiers,
         text=text,
     )
 

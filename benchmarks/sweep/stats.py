@@ -10,9 +10,15 @@ from collections.abc import Sequence
 import numpy as np
 from scipy import stats
 
-from benchmarks.statistics import WILSON_Z, describe, wilson_interval
+from benchmarks.statistics import WILSON_Z, describe, rate, wilson_interval
 
-__all__ = ["describe", "paired_mean_difference", "paired_success_difference", "wilson_interval"]
+__all__ = [
+    "describe",
+    "paired_mean_difference",
+    "paired_success_difference",
+    "rate",
+    "wilson_interval",
+]
 
 Z95 = WILSON_Z  # the two-sided 95 % normal quantile
 
