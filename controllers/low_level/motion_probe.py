@@ -72,7 +72,8 @@ def idealise(
     the axle's position into the probe's ``qpos``, ``qvel`` (the robot's own entries), its
     kinematics, ``mj_comPos`` and ``mj_comVel`` (``wip_gym.mujoco_c``), and ``qacc_0 = Jdot_tf
     nu`` (``qacc = J_tf nu_dot + Jdot_tf nu`` at ``nu_dot = 0``; over every dof of the model, a
-    cup's too: zero). Shared by :meth:`MotionProbe.update` and the compiled task snapshot."""
+    cup's too: zero). The one-call step's (the fast path); :meth:`MotionProbe.idealise` makes
+    the same calls through MuJoCo's bindings."""
     idealised_state(
         q,
         nu,

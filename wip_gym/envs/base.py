@@ -27,8 +27,8 @@ from wip_gym.envs.measures import (  # noqa: F401  (the cup's and tray's thresho
     TRAY_HAND_GAP,
     env_measures,
 )
-from wip_gym.envs.step_reference import friction_use  # noqa: F401  (its home was here)
 from wip_gym.envs.perturbations import Perturbations, Perturber, build_task_model
+from wip_gym.envs.step_reference import friction_use  # noqa: F401  (its home was here)
 from wip_gym.floor import FloorOptions
 from wip_gym.overlay import OverlayValues, draw_overlay
 from wip_gym.renderer import FrameRenderer
