@@ -23,6 +23,7 @@ acceleration).
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -49,6 +50,8 @@ from wip_gym.robot_model import RobotModel
 from wip_gym.wheel_torques import generalized_to_wheel_matrix
 
 Array = NDArray[np.float64]
+#: a user's task (or constraint) for the controller: made at every reset from its robot model
+TaskFactory = Callable[[RobotModel], Any]
 
 
 @dataclass(frozen=True)
@@ -95,6 +98,13 @@ class HierarchicalConfig:
             estimate measured up to 47 rad/s^2 (orientation) and 8 m/s^2 (position), and a
             clamp of 15 (the authors' Kp times 2 cm or 0.1 rad) let the tray tip 32 deg: 100
             leaves a factor 2 over the largest measured need and still stops a runaway.
+        extra_tasks: the user's own tasks, as factories: each is called at every reset with the
+            controller's robot model (updated to the reset state: a factory may read its pose,
+            as the paper's tasks do) and gives a task (``controllers.low_level.tasks``), added
+            to the stack after the paper's. A task of a class without compiled rows makes the
+            QP take its readable path (docs/extending.md §1).
+        constraints: the user's own constraints of the task QP, as factories likewise
+            (``controllers.low_level.constraints``).
         high_level: plan and MPC settings. qp: QP settings.
     """
 
@@ -123,10 +133,19 @@ class HierarchicalConfig:
     hand_observer_bandwidth: float | None = 50.0
     hand_observer_position_bound: float = 100.0
     hand_observer_orientation_bound: float = 100.0
+    extra_tasks: tuple[TaskFactory, ...] = ()
+    constraints: tuple[TaskFactory, ...] = ()
     high_level: HighLevelConfig = field(default_factory=HighLevelConfig)
     qp: QPSettings = field(default_factory=QPSettings)
 
     def __post_init__(self) -> None:
+        for name in ("extra_tasks", "constraints"):
+            factories = getattr(self, name)
+            if not isinstance(factories, tuple) or not all(map(callable, factories)):
+                raise ValueError(
+                    f"{name} must be a tuple of factories, each called with the robot model at "
+                    f"reset, got {factories!r}"
+                )
         if self.tray_mode not in ("level", "specific_force"):
             raise ValueError(f"tray_mode must be level or specific_force, got {self.tray_mode!r}")
         if self.spin_source not in ("heading_task", "mpc_tau_0"):
@@ -338,11 +357,13 @@ class HierarchicalController(PolicyBase):
                     columns=speed_columns,
                 )
             )
-        self.tasks = tasks
+        self.tasks = tasks + [make(robot) for make in cfg.extra_tasks]
+        self.constraints = [make(robot) for make in cfg.constraints]
         self.qp.failures = 0
         # one QP now (creates and compiles the solver object), from the current state
         self.theta_task.theta_d, self.theta_task.thetad_d = robot.theta, robot.thetad
-        first = self.qp.solve(robot, None, self.tasks)  # None: eq. iso3 inside the QP's kernel
+        # None: eq. iso3 inside the QP's kernel
+        first = self.qp.solve(robot, None, self.tasks, self.constraints)
         self._last_tau_0_qp = float(first.generalized[0])
         for task in self.tasks:
             if isinstance(task, DisturbanceRejectingTask):
@@ -396,7 +417,8 @@ class HierarchicalController(PolicyBase):
         self._set_references(robot)
         mpc_time = time.perf_counter() - tick
         tick = time.perf_counter()
-        solution = self.qp.solve(robot, None, self.tasks)  # None: eq. iso3 in the QP's kernel
+        # None: eq. iso3 in the QP's kernel
+        solution = self.qp.solve(robot, None, self.tasks, self.constraints)
         qp_time = time.perf_counter() - tick
         actuators = solution.actuators
         if not solution.solved:
