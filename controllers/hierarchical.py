@@ -35,6 +35,7 @@ from controllers.high_level.planning import Plan, PlanConfig
 from controllers.high_level.receding_horizon import HighLevel, HighLevelConfig
 from controllers.high_level.tray_reference import tilt_toward
 from controllers.low_level.disturbance_tasks import DisturbanceRejectingTask, ObserverSettings
+from controllers.low_level.priority_qp import PRIORITIES, Priority, PriorityQP, PriorityStep
 from controllers.low_level.task_qp import QPSettings, TaskQP
 from controllers.low_level.tasks import (
     FrameOrientationTask,
@@ -105,6 +106,10 @@ class HierarchicalConfig:
             QP take its readable path (docs/extending.md §1).
         constraints: the user's own constraints of the task QP, as factories likewise
             (``controllers.low_level.constraints``).
+        priority: ``weighted`` (the paper: one QP trading every task by its weight) or
+            ``strict`` (balance, then the hands and heading, then posture, as lexicographic
+            levels under the torque and joint limits; ``controllers.low_level.priority_qp``,
+            docs/upright.md §4).
         high_level: plan and MPC settings. qp: QP settings.
     """
 
@@ -135,6 +140,7 @@ class HierarchicalConfig:
     hand_observer_orientation_bound: float = 100.0
     extra_tasks: tuple[TaskFactory, ...] = ()
     constraints: tuple[TaskFactory, ...] = ()
+    priority: Priority = "weighted"
     high_level: HighLevelConfig = field(default_factory=HighLevelConfig)
     qp: QPSettings = field(default_factory=QPSettings)
 
@@ -146,6 +152,8 @@ class HierarchicalConfig:
                     f"{name} must be a tuple of factories, each called with the robot model at "
                     f"reset, got {factories!r}"
                 )
+        if self.priority not in PRIORITIES:
+            raise ValueError(f"priority must be one of {PRIORITIES}, got {self.priority!r}")
         if self.tray_mode not in ("level", "specific_force"):
             raise ValueError(f"tray_mode must be level or specific_force, got {self.tray_mode!r}")
         if self.spin_source not in ("heading_task", "mpc_tau_0"):
@@ -267,6 +275,7 @@ class HierarchicalController(PolicyBase):
         super().__init__(robot, task, config)
         self.high_level = HighLevel(config.high_level, task.control_dt)
         self.qp = TaskQP(robot, task.torque_low, task.torque_high, config.qp)
+        self.priority_qp = PriorityQP(self.qp)
         m = robot.model
         self._sites = [
             mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, name) for name in ("ee", "ee_right")
@@ -417,8 +426,7 @@ class HierarchicalController(PolicyBase):
         self._set_references(robot)
         mpc_time = time.perf_counter() - tick
         tick = time.perf_counter()
-        # None: eq. iso3 in the QP's kernel
-        solution = self.qp.solve(robot, None, self.tasks, self.constraints)
+        solution = self._solve(robot).solution
         qp_time = time.perf_counter() - tick
         actuators = solution.actuators
         if not solution.solved:
@@ -458,6 +466,11 @@ class HierarchicalController(PolicyBase):
         )
         self._step += 1
         return action
+
+    def _solve(self, robot: RobotModel) -> PriorityStep:
+        """This step's task QP (eq. iso3 from ``robot`` in the QP's kernel), by the
+        configured priority."""
+        return self.priority_qp.solve(robot, self.tasks, self.constraints, self.config.priority)
 
     @property
     def diagnostics(self) -> dict[str, Array]:

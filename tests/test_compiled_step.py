@@ -129,7 +129,7 @@ def test_solve_alone_takes_the_common_case(name: str) -> None:
         if a.iterations == 0:
             shortcuts += 1
             assert compiled._last_actuators is a.actuators
-            c = compiled._solution(a.qdd.copy(), 0)
+            c = compiled.solution_for(a.qdd.copy(), 0)
             for field in ("nu_dot", "generalized", "actuators"):
                 np.testing.assert_array_equal(getattr(a, field), getattr(c, field), field)
     assert shortcuts >= 5  # the first step goes to ProxQP; the rest take the common case

@@ -77,7 +77,8 @@ def test_the_centre_of_mass_acceleration_equals_differences_of_mujoco_kinematics
             qp, qv = robot.full_state(q + sign * eps * nu, nu, xy + sign * step)
             other.update(qp, qv, dynamics=False)
             points.append(_cup_point(other, site, offset))
-            velocities.append(R.T @ balance._point(other, probe, offset)[1] @ nu)  # J_c nu
+            motion = balance.tray_motion(other, probe)
+            velocities.append(R.T @ balance._point(motion, offset)[0] @ nu)  # J_c nu
         velocity = (points[0] - points[1]) / (2 * eps)
         np.testing.assert_allclose(W[:3] @ nu * GRAVITY, R.T @ velocity, rtol=1e-6, atol=1e-7)
         # the drift: d/dt (J_c nu) at fixed nu, in the tray frame of this state
@@ -116,9 +117,9 @@ def test_the_wrench_equals_mujoco_inverse_dynamics_of_the_cup_on_the_tray(env_id
         # and the tray's angular acceleration from the same rows' kinematics (checked against
         # MuJoCo's by the test above), then MuJoCo's inverse dynamics of the cup alone
         R = robot.data.site_xmat[site].reshape(3, 3)
-        _, J_c, d_c, J_r, omega, omega_drift = balance._point(
-            robot, probe, np.array([0.0, 0.0, CUP_HALF_HEIGHT])
-        )
+        motion = balance.tray_motion(robot, probe)
+        J_c, d_c = balance._point(motion, np.array([0.0, 0.0, CUP_HALF_HEIGHT]))
+        J_r, omega_drift = motion.J_r, motion.omega_drift
         data.qpos[: lay.nq] = qpos
         data.qvel[: lay.nv] = qvel
         data.qpos[qa : qa + 3] = robot.data.site_xpos[site] + R @ [0.0, 0.0, CUP_HALF_HEIGHT]

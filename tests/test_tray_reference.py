@@ -15,8 +15,11 @@ from controllers.high_level.tray_reference import (
 )
 
 
-def _plan(states: np.ndarray, planar: bool, dt: float = 0.01) -> Plan:
+def _plan(
+    states: np.ndarray, planar: bool, dt: float = 0.01, settle: np.ndarray | None = None
+) -> Plan:
     n = len(states)
+    settle = np.zeros((0, states.shape[1])) if settle is None else settle
     return Plan(
         times=np.arange(n) * dt,
         states=states,
@@ -32,6 +35,9 @@ def _plan(states: np.ndarray, planar: bool, dt: float = 0.01) -> Plan:
         a_max=np.inf,
         theta_max=np.inf,
         violations=(),
+        settle_states=settle,
+        settle_controls=np.zeros((len(settle), 1 if planar else 2)),
+        rest_state=np.zeros(states.shape[1]),
     )
 
 
@@ -48,8 +54,13 @@ def test_the_plans_acceleration_is_its_speed_difference_and_the_turns_lateral_pa
     forward, lateral = plan_acceleration(plan, t)
     assert forward == pytest.approx((spatial[24, 3] - spatial[23, 3]) / 0.01)
     assert lateral == pytest.approx(spatial[23, 3] * spatial[23, 4])  # xd psid
-    assert plan_acceleration(plan, 10.0) == (0.0, 0.0)  # past the end
+    assert plan_acceleration(plan, 10.0) == (0.0, 0.0)  # past the end: at rest
     assert plan_acceleration(plan, -0.5) == (0.0, 0.0)
+    # past t_f the continuation's speeds, then the rest state's
+    settle = rng.normal(size=(5, 4))
+    plan = _plan(planar, True, settle=settle)
+    assert plan_acceleration(plan, 0.515)[0] == pytest.approx((settle[2, 3] - settle[1, 3]) / 0.01)
+    assert plan_acceleration(plan, 0.545)[0] == pytest.approx((0.0 - settle[4, 3]) / 0.01)
 
 
 def _reference(gains: TrayGains | None = None) -> TrayReference:

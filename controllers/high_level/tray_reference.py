@@ -23,6 +23,7 @@ holds it (Krang's two grippers hold a free tray between them).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -41,8 +42,8 @@ def tilt_toward(acceleration: Array, max_tilt_deg: float) -> Array:
     acceleration ``(forward, lateral)``, ``g = (0, 0, -9.81)``), the tilt bounded."""
     specific = np.array([acceleration[0], acceleration[1], GRAVITY])
     n = specific / np.linalg.norm(specific)
-    axis = np.cross([0.0, 0.0, 1.0], n)
-    s = np.linalg.norm(axis)
+    axis = np.array([-n[1], n[0], 0.0])  # e_z x n
+    s = math.hypot(n[0], n[1])
     angle = min(np.arctan2(s, n[2]), np.radians(max_tilt_deg))
     if s < 1e-12:
         return np.eye(3)
@@ -54,18 +55,18 @@ def tilt_toward(acceleration: Array, max_tilt_deg: float) -> Array:
 
 
 def plan_acceleration(plan: Plan, t: float) -> tuple[float, float]:
-    """The axle's acceleration the plan holds at time ``t`` (s), in the axle frame: forward
-    ``dxd/dt`` (the difference of the plan's speeds over the step holding ``t``) and lateral
-    ``xd psid`` (3-D; 0 planar). Zero past the plan's end and before its start."""
-    states, dt = plan.states, plan.dt
-    i = int(np.floor(t / dt))
-    if i < 0 or i + 1 >= len(states):
+    """The axle's acceleration the plan's reference holds at time ``t`` (s), in the axle
+    frame: forward ``dxd/dt`` (the difference of the reference's speeds over the step holding
+    ``t``: the plan, its continuation past ``t_f``, then rest) and lateral ``xd psid`` (3-D; 0
+    planar). Zero before the start."""
+    i = int(np.floor(t / plan.dt))
+    if i < 0:
         return 0.0, 0.0
+    now, ahead = plan.state(i), plan.state(i + 1)
+    forward = float((ahead[3] - now[3]) / plan.dt)  # xd is column 3 of both state layouts
     if plan.planar:  # [theta, thetad, x, xd]
-        return float((states[i + 1, 3] - states[i, 3]) / dt), 0.0
-    # [x, psi, theta, xd, psid, thetad, X0, Y0]
-    forward = (states[i + 1, 3] - states[i, 3]) / dt
-    return float(forward), float(states[i, 3] * states[i, 4])
+        return forward, 0.0
+    return forward, float(now[3] * now[4])  # [x, psi, theta, xd, psid, thetad, X0, Y0]
 
 
 @dataclass(frozen=True)

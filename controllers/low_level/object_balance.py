@@ -41,6 +41,7 @@ why the task leaves out the tray's angular acceleration).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import mujoco
 import numpy as np
@@ -134,6 +135,26 @@ def _edges(vertices: Array) -> list[tuple[float, Array]]:
     return out
 
 
+def _cross(a: Array, b: Array) -> Array:
+    """``a x b`` of two 3-vectors (``np.cross`` costs 20 us per call at this size)."""
+    a0, a1, a2 = a.tolist()
+    b0, b1, b2 = b.tolist()
+    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
+
+
+class TrayMotion(NamedTuple):
+    """The tray's frame and motion at one state (world): ``R`` (world from tray), the plate
+    site's linear and angular Jacobians over ``nu`` (``J_s``, ``J_r``), its drift acceleration
+    ``a_s``, the angular velocity ``omega`` and angular drift ``omega_drift``."""
+
+    R: Array
+    J_s: Array
+    a_s: Array
+    J_r: Array
+    omega: Array
+    omega_drift: Array
+
+
 def _skew(v: Array) -> Array:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
@@ -179,33 +200,42 @@ class ObjectBalance:
     def rows_count(self) -> int:
         return len(self._constants)
 
-    def _point(
-        self, robot: RobotModel, probe: object, lever: Array
-    ) -> tuple[Array, Array, Array, Array, Array, Array]:
-        """``(R, J_p, d_p, J_r, omega, omega_drift)`` of the point ``lever`` (tray frame) from
-        the plate's site, on the tray: the tray frame, the point's linear Jacobian over ``nu``
-        and drift acceleration, the tray's angular Jacobian, velocity and drift (world)."""
+    def tray_motion(self, robot: RobotModel, probe: object) -> TrayMotion:
+        """The tray's motion at the robot's state, which every row reads (compute it once per
+        step and hand it to :meth:`rows` and :meth:`tangential`)."""
         m, d = robot.model, robot.data
         mujoco.mj_jacSite(m, d, self._jp, self._jr, self.site)
-        R = d.site_xmat[self.site].reshape(3, 3)
         J_tf = robot.J_tf
-        J_r = self._jr @ J_tf
         _, _, a_s, omega, omega_drift = probe.site_motion(self.site)  # type: ignore[attr-defined]
-        omega, omega_drift = np.array(omega), np.array(omega_drift)
-        r = R @ lever
-        J_p = self._jp @ J_tf - _skew(r) @ J_r
-        d_p = np.array(a_s) + np.cross(omega_drift, r) + np.cross(omega, np.cross(omega, r))
-        return R, J_p, d_p, J_r, omega, omega_drift
+        return TrayMotion(
+            d.site_xmat[self.site].reshape(3, 3).copy(),
+            self._jp @ J_tf,
+            np.array(a_s),
+            self._jr @ J_tf,
+            np.array(omega),
+            np.array(omega_drift),
+        )
 
-    def wrench(self, robot: RobotModel, probe: object) -> tuple[Array, Array]:
+    @staticmethod
+    def _point(motion: TrayMotion, lever: Array) -> tuple[Array, Array]:
+        """``(J_p, d_p)`` of the point ``lever`` (tray frame) from the plate's site, on the
+        tray: its linear Jacobian over ``nu`` and its drift acceleration (world)."""
+        r = motion.R @ lever
+        omega, drift = motion.omega, motion.omega_drift
+        J_p = motion.J_s - _skew(r) @ motion.J_r
+        return J_p, motion.a_s + _cross(drift, r) + _cross(omega, _cross(omega, r))
+
+    def wrench(
+        self, robot: RobotModel, probe: object, motion: TrayMotion | None = None
+    ) -> tuple[Array, Array]:
         """``(W, w)`` with the contact wrench ``(f, tau) = W nu_dot + w`` (tray frame, per unit
         weight; module docstring): what the plate must give the object for it to move with the
-        tray. ``probe`` is a motion probe updated at the robot's state."""
+        tray. ``probe`` is a motion probe updated at the robot's state; ``motion`` the tray's
+        (:meth:`tray_motion`, computed here when None)."""
+        motion = motion or self.tray_motion(robot, probe)
         x, y = self.carried.place
-        R, J_c, d_c, J_r, omega, omega_drift = self._point(
-            robot, probe, np.array([x, y, self.carried.com_height])
-        )
-        Rt = R.T
+        J_c, d_c = self._point(motion, np.array([x, y, self.carried.com_height]))
+        Rt, J_r, omega, omega_drift = motion.R.T, motion.J_r, motion.omega, motion.omega_drift
         W = np.empty((6, J_c.shape[1]))
         w = np.empty(6)
         W[:3] = Rt @ J_c / GRAVITY
@@ -213,20 +243,25 @@ class ObjectBalance:
         inertia = self._inertia
         omega_t = Rt @ omega
         W[3:] = inertia @ Rt @ J_r / GRAVITY
-        w[3:] = (inertia @ Rt @ omega_drift + np.cross(omega_t, inertia @ omega_t)) / GRAVITY
+        w[3:] = (inertia @ Rt @ omega_drift + _cross(omega_t, inertia @ omega_t)) / GRAVITY
         return W, w
 
-    def rows(self, robot: RobotModel, probe: object) -> tuple[Array, Array]:
+    def rows(
+        self, robot: RobotModel, probe: object, motion: TrayMotion | None = None
+    ) -> tuple[Array, Array]:
         """``(G, b)``: the balance conditions as ``G nu_dot + b <= 0`` (friction, contact,
         tipping; :attr:`row_names`)."""
-        W, w = self.wrench(robot, probe)
+        W, w = self.wrench(robot, probe, motion)
         return self._wrench_rows @ W, self._wrench_rows @ w + self._constants
 
-    def tangential(self, robot: RobotModel, probe: object) -> tuple[Array, Array]:
+    def tangential(
+        self, robot: RobotModel, probe: object, motion: TrayMotion | None = None
+    ) -> tuple[Array, Array]:
         """``(T, t)``: the tangential specific force at the object's place on the plate,
         ``(f_x, f_y) = T nu_dot + t`` (tray frame, in g), without the tray's angular
         acceleration's share at the centre of mass (docs/upright.md §3)."""
+        motion = motion or self.tray_motion(robot, probe)
         x, y = self.carried.place
-        R, J_p, d_p, _, _, _ = self._point(robot, probe, np.array([x, y, 0.0]))
-        Rt = R.T[:2]
+        J_p, d_p = self._point(motion, np.array([x, y, 0.0]))
+        Rt = motion.R.T[:2]
         return Rt @ J_p / GRAVITY, Rt @ (d_p - np.array([0.0, 0.0, -GRAVITY])) / GRAVITY

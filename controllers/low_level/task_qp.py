@@ -293,13 +293,13 @@ class TaskQP:
         ``robot``). ``proxqp_calls`` counts the steps ProxQP solved."""
         H, g, C, lower, upper = self.assemble(robot, iso, tasks, constraints)
         k: LowLevelKernel = self.kernel  # type: ignore[assignment]
-        if self._proxqp_ready and self.settings.unconstrained_first and self._feasible:
+        if self.ready_for_shortcut and self._feasible:
             if self._terms_ready:  # the compiled call computed what x implies
                 self._last_actuators = actuators = k.actuators.copy()
                 return QPSolution(
                     k.x.copy(), k.nu_dot.copy(), k.generalized.copy(), actuators, True, 0
                 )
-            return self._solution(k.x.copy(), iterations=0)
+            return self.solution_for(k.x.copy(), iterations=0)
         self.proxqp_calls += 1
         if self._qp is None or self._qp.model.n_in != len(C):
             self._qp = start_proxqp(H, g, C, lower, upper, self.settings)
@@ -309,35 +309,38 @@ class TaskQP:
         results = self._qp.results
         iterations = int(results.info.iter)
         if results.info.status == _SOLVED and bool(np.all(np.isfinite(results.x))):
-            self._proxqp_ready = True
-            return self._solution(np.array(results.x), iterations)
+            self.note_solved()
+            return self.solution_for(np.array(results.x), iterations)
+        self._qp = None  # start the next step cold: a failed result is no warm start
+        return self.fallback(iterations)
+
+    @property
+    def ready_for_shortcut(self) -> bool:
+        """Whether a feasible unconstrained minimiser may be taken without ProxQP: the
+        settings allow it and a QP was solved since the start or the last failure."""
+        return self._proxqp_ready and self.settings.unconstrained_first
+
+    def note_solved(self) -> None:
+        """A QP of this controller was solved (by ProxQP or by a caller's solver)."""
+        self._proxqp_ready = True
+
+    def fallback(self, iterations: int) -> QPSolution:
+        """The answer to an unsolved QP: the last feasible torques (counted in ``failures``),
+        NaN accelerations; the next step goes to the solver. RuntimeError before any."""
         self.failures += 1
-        # start the next step cold: a warm start from a failed result does not recover
-        self._qp, self._proxqp_ready = None, False
+        self._proxqp_ready = False
         if self._last_actuators is None:
             raise RuntimeError("the first task QP was not solved: no feasible torques yet")
         nan = np.full(self.n, np.nan)
         return QPSolution(
-            qdd=nan,
-            nu_dot=np.full(self.n + 1, np.nan),
-            generalized=nan.copy(),
-            actuators=self._last_actuators,
-            solved=False,
-            iterations=iterations,
+            nan, np.full(self.n + 1, np.nan), nan.copy(), self._last_actuators, False, iterations
         )
 
-    def _solution(self, qdd: Array, iterations: int) -> QPSolution:
+    def solution_for(self, qdd: Array, iterations: int) -> QPSolution:
         """The solved QP's answer for ``qdd``, with its ``(generalized, actuators, nu_dot)``
         (``kernel.solution_terms``; the compiled call computes them itself when the
         unconstrained minimiser is the answer)."""
         k: LowLevelKernel = self.kernel  # type: ignore[assignment]
         generalized, actuators, nu_dot = solution_terms(k.calA, k.Ph, self.M_act, k.E, k.e, qdd)
         self._last_actuators = actuators
-        return QPSolution(
-            qdd=qdd,
-            nu_dot=nu_dot,
-            generalized=generalized,
-            actuators=actuators,
-            solved=True,
-            iterations=iterations,
-        )
+        return QPSolution(qdd, nu_dot, generalized, actuators, True, iterations)
