@@ -85,8 +85,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--env", default=DEFAULT_ENV, help="env id (wip_gym/NAME or NAME)")
     parser.add_argument(
         "--controllers",
-        default=",".join(registry.controller_names()),
-        help=f"comma-separated, from {registry.controller_names()}",
+        default=",".join(registry.default_controller_names()),
+        help=f"comma-separated, from {registry.controller_names()} (default: all but the "
+        f"learned ppo, which runs where it has a checkpoint)",
     )
     parser.add_argument("--episodes", type=int, default=1)
     parser.add_argument("--seed", type=int, default=0)
