@@ -20,6 +20,7 @@ from wip_gym.wrappers import (
     GOAL_REWARD_SCALE_M,
     GOAL_SCALE_M,
     LINEAR_SPEED_SCALE,
+    POSTURE_SCALE_M,
     SPEED_AT_GOAL_WIDTH_M,
     DenseReward,
     DenseRewardWeights,
@@ -267,6 +268,10 @@ def test_the_dense_reward_is_the_sum_of_its_documented_terms(env_id: str) -> Non
             "dense_ctrl": -0.2 * float(np.sum((torque / limit) ** 2)) * dt,
             "dense_fall": -7.0 if info["fallen"] else 0.0,
         }
+        if "psid" in info:
+            expected["dense_spin"] = -0.1 * info["psid"] ** 2 * dt
+        if "ee_error" in info:
+            expected["dense_posture"] = -((info["ee_error"] / POSTURE_SCALE_M) ** 2) * dt
         if "tray_tilt_deg" in info:
             expected["dense_tray_tilt"] = -((info["tray_tilt_deg"] / 10) ** 2) * dt
             expected["dense_friction"] = -(info["cup_friction_use"] ** 2) * dt

@@ -337,13 +337,18 @@ class DenseRewardWeights:
     Attributes:
         alive: per s while up: falling early costs what the rest of the episode would pay.
         goal: per s at the goal, ``exp(-d / GOAL_REWARD_SCALE_M)`` of it at a distance ``d``:
-            a pull that is steepest at the goal (2 per s per m there; the benchmark's goal
-            tolerance is 5 cm), positive everywhere so that staying up always pays.
+            twice ``alive``, so being at the goal matters more than staying up longer; a pull
+            steepest at the goal (2 per s per m there; the benchmark's goal tolerance is 5 cm)
+            and positive everywhere, so that no state makes a fall pay.
         progress: per m of goal distance gained (the env's own ``reward_progress``).
         theta: per s per rad^2 of the body's lean ``theta`` (balance); small: driving needs a
             lean (the controllers lean up to 0.14 to 0.21 rad on the 2 m drive).
         speed_at_goal: per s per (m/s)^2 of the axle's speed, weighted by
             ``exp(-(distance / 0.1 m)^2)``: stop at the goal, drive freely away from it.
+        spin: 3-D robots, per s per (rad/s)^2 of the heading rate ``psid``: turn to the goal,
+            not on the spot (a policy that spins while it balances is a local optimum).
+        posture: robots with an end effector, per s per (``ee_error`` / 0.1 m)^2: the hand
+            held where it was at the reset (the benchmark's ``max_ee_error_m``).
         ctrl: per s per unit of ``sum((torque / limit)^2)`` (the env's effort).
         tray_tilt: tray tasks, per s per (tilt / 10 deg)^2 (the paper keeps the tray level).
         friction: tray tasks, per s per unit of ``cup_friction_use^2`` (1 = slipping).
@@ -352,10 +357,12 @@ class DenseRewardWeights:
     """
 
     alive: float = 1.0
-    goal: float = 1.0
+    goal: float = 2.0
     progress: float = 1.0
     theta: float = 1.0
     speed_at_goal: float = 1.0
+    spin: float = 0.1
+    posture: float = 1.0
     ctrl: float = 0.1
     tray_tilt: float = 1.0
     friction: float = 1.0
@@ -365,8 +372,10 @@ class DenseRewardWeights:
 
 #: m: the width of the goal's neighbourhood where the axle's speed is penalised
 SPEED_AT_GOAL_WIDTH_M = 0.1
-#: m: the goal reward's decay length (a quarter of the default 2 m drive)
-GOAL_REWARD_SCALE_M = 0.5
+#: m: the goal reward's decay length (half the default 2 m drive)
+GOAL_REWARD_SCALE_M = 1.0
+#: m: the end effector's displacement that costs ``posture`` per s
+POSTURE_SCALE_M = 0.1
 
 
 class DenseReward(gym.Wrapper[Any, Any, Any, Any], gym.utils.RecordConstructorArgs):
@@ -378,10 +387,12 @@ class DenseReward(gym.Wrapper[Any, Any, Any, Any], gym.utils.RecordConstructorAr
     | term (``info``) | value |
     |---|---|
     | ``dense_alive`` | ``alive * dt`` unless fallen |
-    | ``dense_goal`` | ``goal * exp(-d / 0.5) * dt`` |
+    | ``dense_goal`` | ``goal * exp(-d / 1 m) * dt`` |
     | ``dense_progress`` | ``progress * (d_before - d)`` |
     | ``dense_theta`` | ``-theta * theta^2 * dt`` |
     | ``dense_speed_at_goal`` | ``-speed_at_goal * exp(-(d / 0.1)^2) * v^2 * dt`` |
+    | ``dense_spin`` | ``-spin * psid^2 * dt`` (3-D robots) |
+    | ``dense_posture`` | ``-posture * (ee_error / 0.1)^2 * dt`` (robots with an end effector) |
     | ``dense_ctrl`` | ``-ctrl * u * dt`` |
     | ``dense_tray_tilt`` | ``-tray_tilt * (tray_tilt_deg / 10)^2 * dt`` (tray tasks) |
     | ``dense_friction`` | ``-friction * cup_friction_use^2 * dt`` (tray tasks) |
@@ -437,6 +448,10 @@ class DenseReward(gym.Wrapper[Any, Any, Any, Any], gym.utils.RecordConstructorAr
             "dense_ctrl": -w.ctrl * float(np.sum(np.square(torque / self._limit))) * dt,
             "dense_fall": -w.fall if fallen else 0.0,
         }
+        if "psid" in info:
+            terms["dense_spin"] = -w.spin * float(info["psid"]) ** 2 * dt
+        if "ee_error" in info:
+            terms["dense_posture"] = -w.posture * (info["ee_error"] / POSTURE_SCALE_M) ** 2 * dt
         if self._tray:
             terms["dense_tray_tilt"] = (
                 -w.tray_tilt * (float(info["tray_tilt_deg"]) / 10.0) ** 2 * dt
