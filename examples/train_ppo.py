@@ -32,6 +32,7 @@ observations and the jitted network's mean actions on them, to check a reloaded 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import os
@@ -56,7 +57,11 @@ if str(ROOT) not in sys.path:  # run from a checkout: python examples/train_ppo.
 
 import wip_gym  # noqa: E402, F401
 from controllers.learned import LearnedConfig, save_checkpoint  # noqa: E402
-from wip_gym.wrappers import ObservationNormalizer, wrap_for_learning  # noqa: E402
+from wip_gym.wrappers import (  # noqa: E402
+    DenseRewardConfig,
+    ObservationNormalizer,
+    wrap_for_learning,
+)
 
 Params = dict[str, Any]
 
@@ -182,11 +187,24 @@ class WithoutInfo(gym.Wrapper[Any, Any, Any, Any]):
         return observation, reward, terminated, truncated, {}
 
 
+def reward_config(settings: list[str]) -> DenseRewardConfig:
+    """``DenseRewardConfig`` with ``NAME=VALUE`` settings applied (``--reward``)."""
+    fields = {f.name for f in dataclasses.fields(DenseRewardConfig)}
+    values = {}
+    for setting in settings:
+        name, _, value = setting.partition("=")
+        if name not in fields or not value:
+            raise ValueError(f"--reward {setting!r}: expected NAME=VALUE, NAME in {sorted(fields)}")
+        values[name] = float(value)
+    return DenseRewardConfig(**values)
+
+
 def make_env(args: argparse.Namespace) -> gym.Env[Any, Any]:
     return wrap_for_learning(
         gym.make(args.env, frame_skip=args.frame_skip),
         goal_low=args.goal_low,
         goal_high=args.goal_high,
+        reward=reward_config(args.reward),
     )
 
 
@@ -248,6 +266,7 @@ def write_checkpoint(
             "observation_names": normalizer.names,
             "training": {
                 **{k: v for k, v in vars(args).items() if k != "out"},
+                "reward_config": dataclasses.asdict(reward_config(args.reward)),
                 "env_steps": env_steps,
                 "wall_s": wall_s,
             },
@@ -421,28 +440,39 @@ def train(args: argparse.Namespace) -> dict[str, Any]:
     return summary
 
 
-def plot_curve(out: Path) -> None:
+def plot_curves(runs: list[Path], labels: list[str], path: Path) -> None:
+    """The runs' success rates and median final goal distances against env steps and training
+    wall time, one line per run."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    curve = json.loads((out / "curve.json").read_text())
-    steps = [p["env_steps"] / 1e6 for p in curve]
-    minutes = [p["train_wall_s"] / 60 for p in curve]
-    success = [p["success_rate"] for p in curve]
-    fig, axes = plt.subplots(1, 2, figsize=(9, 3.2), sharey=True)
-    for ax, x, label in (
-        (axes[0], steps, "env steps (millions)"),
-        (axes[1], minutes, "training wall time (min)"),
-    ):
-        ax.plot(x, success, "o-")
-        ax.set_xlabel(label)
+    fig, axes = plt.subplots(2, 2, figsize=(9, 5.6), sharex="col", sharey="row")
+    seeds = 0
+    for run, label in zip(runs, labels, strict=True):
+        curve = json.loads((run / "curve.json").read_text())
+        seeds = len(curve[0]["final_goal_error_m"])
+        success = [p["success_rate"] for p in curve]
+        distance = [float(np.median(p["final_goal_error_m"])) for p in curve]
+        for column, x in enumerate(
+            ([p["env_steps"] / 1e6 for p in curve], [p["train_wall_s"] / 60 for p in curve])
+        ):
+            axes[0, column].plot(x, success, "o-", label=label)
+            axes[1, column].plot(x, distance, "o-", label=label)
+    for column in (0, 1):
+        axes[1, column].axhline(0.05, color="k", lw=0.8, ls="--")
+    axes[1, 0].set_xlabel("env steps (millions)")
+    axes[1, 1].set_xlabel("training wall time (min)")
+    axes[0, 0].set_ylabel(f"success over {seeds} seeds")
+    axes[0, 0].set_ylim(-0.05, 1.05)
+    axes[1, 0].set_ylabel("median final goal distance (m)")
+    axes[1, 0].set_yscale("log")
+    for ax in axes.flat:
         ax.grid(alpha=0.3)
-    axes[0].set_ylabel(f"success over {len(curve[0]['final_goal_error_m'])} seeds")
-    axes[0].set_ylim(-0.05, 1.05)
+    axes[0, 0].legend()
     fig.tight_layout()
-    fig.savefig(out / "curve.png", dpi=120)
+    fig.savefig(path, dpi=120)
     plt.close(fig)
 
 
@@ -469,10 +499,22 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--eval-every", type=int, default=250_000, help="env steps; 0: never")
     p.add_argument("--eval-seeds", type=int, default=10)
     p.add_argument("--eval-duration", type=float, default=25.0, help="s")
+    p.add_argument(
+        "--reward",
+        nargs="+",
+        default=[],
+        metavar="NAME=VALUE",
+        help="DenseRewardConfig fields (wip_gym.wrappers), e.g. spin=0.5",
+    )
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--print-every", type=int, default=10, help="updates")
     p.add_argument("--plot", action="store_true", help="write curve.png")
     p.add_argument("--out", default="out/ppo")
+    p.add_argument(
+        "--plot-runs", nargs="+", metavar="DIR", help="only plot these runs' curves (no training)"
+    )
+    p.add_argument("--labels", nargs="+", help="one per --plot-runs run")
+    p.add_argument("--plot-out", default="curves.png", help="the --plot-runs figure")
     args = p.parse_args(argv)
     if args.goal_low is not None:
         args.goal_low = args.goal_low[0] if len(args.goal_low) == 1 else tuple(args.goal_low)
@@ -483,9 +525,14 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
+    if args.plot_runs:
+        runs = [Path(r) for r in args.plot_runs]
+        plot_curves(runs, args.labels or [r.name for r in runs], Path(args.plot_out))
+        return
     summary = train(args)
-    if args.plot and (Path(args.out) / "curve.json").exists():
-        plot_curve(Path(args.out))
+    out = Path(args.out)
+    if args.plot and (out / "curve.json").exists():
+        plot_curves([out], [args.env], out / "curve.png")
     print(json.dumps(summary))
 
 

@@ -17,13 +17,10 @@ import wip_gym
 from wip_gym.wrappers import (
     ANGULAR_SPEED_SCALE,
     CUP_REST_Z,
-    GOAL_REWARD_SCALE_M,
     GOAL_SCALE_M,
     LINEAR_SPEED_SCALE,
-    POSTURE_SCALE_M,
-    SPEED_AT_GOAL_WIDTH_M,
     DenseReward,
-    DenseRewardWeights,
+    DenseRewardConfig,
     NormalizedObservation,
     ObservationNormalizer,
     RandomGoal,
@@ -243,8 +240,10 @@ def test_the_action_scaling_errors() -> None:
 # ------------------------------------------------------------------------------- reward
 @pytest.mark.parametrize("env_id", ["wip_gym/WIP-v0", "wip_gym/PlanarTray-v0"])
 def test_the_dense_reward_is_the_sum_of_its_documented_terms(env_id: str) -> None:
-    weights = DenseRewardWeights(alive=1.5, goal=0.7, theta=3.0, ctrl=0.2, fall=7.0)
-    env = DenseReward(gym.make(env_id, frame_skip=10), weights)
+    config = DenseRewardConfig(
+        alive=1.5, goal=0.7, goal_scale_m=0.8, theta=3.0, stop_width_m=0.2, ctrl=0.2, fall=7.0
+    )
+    env = DenseReward(gym.make(env_id, frame_skip=10), config)
     dt = env.unwrapped.dt
     limit = env.unwrapped.action_space.high.astype(float)
     _, info = env.reset(seed=4)
@@ -259,19 +258,17 @@ def test_the_dense_reward_is_the_sum_of_its_documented_terms(env_id: str) -> Non
         d = info["goal_distance"]
         expected = {
             "dense_alive": 0.0 if info["fallen"] else 1.5 * dt,
-            "dense_goal": 0.7 * math.exp(-d / GOAL_REWARD_SCALE_M) * dt,
+            "dense_goal": 0.7 * math.exp(-d / 0.8) * dt,
             "dense_progress": before - d,
             "dense_theta": -3.0 * info["theta"] ** 2 * dt,
-            "dense_speed_at_goal": -math.exp(-((d / SPEED_AT_GOAL_WIDTH_M) ** 2))
-            * info["xd"] ** 2
-            * dt,
+            "dense_speed_at_goal": -math.exp(-((d / 0.2) ** 2)) * info["xd"] ** 2 * dt,
             "dense_ctrl": -0.2 * float(np.sum((torque / limit) ** 2)) * dt,
             "dense_fall": -7.0 if info["fallen"] else 0.0,
         }
         if "psid" in info:
             expected["dense_spin"] = -0.1 * info["psid"] ** 2 * dt
         if "ee_error" in info:
-            expected["dense_posture"] = -((info["ee_error"] / POSTURE_SCALE_M) ** 2) * dt
+            expected["dense_posture"] = -((info["ee_error"] / 0.1) ** 2) * dt
         if "tray_tilt_deg" in info:
             expected["dense_tray_tilt"] = -((info["tray_tilt_deg"] / 10) ** 2) * dt
             expected["dense_friction"] = -(info["cup_friction_use"] ** 2) * dt
@@ -289,9 +286,13 @@ def test_the_dense_reward_is_the_sum_of_its_documented_terms(env_id: str) -> Non
     assert ended and (info["dense_fall"] != 0.0 or info.get("dense_cup_loss", 0.0) != 0.0)
 
 
-def test_the_dense_reward_needs_torques() -> None:
+def test_the_dense_reward_needs_torques_and_a_valid_config() -> None:
     with pytest.raises(ValueError, match="reads torques"):
         DenseReward(ScaledAction(gym.make("wip_gym/WIP-v0")))
+    with pytest.raises(ValueError, match="spin must be finite and >= 0"):
+        DenseRewardConfig(spin=-1.0)
+    with pytest.raises(ValueError, match="stop_width_m must be positive"):
+        DenseRewardConfig(stop_width_m=0.0)
 
 
 # --------------------------------------------------------------------------------- goals

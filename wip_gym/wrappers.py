@@ -19,6 +19,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -329,26 +330,29 @@ class ScaledAction(gym.ActionWrapper[Any, Any, Any], gym.utils.RecordConstructor
 
 # ------------------------------------------------------------------------------- reward
 @dataclass(frozen=True)
-class DenseRewardWeights:
-    """The dense reward's weights (docs/learning.md §6). Rates are per second of simulated
-    time (multiplied by the env's ``dt``), so an episode's return does not depend on
+class DenseRewardConfig:
+    """The dense reward's weights and scales (docs/learning.md §6). Rates are per second of
+    simulated time (multiplied by the env's ``dt``), so an episode's return does not depend on
     ``frame_skip``; the progress and the penalties are per event.
 
     Attributes:
         alive: per s while up: falling early costs what the rest of the episode would pay.
-        goal: per s at the goal, ``exp(-d / GOAL_REWARD_SCALE_M)`` of it at a distance ``d``:
-            twice ``alive``, so being at the goal matters more than staying up longer; a pull
+        goal: per s at the goal, ``exp(-d / goal_scale_m)`` of it at a distance ``d``: twice
+            ``alive``, so being at the goal matters more than staying up longer; a pull
             steepest at the goal (2 per s per m there; the benchmark's goal tolerance is 5 cm)
             and positive everywhere, so that no state makes a fall pay.
+        goal_scale_m: m, the goal term's decay length (half the default 2 m drive).
         progress: per m of goal distance gained (the env's own ``reward_progress``).
         theta: per s per rad^2 of the body's lean ``theta`` (balance); small: driving needs a
             lean (the controllers lean up to 0.14 to 0.21 rad on the 2 m drive).
         speed_at_goal: per s per (m/s)^2 of the axle's speed, weighted by
-            ``exp(-(distance / 0.1 m)^2)``: stop at the goal, drive freely away from it.
+            ``exp(-(d / stop_width_m)^2)``: stop at the goal, drive freely away from it.
+        stop_width_m: m, the width of that neighbourhood of the goal.
         spin: 3-D robots, per s per (rad/s)^2 of the heading rate ``psid``: turn to the goal,
             not on the spot (a policy that spins while it balances is a local optimum).
-        posture: robots with an end effector, per s per (``ee_error`` / 0.1 m)^2: the hand
-            held where it was at the reset (the benchmark's ``max_ee_error_m``).
+        posture: robots with an end effector, per s per (``ee_error`` / ``posture_scale_m``)^2:
+            the hand held where it was at the reset (the benchmark's ``max_ee_error_m``).
+        posture_scale_m: m, the hand's drift that costs ``posture`` per s.
         ctrl: per s per unit of ``sum((torque / limit)^2)`` (the env's effort).
         tray_tilt: tray tasks, per s per (tilt / 10 deg)^2 (the paper keeps the tray level).
         friction: tray tasks, per s per unit of ``cup_friction_use^2`` (1 = slipping).
@@ -358,24 +362,27 @@ class DenseRewardWeights:
 
     alive: float = 1.0
     goal: float = 2.0
+    goal_scale_m: float = 1.0
     progress: float = 1.0
     theta: float = 1.0
     speed_at_goal: float = 1.0
+    stop_width_m: float = 0.1
     spin: float = 0.1
     posture: float = 1.0
+    posture_scale_m: float = 0.1
     ctrl: float = 0.1
     tray_tilt: float = 1.0
     friction: float = 1.0
     fall: float = 10.0
     cup_loss: float = 10.0
 
-
-#: m: the width of the goal's neighbourhood where the axle's speed is penalised
-SPEED_AT_GOAL_WIDTH_M = 0.1
-#: m: the goal reward's decay length (half the default 2 m drive)
-GOAL_REWARD_SCALE_M = 1.0
-#: m: the end effector's displacement that costs ``posture`` per s
-POSTURE_SCALE_M = 0.1
+    def __post_init__(self) -> None:
+        for name, value in dataclasses.asdict(self).items():
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f"DenseRewardConfig.{name} must be finite and >= 0, got {value}")
+        for name in ("goal_scale_m", "stop_width_m", "posture_scale_m"):
+            if getattr(self, name) <= 0.0:
+                raise ValueError(f"DenseRewardConfig.{name} must be positive")
 
 
 class DenseReward(gym.Wrapper[Any, Any, Any, Any], gym.utils.RecordConstructorArgs):
@@ -387,12 +394,12 @@ class DenseReward(gym.Wrapper[Any, Any, Any, Any], gym.utils.RecordConstructorAr
     | term (``info``) | value |
     |---|---|
     | ``dense_alive`` | ``alive * dt`` unless fallen |
-    | ``dense_goal`` | ``goal * exp(-d / 1 m) * dt`` |
+    | ``dense_goal`` | ``goal * exp(-d / goal_scale_m) * dt`` |
     | ``dense_progress`` | ``progress * (d_before - d)`` |
     | ``dense_theta`` | ``-theta * theta^2 * dt`` |
-    | ``dense_speed_at_goal`` | ``-speed_at_goal * exp(-(d / 0.1)^2) * v^2 * dt`` |
+    | ``dense_speed_at_goal`` | ``-speed_at_goal * exp(-(d / stop_width_m)^2) * v^2 * dt`` |
     | ``dense_spin`` | ``-spin * psid^2 * dt`` (3-D robots) |
-    | ``dense_posture`` | ``-posture * (ee_error / 0.1)^2 * dt`` (robots with an end effector) |
+    | ``dense_posture`` | ``-posture * (ee_error / posture_scale_m)^2 * dt`` (robots with an end effector) |
     | ``dense_ctrl`` | ``-ctrl * u * dt`` |
     | ``dense_tray_tilt`` | ``-tray_tilt * (tray_tilt_deg / 10)^2 * dt`` (tray tasks) |
     | ``dense_friction`` | ``-friction * cup_friction_use^2 * dt`` (tray tasks) |
@@ -404,9 +411,9 @@ class DenseReward(gym.Wrapper[Any, Any, Any, Any], gym.utils.RecordConstructorAr
     """
 
     def __init__(
-        self, env: gym.Env[Any, Any], weights: DenseRewardWeights = DenseRewardWeights()
+        self, env: gym.Env[Any, Any], config: DenseRewardConfig = DenseRewardConfig()
     ) -> None:
-        gym.utils.RecordConstructorArgs.__init__(self, weights=weights)
+        gym.utils.RecordConstructorArgs.__init__(self, config=config)
         gym.Wrapper.__init__(self, env)
         if (
             not isinstance(env.action_space, spaces.Box)
@@ -414,7 +421,7 @@ class DenseReward(gym.Wrapper[Any, Any, Any, Any], gym.utils.RecordConstructorAr
         ):
             raise ValueError("DenseReward reads torques: wrap the wip-gym env itself")
         base = wip_env(env)
-        self.weights = weights
+        self.config = config
         self._limit = np.maximum(
             np.abs(np.asarray(base.action_space.high, dtype=np.float64)), 1e-12
         )
@@ -432,17 +439,17 @@ class DenseReward(gym.Wrapper[Any, Any, Any, Any], gym.utils.RecordConstructorAr
 
     def step(self, action: ArrayLike) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         observation, reward, terminated, truncated, info = self.env.step(action)
-        w, dt = self.weights, float(wip_env(self.env).dt)
+        w, dt = self.config, float(wip_env(self.env).dt)
         torque = np.asarray(action, dtype=np.float64)
         distance = float(info["goal_distance"])
         fallen = bool(info["fallen"])
         terms = {
             "dense_alive": 0.0 if fallen else w.alive * dt,
-            "dense_goal": w.goal * math.exp(-distance / GOAL_REWARD_SCALE_M) * dt,
+            "dense_goal": w.goal * math.exp(-distance / w.goal_scale_m) * dt,
             "dense_progress": w.progress * (self._distance - distance),
             "dense_theta": -w.theta * float(info["theta"]) ** 2 * dt,
             "dense_speed_at_goal": -w.speed_at_goal
-            * math.exp(-((distance / SPEED_AT_GOAL_WIDTH_M) ** 2))
+            * math.exp(-((distance / w.stop_width_m) ** 2))
             * float(info["xd"]) ** 2
             * dt,
             "dense_ctrl": -w.ctrl * float(np.sum(np.square(torque / self._limit))) * dt,
@@ -451,7 +458,7 @@ class DenseReward(gym.Wrapper[Any, Any, Any, Any], gym.utils.RecordConstructorAr
         if "psid" in info:
             terms["dense_spin"] = -w.spin * float(info["psid"]) ** 2 * dt
         if "ee_error" in info:
-            terms["dense_posture"] = -w.posture * (info["ee_error"] / POSTURE_SCALE_M) ** 2 * dt
+            terms["dense_posture"] = -w.posture * (info["ee_error"] / w.posture_scale_m) ** 2 * dt
         if self._tray:
             terms["dense_tray_tilt"] = (
                 -w.tray_tilt * (float(info["tray_tilt_deg"]) / 10.0) ** 2 * dt
@@ -509,14 +516,14 @@ def wrap_for_learning(
     wheel_angles: WheelAngles = "drop",
     out_of_range: OutOfRange = "clip",
     dtype: Any = np.float32,
-    weights: DenseRewardWeights = DenseRewardWeights(),
+    reward: DenseRewardConfig = DenseRewardConfig(),
 ) -> gym.Env[Any, Any]:
     """``env`` wrapped in the order the wrappers need: the dense reward on the torques, a
     random goal (when both bounds are given), the flat observation, the scaled action."""
     if isinstance(env.unwrapped, WIPEnv) is False:
         raise ValueError(f"expected a wip-gym env, got {type(env.unwrapped).__name__}")
     if dense_reward:
-        env = DenseReward(env, weights)
+        env = DenseReward(env, reward)
     if (goal_low is None) != (goal_high is None):
         raise ValueError("give both goal_low and goal_high, or neither")
     if goal_low is not None and goal_high is not None:
