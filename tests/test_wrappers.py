@@ -246,8 +246,11 @@ def test_the_dense_reward_is_the_sum_of_its_documented_terms(env_id: str) -> Non
     env = DenseReward(gym.make(env_id, frame_skip=10), config)
     dt = env.unwrapped.dt
     limit = env.unwrapped.action_space.high.astype(float)
-    _, info = env.reset(seed=4)
+    # a goal near the start: the stop term is not negligible
+    planar = env.unwrapped.robot.layout.planar
+    _, info = env.reset(seed=4, options={"goal": 0.05 if planar else (0.05, 0.1)})
     before = info["goal_distance"]
+    near = 0
     rng = np.random.default_rng(5)
     ended = False
     for _ in range(300):
@@ -261,7 +264,10 @@ def test_the_dense_reward_is_the_sum_of_its_documented_terms(env_id: str) -> Non
             "dense_goal": 0.7 * math.exp(-d / 0.8) * dt,
             "dense_progress": before - d,
             "dense_theta": -3.0 * info["theta"] ** 2 * dt,
-            "dense_speed_at_goal": -math.exp(-((d / 0.2) ** 2)) * info["xd"] ** 2 * dt,
+            # xd -+ psid b: the wheels' ground speeds when they roll without slipping
+            "dense_speed_at_goal": -math.exp(-((d / 0.2) ** 2))
+            * (info["xd"] ** 2 + (info.get("psid", 0.0) * 0.34) ** 2)
+            * dt,
             "dense_ctrl": -0.2 * float(np.sum((torque / limit) ** 2)) * dt,
             "dense_fall": -7.0 if info["fallen"] else 0.0,
         }
@@ -275,6 +281,7 @@ def test_the_dense_reward_is_the_sum_of_its_documented_terms(env_id: str) -> Non
             lost = not (info["cup_on_tray"] and info["tray_on_hand"])
             expected["dense_cup_loss"] = -10.0 if lost and info["reward_cup_loss"] else 0.0
         assert terms == pytest.approx(expected, abs=1e-12)
+        near += abs(terms["dense_speed_at_goal"]) > 1e-6
         assert info["env_reward"] == pytest.approx(
             sum(v for k, v in info.items() if k.startswith("reward_")), abs=1e-12
         )
@@ -282,7 +289,9 @@ def test_the_dense_reward_is_the_sum_of_its_documented_terms(env_id: str) -> Non
         if terminated:
             ended = True
             break
-    # random torques: the robot fell or the cup went, and that step's penalty was checked too
+    # random torques: the robot fell or the cup went, and that step's penalty was checked too;
+    # the stop term was checked where it counts
+    assert near > 5
     assert ended and (info["dense_fall"] != 0.0 or info.get("dense_cup_loss", 0.0) != 0.0)
 
 

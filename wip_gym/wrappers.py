@@ -345,8 +345,11 @@ class DenseRewardConfig:
         progress: per m of goal distance gained (the env's own ``reward_progress``).
         theta: per s per rad^2 of the body's lean ``theta`` (balance); small: driving needs a
             lean (the controllers lean up to 0.14 to 0.21 rad on the 2 m drive).
-        speed_at_goal: per s per (m/s)^2 of the axle's speed, weighted by
-            ``exp(-(d / stop_width_m)^2)``: stop at the goal, drive freely away from it.
+        speed_at_goal: per s per (m/s)^2 of the wheels' mean squared ground speed (rolling
+            without slip: ``xd -+ psid`` times half the wheel separation), weighted by
+            ``exp(-(d / stop_width_m)^2)``: stop at the goal (both wheels: neither drive nor
+            turn there; a policy circling the goal is a local optimum), move freely away from
+            it.
         stop_width_m: m, the width of that neighbourhood of the goal.
         spin: 3-D robots, per s per (rad/s)^2 of the heading rate ``psid``: turn to the goal,
             not on the spot (a policy that spins while it balances is a local optimum).
@@ -388,8 +391,9 @@ class DenseRewardConfig:
 class DenseReward(gym.Wrapper[Any, Any, Any, Any], gym.utils.RecordConstructorArgs):
     """Replace the env's reward with a dense reward on the benchmark's measures.
 
-    Per step (``dt`` the env's step, ``d`` the goal distance after it, ``v`` the axle's speed
-    ``|info["xd"]|``, ``u = sum((torque / limit)^2)``):
+    Per step (``dt`` the env's step, ``d`` the goal distance after it, ``s2`` the wheels' mean
+    squared ground speed ``xd^2 + (psid * b)^2`` with ``b`` half the wheel separation (planar:
+    ``xd^2``), ``u = sum((torque / limit)^2)``):
 
     | term (``info``) | value |
     |---|---|
@@ -397,7 +401,7 @@ class DenseReward(gym.Wrapper[Any, Any, Any, Any], gym.utils.RecordConstructorAr
     | ``dense_goal`` | ``goal * exp(-d / goal_scale_m) * dt`` |
     | ``dense_progress`` | ``progress * (d_before - d)`` |
     | ``dense_theta`` | ``-theta * theta^2 * dt`` |
-    | ``dense_speed_at_goal`` | ``-speed_at_goal * exp(-(d / stop_width_m)^2) * v^2 * dt`` |
+    | ``dense_speed_at_goal`` | ``-speed_at_goal * exp(-(d / stop_width_m)^2) * s2 * dt`` |
     | ``dense_spin`` | ``-spin * psid^2 * dt`` (3-D robots) |
     | ``dense_posture`` | ``-posture * (ee_error / posture_scale_m)^2 * dt`` (robots with an end effector) |
     | ``dense_ctrl`` | ``-ctrl * u * dt`` |
@@ -426,6 +430,8 @@ class DenseReward(gym.Wrapper[Any, Any, Any, Any], gym.utils.RecordConstructorAr
             np.abs(np.asarray(base.action_space.high, dtype=np.float64)), 1e-12
         )
         self._tray = bool(base.scene_options.tray)
+        #: m, half the wheel separation: a wheel's ground speed is xd -+ psid times it
+        self._half_track = base.robot.layout.wheel_separation / 2.0
         self._distance = 0.0
         self._cup_lost = False
 
@@ -450,7 +456,7 @@ class DenseReward(gym.Wrapper[Any, Any, Any, Any], gym.utils.RecordConstructorAr
             "dense_theta": -w.theta * float(info["theta"]) ** 2 * dt,
             "dense_speed_at_goal": -w.speed_at_goal
             * math.exp(-((distance / w.stop_width_m) ** 2))
-            * float(info["xd"]) ** 2
+            * (float(info["xd"]) ** 2 + (float(info.get("psid", 0.0)) * self._half_track) ** 2)
             * dt,
             "dense_ctrl": -w.ctrl * float(np.sum(np.square(torque / self._limit))) * dt,
             "dense_fall": -w.fall if fallen else 0.0,
