@@ -24,7 +24,8 @@ as the ``ppo`` controller through ``benchmarks.rollout`` (as ``wip-bench compare
 curve (success rate, falls, final goal distance against env steps and wall time) goes to
 ``curve.json`` and, with ``--plot``, ``curve.png``.
 
-Outputs in ``--out``: ``checkpoint.npz`` (the final policy), ``curve.json``, ``log.jsonl`` (one
+Outputs in ``--out``: ``checkpoint.npz`` (the final policy), ``checkpoint_<steps>.npz`` (the
+policy of each evaluation), ``curve.json``, ``log.jsonl`` (one
 line per update: losses, KL, clip fraction, entropy, episode returns), ``probe.npz`` (flat
 observations and the jitted network's mean actions on them, to check a reloaded checkpoint).
 """
@@ -36,6 +37,7 @@ import dataclasses
 import json
 import math
 import os
+import shutil
 import sys
 import time
 from collections.abc import Callable
@@ -232,12 +234,17 @@ def evaluate(args: argparse.Namespace, checkpoint: Path) -> dict[str, Any]:
         ).metrics
         for seed in range(args.eval_seeds)
     ]
-    return {
+    result = {
         "success_rate": float(np.mean([r["success"] for r in rows])),
         "fell_rate": float(np.mean([r["fell"] for r in rows])),
         "final_goal_error_m": [float(r["final_goal_error_m"]) for r in rows],
         "sim_time_s": [float(r["sim_time_s"]) for r in rows],
     }
+    if rows[0]["carried"] is not None:  # a tray task
+        result["carried_rate"] = float(np.mean([r["carried"] for r in rows]))
+        result["max_cup_friction_use"] = [float(r["max_cup_friction_use"]) for r in rows]
+        result["max_tray_tilt_deg"] = [float(r["max_tray_tilt_deg"]) for r in rows]
+    return result
 
 
 def write_checkpoint(
@@ -328,14 +335,16 @@ def train(args: argparse.Namespace) -> dict[str, Any]:
         wall = tick - start - eval_time
         write_checkpoint(path, params, obs_stats, normalizer, args, control_dt, env_steps, wall)
         result = evaluate(args, path)
+        shutil.copyfile(path, out / f"checkpoint_{env_steps}.npz")  # the curve's policies
         eval_time += time.perf_counter() - tick
         point = {"env_steps": env_steps, "train_wall_s": wall, "wall_s": tick - start, **result}
         curve.append(point)
         (out / "curve.json").write_text(json.dumps(curve, indent=1))
+        carried = f", carried {result['carried_rate']:.1f}" if "carried_rate" in result else ""
         print(
             f"eval at {env_steps} steps ({wall:.0f} s training): success "
-            f"{result['success_rate']:.1f}, fell {result['fell_rate']:.1f}, final distance "
-            f"median {np.median(result['final_goal_error_m']):.3f} m",
+            f"{result['success_rate']:.1f}, fell {result['fell_rate']:.1f}{carried}, final "
+            f"distance median {np.median(result['final_goal_error_m']):.3f} m",
             flush=True,
         )
 
@@ -441,8 +450,8 @@ def train(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def plot_curves(runs: list[Path], labels: list[str], path: Path) -> None:
-    """The runs' success rates and median final goal distances against env steps and training
-    wall time, one line per run."""
+    """The runs' success rates (and, on tray tasks, carried rates) and median final goal
+    distances against env steps and training wall time, one line per run."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -458,7 +467,12 @@ def plot_curves(runs: list[Path], labels: list[str], path: Path) -> None:
         for column, x in enumerate(
             ([p["env_steps"] / 1e6 for p in curve], [p["train_wall_s"] / 60 for p in curve])
         ):
-            axes[0, column].plot(x, success, "o-", label=label)
+            line = axes[0, column].plot(x, success, "o-", label=label)[0]
+            if "carried_rate" in curve[0]:  # a tray task: the cup carried, dashed
+                carried = [p["carried_rate"] for p in curve]
+                axes[0, column].plot(
+                    x, carried, "s--", color=line.get_color(), label=f"{label}: cup carried"
+                )
             axes[1, column].plot(x, distance, "o-", label=label)
     for column in (0, 1):
         axes[1, column].axhline(0.05, color="k", lw=0.8, ls="--")

@@ -169,3 +169,20 @@ def test_what_the_controller_refuses(run: Path) -> None:
     with pytest.raises(ValueError, match="LearnedConfig"):
         LearnedController.for_env(gym.make("wip_gym/WIP-v0"), object())
     assert ObservationNormalizer.for_env(gym.make("wip_gym/WIP-v0")).size == 13
+
+
+@pytest.mark.parametrize("env_id", ["wip_gym/Planar-v0"])
+def test_the_shipped_policy_balances_and_ends_at_the_goal(env_id: str) -> None:
+    """The checkpoint shipped for the env, as ``wip-bench compare`` runs it on the env's
+    default task: it balances the 25 s and ends within 5 cm of the goal, slower than 5 cm/s
+    (``success``), in at least 8 of 10 seeds (docs/learning.md §8). At a 10 ms env step: the
+    policy's own, on which the 1 ms env's held actions give the same trajectory (above)."""
+    from benchmarks.rollout import rollout
+    from controllers.registry import default_config
+
+    config = default_config("ppo")
+    rows = [
+        rollout(env_id, {"frame_skip": 10}, "ppo", config, seed, 25.0).metrics for seed in range(10)
+    ]
+    assert sum(r["success"] for r in rows) >= 8, [r["final_goal_error_m"] for r in rows]
+    assert not any(r["fell"] for r in rows)
