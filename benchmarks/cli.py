@@ -6,6 +6,13 @@ wip-bench solvers --json out/solvers.json
 wip-bench profile --env KrangTray-v0 --controller unified --json out/profile.json
 wip-bench sweep benchmarks/sweeps/claim_map.toml --out out/claim_map
 wip-bench render out/compare --camera tray --size 640x480
+wip-bench view --env PlanarTray-v0 --controller unified
+wip-bench view --replay out/compare/recording_unified.npz
+
+``--import MODULE`` (repeatable) on compare, profile and sweep imports a module that registers
+controllers (``controllers.registry``) before the command reads its arguments; compare's and the
+sweep's workers import it too. Installed plug-ins (the entry-point group
+``wip_gym.controllers``) need no flag (docs/extending.md §2).
 """
 
 from __future__ import annotations
@@ -14,10 +21,26 @@ import argparse
 import os
 import sys
 
-from benchmarks import compare, figures, render
+from benchmarks import compare, figures, render, view
 from benchmarks.speed import profile, solvers
 from benchmarks.sweep import cli as sweep_cli
+from controllers import registry
 from controllers.optimizer import jax_setup
+
+IMPORT_COMMANDS = ("compare", "profile", "sweep")
+
+
+def add_import_argument(parser: argparse.ArgumentParser) -> None:
+    """``--import MODULE`` (repeatable): a module whose import registers controllers."""
+    parser.add_argument(
+        "--import",
+        dest="imports",
+        action="append",
+        default=[],
+        metavar="MODULE",
+        help="import MODULE first, a module that registers controllers (repeatable; the "
+        "workers import it too; it must be importable: installed or on PYTHONPATH)",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -43,14 +66,24 @@ def build_parser() -> argparse.ArgumentParser:
         "render", help="re-render a recorded compare run's videos without simulating"
     )
     render.add_arguments(render_parser)
+    view_parser = commands.add_parser(
+        "view", help="a controller driving an env, or a recording, in MuJoCo's viewer"
+    )
+    view.add_arguments(view_parser)
+    for name in IMPORT_COMMANDS:
+        add_import_argument(commands.choices[name])
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    jax_setup.configure()  # the solvers' JAX settings, before JAX starts (one explicit call)
+    if args.command == "solvers":  # its peers call the WIPM's JAX functions themselves
+        jax_setup.configure()  # the compilation cache and float64 for the whole process
+    else:  # the solvers scope float64 themselves (docs/DESIGN.md §4)
+        jax_setup.use_compilation_cache()
     try:
+        registry.import_modules(getattr(args, "imports", []))
         if args.command == "compare":
             compare.run(args)
         elif args.command == "figures":
@@ -63,6 +96,8 @@ def main(argv: list[str] | None = None) -> int:
             return sweep_cli.run(args)
         elif args.command == "render":
             render.run(args)
+        elif args.command == "view":
+            view.run(args)
     except ValueError as error:
         parser.error(str(error))  # exits with status 2 and the message
     except BrokenPipeError:  # the reader went away (`... --list-keys | head`): not an error

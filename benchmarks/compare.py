@@ -6,10 +6,18 @@ Settings resolve in the order defaults, ``--preset``, named flags, ``--set`` (se
 ``benchmarks.overrides``; ``--list-keys`` prints every key). Two progress bars: episodes, and
 the simulated seconds of all episodes (it moves inside a long episode).
 
-Outputs in ``--out``: ``episodes.jsonl`` (one line per episode: ``benchmarks.metrics``, the
-controller's ``counters``, timing) and ``summary.json``:
+A ``plan.*`` key applies to every controller with an offline plan and leaves the others as
+they are (``benchmarks.overrides.keys_not_applied``, the sweep's rule too): the run prints a
+note and ``summary.json`` lists them under ``keys_not_applied``. ``--import MODULE`` modules
+are imported by the workers too.
 
-    {"env", "preset", "overrides": {key: value},
+Outputs in ``--out``: ``episodes.jsonl`` (one line per episode: ``benchmarks.metrics``, the
+controller's ``counters``, timing), with ``--record-transitions`` one Minari dataset per
+controller of every episode's observations, actions, rewards, terminations and truncations
+(``datasets/wip_gym/<env name>/<controller>-v0``, ``benchmarks.transitions``), and
+``summary.json``:
+
+    {"env", "preset", "overrides": {key: value}, "keys_not_applied": {key: [controller]},
      "scenario": {every env argument in effect, "env", "duration_s", "control_dt_s",
                   "episodes", "seed", "seeds", "controllers", "preset"},
      "controllers": {name: {"config": {...resolved config...}, "episodes": n,
@@ -56,6 +64,7 @@ from benchmarks.scenario import (
 )
 from benchmarks.seeding import episode_seed
 from benchmarks.statistics import describe, rate
+from benchmarks.transitions import episode_file, require_minari, write_datasets
 from controllers import registry
 from controllers.optimizer import jax_setup
 
@@ -85,9 +94,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--env", default=DEFAULT_ENV, help="env id (wip_gym/NAME or NAME)")
     parser.add_argument(
         "--controllers",
-        default=",".join(registry.default_controller_names()),
-        help=f"comma-separated, from {registry.controller_names()} (default: all but the "
-        f"learned ppo, which runs where it has a checkpoint)",
+        help="comma-separated registry names (default: every registered controller but the "
+        f"learned ppo, which runs where it has a checkpoint: "
+        f"{', '.join(registry.default_controller_names())}, and those of --import modules)",
     )
     parser.add_argument("--episodes", type=int, default=1)
     parser.add_argument("--seed", type=int, default=0)
@@ -97,7 +106,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "(repeatable; see --list-keys)",
     )
     parser.add_argument(
-        "--list-keys", action="store_true", help="print every --set key, its type and default"
+        "--list-keys",
+        action="store_true",
+        help="print every --set key: its type, default and what it means",
     )
     parser.add_argument("--goal", type=float, nargs="+", metavar=("X", "Y"))
     parser.add_argument(
@@ -118,6 +129,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--jobs", type=int, default=1)
     add_video_arguments(parser, default_kind=None)  # --video [each|grid|both] of the 1st episode
+    parser.add_argument(
+        "--record-transitions",
+        action="store_true",
+        help="write every episode's observations, actions, rewards, terminations and "
+        "truncations as a Minari dataset per controller (OUT/datasets; needs wip-gym[data])",
+    )
     parser.add_argument("--out", default="out/compare")
 
 
@@ -138,11 +155,19 @@ def named_env_flags(args: argparse.Namespace) -> dict[str, Any]:
     return flags
 
 
+def controller_list(args: argparse.Namespace) -> list[str]:
+    """``--controllers``, or every default controller (``--import`` modules' included; the
+    learned ``ppo`` only by name, ``registry.default_controller_names``)."""
+    if args.controllers is None:
+        return registry.default_controller_names()
+    return parse_controllers(args.controllers)
+
+
 def spec_from_args(args: argparse.Namespace) -> RunSpec:
     """Validate the flags and resolve the run; raise ValueError naming the bad flag or key
     and the valid choices (nothing has run or been written yet)."""
     env_id = resolve_env_id(args.env)
-    names = parse_controllers(args.controllers)
+    names = controller_list(args)
     if args.episodes < 1:
         raise ValueError(f"--episodes must be >= 1, got {args.episodes}")
     if args.jobs < 1:
@@ -150,6 +175,8 @@ def spec_from_args(args: argparse.Namespace) -> RunSpec:
     if not (np.isfinite(args.duration) and args.duration > 0):
         raise ValueError(f"--duration must be positive, got {args.duration}")
     check_task_flags(env_id, args.goal, args.cup_friction)
+    if getattr(args, "record_transitions", False):
+        require_minari()
     for flag, value in (("--payload", args.payload), ("--payload-time", args.payload_time)):
         if value is not None and (not np.isfinite(value) or value < 0):
             raise ValueError(f"{flag} must be finite and >= 0, got {value}")
@@ -166,7 +193,7 @@ def list_keys(args: argparse.Namespace) -> str:
     """``--list-keys``: every key of this env and these controllers (defaults after the
     preset)."""
     env_id = resolve_env_id(args.env)
-    spec = resolve_run(env_id, parse_controllers(args.controllers), args.preset)
+    spec = resolve_run(env_id, controller_list(args), args.preset)
     return format_keys(valid_settings(env_id, spec.configs))
 
 
@@ -304,8 +331,19 @@ class _SimulatedSeconds:
         self.bar.close()
 
 
+def _start_worker(imports: tuple[str, ...]) -> None:
+    """A spawned worker's start: the ``--import`` modules, whose controllers its episodes
+    make, and JAX's persistent compilation cache (``jax_setup.use_compilation_cache``)."""
+    registry.import_modules(imports)
+    jax_setup.use_compilation_cache()
+
+
 def _run_tasks(
-    tasks: list[tuple[Any, ...]], jobs: int, duration: float, on_done: Any = None
+    tasks: list[tuple[Any, ...]],
+    jobs: int,
+    duration: float,
+    on_done: Any = None,
+    imports: tuple[str, ...] = (),
 ) -> list[Any]:
     results: list[Any] = [None] * len(tasks)
     episodes_bar = tqdm(total=len(tasks), desc="episodes", unit="ep", position=0)
@@ -323,8 +361,11 @@ def _run_tasks(
         with context.Manager() as manager:
             reports = manager.Queue()
             with ProcessPoolExecutor(
-                max_workers=jobs, mp_context=context, initializer=jax_setup.configure
-            ) as pool:  # a spawned worker is an entry point: the solvers' JAX settings first
+                max_workers=jobs,
+                mp_context=context,
+                initializer=_start_worker,
+                initargs=(imports,),
+            ) as pool:
                 futures = {
                     pool.submit(compare_episode, *task, progress=reports): k
                     for k, task in enumerate(tasks)
@@ -356,6 +397,8 @@ def run(args: argparse.Namespace) -> dict[str, Any] | None:
         return None
     spec = spec_from_args(args)
     names = list(spec.configs)
+    for key, left in spec.not_applied.items():
+        print(f"note: {key} leaves {', '.join(left)} as configured (no offline plan)")
     env = gym.make(spec.env_id, max_episode_steps=-1, **spec.env_kwargs)
     videos = video_options(args, env.unwrapped.model)
     env.close()
@@ -366,6 +409,7 @@ def run(args: argparse.Namespace) -> dict[str, Any] | None:
     for name in names:
         for i, seed in enumerate(seeds):
             record = str(recording_file(out, name)) if (videos and i == 0) else None
+            transitions = str(episode_file(out, name, i)) if args.record_transitions else None
             tasks.append(
                 (
                     len(tasks),
@@ -377,6 +421,7 @@ def run(args: argparse.Namespace) -> dict[str, Any] | None:
                     args.duration,
                     record,
                     videos.fps if videos else None,
+                    transitions,
                 )
             )
     # videos render from the recordings in another process while the next episodes run
@@ -386,7 +431,10 @@ def run(args: argparse.Namespace) -> dict[str, Any] | None:
         if jobs is not None and tasks[k][7] is not None:
             jobs.submit(tasks[k][3])
 
-    outcomes = _run_tasks(tasks, args.jobs, args.duration, on_done=render_when_recorded)
+    imports = tuple(getattr(args, "imports", ()))
+    outcomes = _run_tasks(
+        tasks, args.jobs, args.duration, on_done=render_when_recorded, imports=imports
+    )
     episodes_done = time.perf_counter()
     results = [metrics for metrics, _ in outcomes]
     with open(out / "episodes.jsonl", "w") as f:
@@ -397,16 +445,26 @@ def run(args: argparse.Namespace) -> dict[str, Any] | None:
         "preset": spec.preset,
         "overrides": spec.overrides,
         "scenario": scenario_record(spec, args, seeds),
+        "keys_not_applied": {key: list(left) for key, left in spec.not_applied.items()},
         "controllers": {},
     }
     for name in names:
         mine = [k for k, r in enumerate(results) if r["controller"] == name]
         stats = summarize([results[k] for k in mine], [outcomes[k][1] for k in mine])
         summary["controllers"][name] = {"config": config_dict(spec.configs[name]), **stats}
+    if args.record_transitions:
+        indices = {name: list(range(args.episodes)) for name in names}
+        datasets = write_datasets(out, spec.env_id, spec.env_kwargs, indices)
+        summary["datasets"] = {"root": str(out / "datasets"), "ids": datasets}
     with open(out / "summary.json", "w") as f:
         json.dump(summary, f, indent=2)
     print(format_table(summary))
     print(f"\nwrote {out / 'summary.json'} and {out / 'episodes.jsonl'}")
+    if args.record_transitions:
+        print(
+            f"datasets (Minari; MINARI_DATASETS_PATH={out / 'datasets'}): "
+            + ", ".join(summary["datasets"]["ids"].values())
+        )
     if jobs is not None:
         rendered = jobs.finish(names)
         for video in rendered["videos"]:

@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 
 from benchmarks.metrics import time_to_goal
 from benchmarks.rollout import ProgressHook, rollout
+from benchmarks.transitions import TransitionRecorder
 from wip_gym.recording import DEFAULT_FPS, EpisodeRecorder
 
 __all__ = ["RecordingHook", "compare_episode", "time_to_goal"]
@@ -46,12 +47,15 @@ def compare_episode(
     duration: float,
     recording_path: str | None = None,
     fps: float | None = None,
+    transitions_path: str | None = None,
     progress: Any = None,
 ) -> tuple[dict[str, Any], NDArray[np.float64]]:
     """One rollout; its metrics and per-step control times. With ``recording_path`` the
     episode is recorded at ``fps`` (default 30) for its video (rendered afterwards from the
-    record, :mod:`wip_gym.recording`). ``progress`` is None, a queue (``.put``) or a callable
-    that receives ``(task_index, simulated_s)`` tuples."""
+    record, :mod:`wip_gym.recording`); with ``transitions_path`` its observations, actions,
+    rewards, terminations and truncations are saved there (``benchmarks.transitions``).
+    ``progress`` is None, a queue (``.put``) or a callable that receives ``(task_index,
+    simulated_s)`` tuples."""
     recorder = None
     if recording_path is not None:
         recorder = EpisodeRecorder(
@@ -68,6 +72,7 @@ def compare_episode(
         def report(simulated_s: float) -> None:
             send((task_index, simulated_s))
 
+    transitions = TransitionRecorder() if transitions_path is not None else None
     episode = rollout(
         env_id,
         dict(env_kwargs),
@@ -77,7 +82,11 @@ def compare_episode(
         duration,
         on_step=None if recorder is None else RecordingHook(recorder),
         progress=report,
+        on_transition=transitions,
     )
     if recorder is not None:
         recorder.save(recording_path)
+    if transitions is not None:
+        assert transitions_path is not None
+        transitions.save(transitions_path, seed)
     return episode.metrics, episode.control_times

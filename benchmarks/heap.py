@@ -3,9 +3,10 @@
 A closed-loop episode starts in a process that holds a few hundred thousand objects (JAX's,
 numba's, MuJoCo's bindings, the env, the policy and its plan). The collector's full pass (its
 oldest generation) walks all of them: 131 ms here, at a time set by the allocation counts,
-so now inside an episode's timed loop, now outside it (``python -m benchmarks.speed.gc_pauses``;
-docs/performance.md §20). One such pause in an 8 s episode adds about 2 units to its mean
-control step, and it came and went between two revisions whose timed code was the same.
+so now inside an episode's timed loop, now outside it (the median of 7 full passes over a
+``wip-bench`` process with KrangTray-v0 and ``unified`` reset). One such pause in an 8 s
+episode adds about 2 units to its mean control step, and it came and went between two
+revisions whose timed code was the same.
 
 :func:`setup_frozen` moves the objects that exist when it starts to the permanent generation
 (``gc.freeze``) for the loop, so that a pass walks only what the loop itself made; on exit they

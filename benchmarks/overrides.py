@@ -1,7 +1,8 @@
 """``--set KEY=VALUE``: one grammar for every setting of a benchmark run, type-checked before
 anything runs.
 
-Keys (``wip-bench compare --list-keys`` prints them with their types and defaults):
+Keys (``wip-bench compare --list-keys`` prints them with their types, defaults and one line
+each from where the setting is documented, :mod:`benchmarks.key_docs`):
 
 * ``env.<argument>``: any argument of the env's constructor (``WIPEnv.__init__`` and the task
   class's own), e.g. ``env.cup_friction=0.2``, ``env.goal=[2, 1]``. The task's fixed ones
@@ -9,7 +10,9 @@ Keys (``wip-bench compare --list-keys`` prints them with their types and default
   keys.
 * ``plan.<field>[.<field>...]``: a field of the offline plan's ``PlanConfig``, applied to every
   ``PlanConfig`` inside every controller of the run (found by walking the config dataclasses),
-  so that every controller shares the same plan, e.g. ``plan.a_max=2.5``.
+  so that every controller shares the same plan, e.g. ``plan.a_max=2.5``. A controller of the
+  run without an offline plan is left as it is (``RunSpec.not_applied`` names it; compare and
+  the sweep say so); a run in which no controller has a plan refuses the key.
 * ``<controller>.<field>[.<field>...]``: one controller's config, by its dotted path through
   the nested config dataclasses, e.g. ``unified.ee_position_weight=5``,
   ``unified.high_level.mpc.horizon_s=0.5``.
@@ -34,7 +37,7 @@ import json
 import math
 import types
 import typing
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import cache
 from typing import Any
@@ -42,6 +45,7 @@ from typing import Any
 import gymnasium as gym
 
 from benchmarks import presets
+from benchmarks.key_docs import config_field_doc, env_argument_docs
 from controllers import registry
 from wip_gym.envs.base import wip_env
 
@@ -58,11 +62,12 @@ class OverrideError(ValueError):
 
 @dataclass(frozen=True)
 class Setting:
-    """One valid key: its annotated type and its default."""
+    """One valid key: its annotated type, its default and one line saying what it means."""
 
     key: str
     type: Any
     default: Any
+    description: str = ""
 
 
 # ---------------------------------------------------------------------------- values and types
@@ -167,12 +172,17 @@ def _load(path: str) -> Any:
     return getattr(importlib.import_module(module), attribute)
 
 
-@cache
-def _env_signature(env_id: str) -> tuple[tuple[str, Any, Any], ...]:
+def _env_class(env_id: str) -> type:
     entry = gym.spec(env_id).entry_point
     env_class = _load(entry) if isinstance(entry, str) else entry
     if not isinstance(env_class, type):
         raise ValueError(f"{env_id}'s entry point is not a class: {entry!r}")
+    return env_class
+
+
+@cache
+def _env_signature(env_id: str) -> tuple[tuple[str, Any, Any], ...]:
+    env_class = _env_class(env_id)
     found: dict[str, tuple[Any, Any]] = {}
     for cls in reversed(env_class.__mro__):
         init = vars(cls).get("__init__")
@@ -228,13 +238,16 @@ def is_planar(env_id: str) -> bool:
 
 
 def env_settings(env_id: str) -> dict[str, Setting]:
-    """Every ``env.<argument>`` key of ``env_id`` with its type and default."""
+    """Every ``env.<argument>`` key of ``env_id`` with its type, default and description (the
+    env class's ``## Arguments`` table)."""
+    docs = env_argument_docs(_env_class(env_id))
     settings = {}
     for name, hint, default in _env_signature(env_id):
         if name == "goal":
             goal, planar = _task_goal(env_id)
             default = goal[0] if planar else list(goal)
-        settings[f"env.{name}"] = Setting(f"env.{name}", hint, _plain(default))
+        key = f"env.{name}"
+        settings[key] = Setting(key, hint, _plain(default), docs.get(name, ""))
     return settings
 
 
@@ -251,7 +264,8 @@ def _field_hints(config: Any) -> dict[str, Any]:
 
 
 def config_settings(config: Any, prefix: str) -> dict[str, Setting]:
-    """Every leaf field of a (nested) config dataclass as ``prefix.dotted.path``."""
+    """Every leaf field of a (nested) config dataclass as ``prefix.dotted.path``, described by
+    the ``Attributes:`` entry of the dataclass that declares it."""
     settings: dict[str, Setting] = {}
     hints = _field_hints(config)
     for field in dataclasses.fields(config):
@@ -260,7 +274,10 @@ def config_settings(config: Any, prefix: str) -> dict[str, Setting]:
         if _is_instance(value):
             settings.update(config_settings(value, key))
         else:
-            settings[key] = Setting(key, hints.get(field.name, type(value)), _plain(value))
+            description = field.metadata.get("doc") or config_field_doc(type(config), field.name)
+            settings[key] = Setting(
+                key, hints.get(field.name, type(value)), _plain(value), description
+            )
     return settings
 
 
@@ -332,8 +349,11 @@ class RunSpec:
         env_id: the registered env. env_kwargs: the arguments passed to ``gym.make`` (those
             the preset, the flags and the overrides set; the rest are the env's defaults).
         configs: controller name -> its resolved config dataclass, in run order.
-        preset: the preset's name or None. overrides: the ``--set`` keys and parsed values.
+        preset: the preset's name (composed presets joined by commas) or None.
+        overrides: the ``--set`` keys and parsed values.
         skipped: preset env arguments this env does not accept (logged, not applied).
+        not_applied: ``plan.*`` key -> the controllers of the run it leaves as they are (they
+            have no offline plan; :func:`keys_not_applied`).
     """
 
     env_id: str
@@ -342,12 +362,24 @@ class RunSpec:
     preset: str | None
     overrides: dict[str, Any]
     skipped: tuple[str, ...] = ()
+    not_applied: dict[str, tuple[str, ...]] = dataclasses.field(default_factory=dict)
 
     def env_arguments(self) -> dict[str, Any]:
         """Every env argument in effect: the defaults updated with ``env_kwargs``."""
         effective = {k[len("env.") :]: s.default for k, s in env_settings(self.env_id).items()}
         effective.update(_plain(self.env_kwargs))
         return effective
+
+
+def keys_not_applied(configs: Mapping[str, Any], keys: Iterable[str]) -> dict[str, tuple[str, ...]]:
+    """The rule shared by compare and the sweep: a ``plan.*`` key applies to every controller
+    of the run that has an offline plan and leaves the others as they are. This maps each such
+    key to the controllers (of ``configs``) it leaves; keys that reach every controller are
+    absent."""
+    without_plan = tuple(name for name, config in configs.items() if not plan_configs(config))
+    if not without_plan:
+        return {}
+    return {key: without_plan for key in keys if key.startswith("plan.")}
 
 
 def valid_settings(env_id: str, configs: Mapping[str, Any]) -> dict[str, Setting]:
@@ -389,7 +421,7 @@ def _apply(
                 f"{sorted(s[len('env.') :] for s in settings)}"
             )
         env_kwargs[rest] = coerce(value, settings[key].type, key)
-    elif head == "plan":
+    elif head == "plan":  # every controller with a plan; the others unchanged (RunSpec)
         if not any(plan_configs(c) for c in configs.values()):
             raise OverrideError(f"{key}: no controller of this run has an offline plan")
         for name in configs:
@@ -409,19 +441,22 @@ def _apply(
 def resolve_run(
     env_id: str,
     controllers: Iterable[str],
-    preset: str | None = None,
+    preset: str | Sequence[str] | None = None,
     env_flags: Mapping[str, Any] | None = None,
     controller_flags: Mapping[str, Any] | None = None,
     overrides: Mapping[str, Any] | None = None,
     ignore_other_controllers: bool = False,
 ) -> RunSpec:
-    """Resolve a run: defaults, then ``preset``, then the named flags (``env_flags``: env
+    """Resolve a run: defaults, then ``preset`` (one name or several composed in order,
+    ``benchmarks.presets``), then the named flags (``env_flags``: env
     arguments; ``controller_flags``: fields set on every controller's config, e.g.
     ``model``), then ``overrides`` (``--set`` keys and parsed values, in order). Raises
     ``OverrideError`` naming the first bad key."""
     names = list(controllers)
+    preset = presets.canonical(preset)
     preset_env, skipped = presets.env_arguments(preset, env_id, env_settings(env_id))
-    configs = {name: registry.default_config(name, preset=preset) for name in names}
+    controller_preset = presets.controller_preset(preset)
+    configs = {name: registry.default_config(name, preset=controller_preset) for name in names}
     env_kwargs: dict[str, Any] = dict(preset_env)
     settings = env_settings(env_id)
     for name, value in (env_flags or {}).items():
@@ -440,12 +475,19 @@ def resolve_run(
         preset=preset,
         overrides=_plain(parsed),
         skipped=tuple(skipped),
+        not_applied=keys_not_applied(configs, parsed),
     )
 
 
 def format_keys(settings: Mapping[str, Setting]) -> str:
-    """The ``--list-keys`` table: key, type, default."""
-    rows = [(s.key, type_name(s.type), json.dumps(s.default)) for s in settings.values()]
+    """The ``--list-keys`` table: key, type, default, then the description on the same line."""
+    rows = [
+        (s.key, type_name(s.type), json.dumps(s.default), s.description) for s in settings.values()
+    ]
     width = max(len(r[0]) for r in rows) + 2
     type_width = max(len(r[1]) for r in rows) + 2
-    return "\n".join(f"{k:<{width}}{t:<{type_width}}{d}" for k, t, d in rows)
+    default_width = min(24, max(len(r[2]) for r in rows))
+    return "\n".join(
+        f"{k:<{width}}{t:<{type_width}}{d:<{default_width}}  {text}".rstrip()
+        for k, t, d, text in rows
+    )

@@ -9,7 +9,10 @@ size or rate) without simulating:
     wip-bench render out/demo --camera tray --size 640x480 --fps 25
 
 Outputs: ``video_<controller>.mp4`` (``--video each``), ``video_grid.mp4`` with every
-controller side by side in sync (``--video grid``), or both (``--video both``).
+controller side by side in sync (``--video grid``), or both (``--video both``). ``wip-bench
+render``'s are named by what they show, ``video_<controller>.<camera>-<W>x<H>-<fps>fps.mp4``
+and ``video_grid.<camera>-<W>x<H>-<fps>fps.mp4`` (:func:`rendering_tag`): new files beside the
+run's videos, never over them (a render with the same camera, size and rate replaces its own).
 """
 
 from __future__ import annotations
@@ -38,8 +41,15 @@ def recording_file(out: Path, controller: str) -> Path:
     return out / f"recording_{controller}.npz"
 
 
-def video_file(out: Path, controller: str) -> Path:
-    return out / f"video_{controller}.mp4"
+def video_file(out: Path, controller: str, tag: str | None = None) -> Path:
+    """A controller's video: ``video_<controller>.mp4`` (compare's), or with ``tag``
+    (``wip-bench render``'s) ``video_<controller>.<tag>.mp4``."""
+    return out / f"video_{controller}{'.' + tag if tag else ''}.mp4"
+
+
+def grid_file(out: Path, tag: str | None = None) -> Path:
+    """The grid: :data:`GRID_FILE`, or with ``tag`` ``video_grid.<tag>.mp4``."""
+    return out / (GRID_FILE if not tag else f"video_grid.{tag}.mp4")
 
 
 @dataclass(frozen=True)
@@ -57,6 +67,11 @@ class VideoOptions:
             raise ValueError(f"--video must be one of {list(VIDEO_KINDS)}, got {self.kind!r}")
         if not self.fps > 0:
             raise ValueError(f"--fps must be positive, got {self.fps}")
+
+    @property
+    def tag(self) -> str:
+        """What the videos show, for their names: ``<camera>-<W>x<H>-<fps>fps``."""
+        return f"{self.camera}-{self.size[0]}x{self.size[1]}-{self.fps:g}fps"
 
     @property
     def each(self) -> bool:
@@ -163,6 +178,7 @@ class VideoJobs:
     controllers)`` waits, renders the grid and returns ``{"videos": [...], ...}``. With both
     kinds, the last of ``controllers`` is drawn once, into its video and the grid together.
     ``workers``: rendering processes (0: render in this process, e.g. on a single core).
+    ``tag``: in the videos' names (:func:`video_file`; ``wip-bench render``'s).
     """
 
     def __init__(
@@ -171,9 +187,11 @@ class VideoJobs:
         options: VideoOptions,
         workers: int = 1,
         controllers: list[str] | None = None,
+        tag: str | None = None,
     ) -> None:
         self.out = Path(out)
         self.options = options
+        self.tag = tag
         both = options.each and options.grid
         self._with_grid = controllers[-1] if (both and controllers) else None
         self._pool: ProcessPoolExecutor | None = None
@@ -201,7 +219,7 @@ class VideoJobs:
             self._run(
                 _render_one,
                 str(recording_file(self.out, controller)),
-                str(video_file(self.out, controller)),
+                str(video_file(self.out, controller, self.tag)),
                 self.options,
             )
 
@@ -211,19 +229,24 @@ class VideoJobs:
             for future in self._futures:
                 self._seconds.append(future.result())
             self._futures = []
+            tag = self.tag
             videos = (
-                [str(video_file(self.out, c)) for c in controllers] if self.options.each else []
+                [str(video_file(self.out, c, tag)) for c in controllers]
+                if self.options.each
+                else []
             )
             if self.options.grid:
                 # panels decoded from the controllers' videos when they exist: not drawn twice
                 each, last = self.options.each, self._with_grid
                 panels = [
-                    str(video_file(self.out, c)) if each and c != last else None
+                    str(video_file(self.out, c, tag)) if each and c != last else None
                     for c in controllers
                 ]
-                own = [str(video_file(self.out, c)) if c == last else None for c in controllers]
+                own = [
+                    str(video_file(self.out, c, tag)) if c == last else None for c in controllers
+                ]
                 recordings = [str(recording_file(self.out, c)) for c in controllers]
-                grid = str(self.out / GRID_FILE)
+                grid = str(grid_file(self.out, tag))
                 self._run(_render_grid, recordings, grid, self.options, panels, own)
                 for future in self._futures:
                     self._seconds.append(future.result())
@@ -297,7 +320,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             target.write_bytes(recording_file(directory, c).read_bytes())
     cores = os.cpu_count() or 1
     workers = min(cores, len(controllers)) if cores > 1 and options.each else 0
-    jobs = VideoJobs(out, options, workers=workers, controllers=controllers)
+    jobs = VideoJobs(out, options, workers=workers, controllers=controllers, tag=options.tag)
     for c in controllers:
         jobs.submit(c)
     result = jobs.finish(controllers)

@@ -8,7 +8,8 @@ that every metric (``benchmarks.metrics``) is computed in one place.
     episode.policy         # the policy, after the episode (diagnostics, plan)
     episode.env            # the env, still open, with keep_env=True (close it yourself)
 
-    row = run_configured_episode(env_id, controller, overrides, seed, duration, preset=None)
+    row = run_configured_episode(env_id, controller, overrides, seed, duration, preset=None,
+                                 run_controllers=None)
 
 Seeds: episode ``i`` of a run with base seed ``S`` uses ``benchmarks.seeding.episode_seed(S, i)``.
 """
@@ -16,9 +17,9 @@ Seeds: episode ``i`` of a run with base seed ``S`` uses ``benchmarks.seeding.epi
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol, SupportsFloat
 
 import gymnasium as gym
 import numpy as np
@@ -49,6 +50,21 @@ StepHook = Callable[[gym.Env, dict[str, Any], int], None]
 ProgressHook = Callable[[float], None]
 
 
+class TransitionHook(Protocol):
+    """Sees the episode's stream (``benchmarks.transitions.TransitionRecorder``)."""
+
+    def on_reset(self, observation: dict[str, Any]) -> None: ...
+
+    def on_step(
+        self,
+        action: NDArray[Any],
+        observation: dict[str, Any],
+        reward: SupportsFloat,
+        terminated: bool,
+        truncated: bool,
+    ) -> None: ...
+
+
 class EpisodeError(RuntimeError):
     """An episode that raised while it ran (a controller's or the env's ValueError, e.g. a NaN
     action): a failure of the run, not of the command's arguments, so the CLI shows its
@@ -75,6 +91,7 @@ def rollout(
     on_step: StepHook | None = None,
     progress: ProgressHook | None = None,
     keep_env: bool = False,
+    on_transition: TransitionHook | None = None,
 ) -> Episode:
     """Run ``controller`` (with its resolved ``config``) on ``gym.make(env_id, **env_kwargs)``
     reset with ``seed`` for ``duration`` simulated seconds, or until the env terminates.
@@ -86,6 +103,8 @@ def rollout(
         progress: called with the simulated time so far (s) every ``PROGRESS_INTERVAL_S``
             and at the end.
         keep_env: leave the env open and return it in ``Episode.env``.
+        on_transition: given the reset's observation (``on_reset``) and each step's action,
+            observation, reward, termination and truncation (``on_step``), to record them.
     """
     if not (np.isfinite(duration) and duration > 0):
         raise ValueError(f"duration must be positive, got {duration}")
@@ -105,6 +124,8 @@ def rollout(
         metrics = EpisodeMetrics(dt, info, observation, low, high)
         if on_step is not None:
             on_step(env, info, 0)
+        if on_transition is not None:
+            on_transition.on_reset(observation)
         steps = int(round(duration / dt))
         report_every = max(1, int(round(PROGRESS_INTERVAL_S / dt)))
         loop_time = 0.0
@@ -115,7 +136,7 @@ def rollout(
                 try:
                     action = policy(observation)
                     tock = time.perf_counter()
-                    observation, _, terminated, truncated, info = env.step(action)
+                    observation, reward, terminated, truncated, info = env.step(action)
                 except ValueError as error:  # not a usage error: say where the episode failed
                     raise EpisodeError(
                         f"{controller} on {env_id} (seed {seed}) failed at step {n} "
@@ -123,6 +144,8 @@ def rollout(
                     ) from error
                 loop_time += time.perf_counter() - tick
                 metrics.update(info, observation, action, tock - tick)
+                if on_transition is not None:
+                    on_transition.on_step(action, observation, reward, terminated, truncated)
                 if on_step is not None:
                     on_step(env, info, n)
                 if progress is not None and n % report_every == 0:
@@ -154,22 +177,32 @@ def run_configured_episode(
     seed: int,
     duration: float,
     preset: str | None = None,
+    run_controllers: Sequence[str] | None = None,
 ) -> dict[str, Any]:
     """One episode of ``controller`` on ``env_id`` configured like ``wip-bench compare
     --preset PRESET --set KEY=VALUE ...``; its metrics row, JSON-ready.
 
     ``overrides`` maps ``--set`` keys (``benchmarks.overrides``) to values; a string value is
     parsed like a ``--set`` value (``"[2, 1]"`` is a list), other values are used as they are.
-    Keys of registered controllers other than ``controller`` are ignored, so that a sweep can
-    share one mapping. The row: the rollout's metrics plus ``env``, ``preset``, ``overrides``,
-    ``duration_s``, ``env_arguments`` (every env argument in effect) and ``config`` (the
-    controller's resolved config).
+    ``run_controllers``: the controllers of the run the overrides were written for (a sweep's),
+    ``controller`` among them; the overrides are resolved as compare resolves a run of them
+    (so a ``plan.*`` key leaves a controller without an offline plan as it is, and is refused
+    only if none of them has a plan), and this episode takes ``controller``'s config. Without
+    it, the run is ``controller`` alone and keys of other registered controllers are ignored.
+    The row: the rollout's metrics plus ``env``, ``preset``, ``overrides``, ``duration_s``,
+    ``env_arguments`` (every env argument in effect) and ``config`` (the controller's resolved
+    config).
     """
     env_id = resolve_env_id(env_id)
     parsed = {k: parse_value(v) if isinstance(v, str) else v for k, v in overrides.items()}
-    spec = resolve_run(
-        env_id, [controller], preset, overrides=parsed, ignore_other_controllers=True
-    )
+    if run_controllers is None:
+        spec = resolve_run(
+            env_id, [controller], preset, overrides=parsed, ignore_other_controllers=True
+        )
+    else:
+        if controller not in run_controllers:
+            raise ValueError(f"{controller!r} is not one of the run's {list(run_controllers)}")
+        spec = resolve_run(env_id, run_controllers, preset, overrides=parsed)
     episode = rollout(env_id, spec.env_kwargs, controller, spec.configs[controller], seed, duration)
     row = dict(episode.metrics)
     row.update(

@@ -3,16 +3,19 @@
     from controllers import HierarchicalController, make_policy
 
 The names below are imported on first use (PEP 562), so ``import controllers`` alone does not
-import JAX, and no import changes JAX's settings: the solvers' settings (float64, XLA's loop
-option, the compilation cache) are applied by one explicit call,
-``controllers.optimizer.jax_setup.configure()``, before JAX starts (wip-bench, the sweep's workers
-and the tests make it); without it the first DDP solver warns what that costs.
+import JAX. It puts XLA's loop option in ``XLA_FLAGS`` if JAX has not started (the one setting
+that cannot be scoped); the solvers scope float64 themselves, so a program needs no call
+(``controllers.optimizer.jax_setup``, docs/DESIGN.md §4).
 """
 
 from __future__ import annotations
 
 import importlib
 from typing import TYPE_CHECKING, Any
+
+from controllers.optimizer import jax_setup as _jax_setup
+
+_jax_setup.add_loop_flag()  # before JAX's backend starts, or the first solver warns once
 
 if TYPE_CHECKING:
     from controllers.baselines.decoupled import (

@@ -75,8 +75,10 @@ class HierarchicalConfig:
         ee_position_weight, ee_kp, ee_kv: end-effector position (authors: W = diag(0, 1, 10)
             over (forward, lateral, up) in the axle frame, Kp 750, Kv 250); a number weights
             all three axes, a triple each axis.
-        ee_orientation_weight, orientation_kp, orientation_kv: (authors: 10, 150, 50).
-        posture_weight, posture_kp, posture_kv: (authors: weights 0..10 per joint, Kp 10, Kv 20).
+        ee_orientation_weight, orientation_kp, orientation_kv: end-effector orientation
+            (authors: 10, 150, 50).
+        posture_weight, posture_kp, posture_kv: the body joints toward their reset values
+            (authors: weights 0..10 per joint, Kp 10, Kv 20).
             ``posture_weight`` ``"authors"``: their per-joint weights (docs/AUTHORS_CONFIG.md
             §4.3: torso 1, waist 0, arm joints 1-4 10, 5-7 5), matched to our joints by name.
         speed_regularization_kv: the authors' speed regularisation (``-KvSpeedReg qd``,

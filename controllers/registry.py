@@ -18,16 +18,37 @@ controller with ``tray_mode="specific_force"``). Adding a controller is one call
 
     register("my-controller", MyController, MyConfig, some_field=1.0)
 
-after which ``wip-bench`` and the sweep's workers find it by name (a worker process must import
-the module that registers it). Classes are imported on first use, so importing this module
-does not start JAX.
+A ``register`` call serves the process that makes it. Three ways reach every process a
+command runs (``wip-bench`` itself, compare's ``--jobs`` workers, the sweep's Ray workers),
+without editing this package (docs/extending.md §2):
+
+* **an installed plug-in**: a distribution that declares an entry point in the group
+  :data:`ENTRY_POINT_GROUP` (``wip_gym.controllers``). Its value names a module, whose import
+  calls ``register`` (``my_controllers = "my_package.controllers"``), or a callable taking no
+  argument that calls it (``my_controllers = "my_package.controllers:register_all"``); the
+  entry point's name is only a label. Every process loads the group once, on its first
+  question to the registry (:func:`load_plugins`); an entry point that fails to load raises
+  :class:`PluginError` naming it.
+* **``--import MODULE``** (repeatable) on ``wip-bench compare``, ``sweep`` and ``profile``: the
+  command imports the module (:func:`import_modules`) before it reads its arguments' names, and
+  hands the list to its workers, which import it before they make a policy. The module must be
+  importable there (installed, or on ``PYTHONPATH``).
+* an entry in ``_REGISTRY`` below, as the shipped controllers are (class and config as
+  ``"module:Name"`` paths, imported on first use).
+
+Order: the shipped names, then the plug-ins', then ``register`` calls (``--import`` modules
+included); a name registered again is replaced. Classes are imported on first use, so importing
+this module does not start JAX.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import importlib
+import types
+from collections.abc import Iterable
 from dataclasses import dataclass
+from importlib import metadata
 from typing import Any
 
 import gymnasium as gym
@@ -35,6 +56,12 @@ import gymnasium as gym
 from controllers.policy import ModelChoice, Policy
 
 PRESETS = ("paper",)
+#: the entry-point group of controller plug-ins (module docstring)
+ENTRY_POINT_GROUP = "wip_gym.controllers"
+
+
+class PluginError(RuntimeError):
+    """A plug-in's entry point that could not be loaded (its cause chained)."""
 
 
 @dataclass(frozen=True)
@@ -94,14 +121,69 @@ _REGISTRY: dict[str, Registration] = {
 }
 
 
+# the plug-ins' state in this process: None (not loaded), "loading", "loaded"
+_plugins: str | None = None
+
+
+def load_plugins() -> list[str]:
+    """Load every entry point of :data:`ENTRY_POINT_GROUP` (once per process; later calls do
+    nothing) and return their ``name = value`` lines. The registry's questions call it, so a
+    program need not; ``PluginError`` naming the entry point if one fails."""
+    global _plugins
+    if _plugins is not None:
+        return []
+    _plugins = "loading"  # a plug-in's own register calls must not load the group again
+    loaded = []
+    try:
+        for entry in metadata.entry_points(group=ENTRY_POINT_GROUP):
+            label = f"{entry.name} = {entry.value}"
+            distribution = getattr(entry.dist, "name", None) or "an unknown distribution"
+            try:
+                target = entry.load()
+                if not isinstance(target, types.ModuleType):
+                    if not callable(target):
+                        raise TypeError(f"{entry.value} is neither a module nor a callable")
+                    target()
+            except Exception as error:
+                raise PluginError(
+                    f"the {ENTRY_POINT_GROUP} entry point '{label}' of {distribution} failed: "
+                    f"{type(error).__name__}: {error}"
+                ) from error
+            loaded.append(label)
+    finally:
+        _plugins = "loaded"
+    return loaded
+
+
+def import_modules(modules: Iterable[str]) -> None:
+    """Import each module (``--import MODULE``), whose import registers its controllers.
+    ``ValueError`` for a module that does not exist; an error inside the module propagates."""
+    load_plugins()  # the plug-ins first, so that a module's register call wins
+    for name in modules:
+        if not isinstance(name, str) or not name:
+            raise ValueError(f"--import takes a module name, got {name!r}")
+        try:
+            importlib.import_module(name)
+        except ModuleNotFoundError as error:
+            if error.name is None or not (name == error.name or name.startswith(error.name + ".")):
+                raise  # a module the imported one needs: its own error
+            raise ValueError(
+                f"--import {name}: no module named {error.name!r} (install it, or put its "
+                "directory on PYTHONPATH)"
+            ) from None
+
+
 def controller_names() -> list[str]:
-    """Every registered name, in registration order."""
+    """Every registered name, in registration order (the plug-ins loaded first)."""
+    load_plugins()
     return list(_REGISTRY)
 
 
 def default_controller_names() -> list[str]:
     """The names a run uses when it names none, in registration order: every registered
-    controller but the learned ones (each drives only the envs it was trained for)."""
+    controller but the learned ones (each drives only the envs it was trained for), the
+    plug-ins' included."""
+    load_plugins()
     return [name for name, entry in _REGISTRY.items() if entry.default]
 
 
@@ -111,6 +193,7 @@ def register(name: str, controller_cls: Any, config_cls: Any, **fields: Any) -> 
     Either class may be given as a ``"module:Name"`` path, imported on first use. A name
     already registered is replaced. ``ValueError`` for an empty name or a field the config
     class does not have (checked when the config class is a class)."""
+    load_plugins()  # the plug-ins first: a later register call replaces theirs
     if not isinstance(name, str) or not name:
         raise ValueError(f"a controller name must be a non-empty string, got {name!r}")
     if not isinstance(config_cls, str):
@@ -127,6 +210,7 @@ def register(name: str, controller_cls: Any, config_cls: Any, **fields: Any) -> 
 
 def registration(name: str) -> Registration:
     """The registration of ``name``; ``ValueError`` naming the valid names."""
+    load_plugins()
     if name not in _REGISTRY:
         raise ValueError(f"unknown controller {name!r}; valid: {controller_names()}")
     return _REGISTRY[name]

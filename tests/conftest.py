@@ -4,14 +4,18 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+import jax
 import mujoco
 import pytest
 
 from controllers.optimizer import jax_setup
 from wip_gym.assets import mjcf_path
 
-# the suite is an entry point: the solvers' JAX settings, before any test starts JAX
-jax_setup.configure()
+# The solvers need no setting (they scope float64, docs/DESIGN.md §4; tests/test_jax_setup.py
+# runs them without any). The suite's own: JAX's compilation cache, and float64 for the whole
+# process, since tests call the WIPM's JAX functions and the solvers' raw jitted ones directly.
+jax_setup.use_compilation_cache()
+jax.config.update("jax_enable_x64", True)
 
 
 def home_data(model: mujoco.MjModel) -> mujoco.MjData:

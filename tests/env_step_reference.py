@@ -293,7 +293,7 @@ def reference_step(
     island = int(mujoco.mjtDisableBit.mjDSBL_ISLAND)
     if newly_lost and m.opt.disableflags & island:
         # added since 61c923a: islands on from a cup's loss to the next reset (the models are
-        # built with them off; WIPEnv._solve_by_islands, docs/performance.md §24)
+        # built with them off; WIPEnv._solve_by_islands)
         m.opt.disableflags &= ~island
         env._islands_switched_on = True
     distance = goal_distance(env)

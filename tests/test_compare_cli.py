@@ -9,7 +9,11 @@ from pathlib import Path
 import pytest
 
 from benchmarks.cli import main
+from benchmarks.key_docs import MAX_LENGTH
+from benchmarks.overrides import format_keys, resolve_run, valid_settings
 from benchmarks.rollout import without_timing
+from benchmarks.scenario import resolve_env_id
+from controllers import registry
 
 RATE_KEYS = {
     "success_rate",
@@ -193,7 +197,7 @@ def test_bad_overrides_exit_2_naming_the_key_and_write_nothing(
     assert not out.exists()
 
 
-def test_list_keys_prints_every_key_with_type_and_default(
+def test_list_keys_prints_every_key_with_type_default_and_description(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "out"
@@ -212,9 +216,25 @@ def test_list_keys_prints_every_key_with_type_and_default(
     rows = {
         line.split()[0]: line.split(None, 1)[1] for line in capsys.readouterr().out.splitlines()
     }
-    assert rows["env.cup_friction"].split() == ["float", "0.3"]
-    assert rows["env.goal"].endswith("[2.0, 0.0]")
+    assert rows["env.cup_friction"].split()[:3] == ["float", "0.3", "tray-cup"]
+    assert rows["env.goal"].split()[4:] == [
+        "[2.0,",
+        "0.0]",
+        "goal",
+        "x,",
+        "or",
+        "`(X,",
+        "Y)`",
+        "in",
+        "3-D",
+    ]
     assert rows["unified.ee_position_weight"].startswith("float")
+    # each from where it is documented: the env's Arguments table, the config's Attributes
+    assert rows["env.push_duration"].endswith("s the push lasts")
+    assert "  how aggressive the plan may be, independent of the cup" in rows["plan.a_max"]
+    assert rows["unified.high_level.mpc.ddp.second_order"].endswith(
+        "True: DDP with the ``V_x . f_xx, f_ux, f_uu`` terms; False: iLQR (the authors' choice)."
+    )
     for key in (
         "plan.a_max",
         "plan.q_position",
@@ -224,6 +244,17 @@ def test_list_keys_prints_every_key_with_type_and_default(
         assert key in rows, key
     assert not any(key.startswith("decoupled-mpc.") for key in rows)  # only these controllers
     assert not out.exists()
+
+
+@pytest.mark.parametrize("env_id", ["WIP-v0", "PlanarTray-v0", "KrangTray-v0"])
+def test_every_key_of_every_controller_has_a_one_line_description(env_id: str) -> None:
+    spec = resolve_run(resolve_env_id(env_id), registry.controller_names())
+    settings = valid_settings(spec.env_id, spec.configs)
+    undocumented = [key for key, setting in settings.items() if not setting.description]
+    assert not undocumented
+    for setting in settings.values():
+        assert "\n" not in setting.description and len(setting.description) <= MAX_LENGTH
+    assert len(format_keys(settings).splitlines()) == len(settings)
 
 
 def test_preset_paper_runs_and_records_its_settings(tmp_path: Path) -> None:

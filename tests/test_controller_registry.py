@@ -36,7 +36,9 @@ from wip_gym.wheel_torques import wheel_to_generalized
 NAMES = ["decoupled", "decoupled-lqr", "decoupled-mpc", "unified", "unified-waiter"]
 BASE_COUNTERS = {"clipped_steps", "max_clip_excess", "actuator_limit_steps"}
 EXPECTED_COUNTERS = {
-    "decoupled": BASE_COUNTERS | {"plan_violations", "plan_converged", "max_joint_deviation_rad"},
+    "decoupled": BASE_COUNTERS
+    | {"plan_violations", "plan_converged", "max_joint_deviation_rad"}
+    | {"spin_current_clamped_steps", "wheel_current_clamped_steps"},
     "decoupled-lqr": BASE_COUNTERS
     | {"plan_violations", "plan_converged", "max_joint_deviation_rad"},
     "decoupled-mpc": BASE_COUNTERS

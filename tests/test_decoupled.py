@@ -148,6 +148,9 @@ def test_krang_2014_reaches_a_2m_goal_and_stops(env_id: str) -> None:
     if env_id == "wip_gym/Planar-v0":
         assert np.abs([p["theta"] for p in planned]).max() > 0.01  # a lean it does not track
     wheels = diag["torque"][:, :2]
+    # no current clamp acts on this drive: the law as it is (tests/test_krang_current_limits.py)
+    assert np.abs(diag["wheel_current"]).max() < 50.0
+    assert policy.counters["wheel_current_clamped_steps"] == 0
     np.testing.assert_allclose(wheels, np.stack([law, law], axis=1), rtol=0, atol=1e-9)
     assert episode.metrics["goal_reached"]  # within 5 cm and 5 cm/s to the episode's end
 

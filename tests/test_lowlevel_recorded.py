@@ -1,19 +1,21 @@
-"""Guards for the low level's speed changes: the code reproduces the reference data
-recorded by ``tests/lowlevel_recording.py`` before any of them.
+"""Guards for the low level's changes: the controller in its default configuration (the hand
+tasks' disturbance observer on) reproduces the reference data recorded by
+``tests/lowlevel_recording.py``, the one source of those data and of the configuration.
 
-* Main guard, on recorded inputs: the task QP assembled from a recorded observation and task
-  references is the recorded ``(H, g, C, lower, upper)`` to 1e-9 (relative to each array's
-  largest entry), and ProxQP's solution the recorded one to 1e-6. The MPC is not run (its
-  reset is replaced by a stub), so changes to the high level do not move this guard.
+* Main guard, on recorded inputs: the task QP assembled from a recorded observation, task
+  references and disturbance observers' state is the recorded ``(H, g, C, lower, upper)`` to
+  1e-9 (relative to each array's largest entry), and the QP's solution the recorded one to
+  1e-6. The MPC is not run (its reset is replaced by a stub), so changes to the high level do
+  not move this guard.
 * Second guard, the closed loop: the first ``CLOSED_LOOP_STEPS`` steps from the recorded seed
   give the recorded actions and states to 1e-6 (the MPC, sped up elsewhere, is allowed 1e-6),
   on the envs without the cup: a cup resting on the tray turns a 1e-10 change of the torques
   into 1e-3 m/s of its velocity within ten steps (its contacts switch), so no tolerance would
   be honest there; the cases with the cup are guarded on recorded inputs.
 
-The hand tasks' disturbance observer (``controllers.low_level.disturbance_tasks``) came after the
-recording and carries a state of its own, so both guards run with it off
-(``hand_observer_bandwidth=None``); it has tests of its own.
+The observers carry a state from step to step; it is deterministic given their inputs (the
+recording script's docstring), so the main guard writes the recorded state into them at each
+sample, and the closed loop carries it as the recording did.
 """
 
 from __future__ import annotations
@@ -25,10 +27,15 @@ import numpy as np
 import pytest
 
 import wip_gym  # noqa: F401
-from controllers.hierarchical import HierarchicalConfig, HierarchicalController
+from controllers.hierarchical import HierarchicalController
 from controllers.low_level.isolated_dynamics import isolated_dynamics
-from controllers.low_level.task_qp import TaskQP
-from tests.lowlevel_recording import CASES, DATA  # the one table of recorded cases
+from tests.lowlevel_recording import (  # the one table of recorded cases and their configuration
+    CASES,
+    DATA,
+    config,
+    observers,
+    restore_observer_state,
+)
 
 CLOSED_LOOP_STEPS = 100
 
@@ -48,9 +55,7 @@ def _low_level_only(case: str) -> tuple[gym.Env, HierarchicalController]:
     env_id, goal, mode = CASES[case]
     env = gym.make(env_id, goal=goal)
     obs, info = env.reset(seed=int(_reference(case)["seed"]))
-    policy = HierarchicalController.for_env(
-        env, HierarchicalConfig(tray_mode=mode, hand_observer_bandwidth=None)
-    )
+    policy = HierarchicalController.for_env(env, config(mode))
     policy.high_level.reset = lambda *args: SimpleNamespace()
     policy.reset(obs, info)
     return env, policy
@@ -61,9 +66,10 @@ def test_assembled_qps_and_solutions_match_the_recording(case: str) -> None:
     ref = _reference(case)
     env, policy = _low_level_only(case)
     robot = policy.robot
-    # one solver across the samples, as in the controller (ProxQP first, then the
-    # unconstrained minimiser wherever it is feasible)
-    qp = TaskQP(robot, policy.task.torque_low, policy.task.torque_high, policy.config.qp)
+    assert observers(policy), "the default configuration has disturbance observers"
+    # the controller's own task QP across the samples (its solver's warm start carried from
+    # one to the next), as in the controller
+    qp = policy.qp
     for i in range(len(ref["x"])):
         robot.update(ref["obs_qpos"][i], ref["obs_qvel"][i])
         theta = policy.theta_task
@@ -75,6 +81,7 @@ def test_assembled_qps_and_solutions_match_the_recording(case: str) -> None:
             policy.orientation_tasks, ref["orientation_targets"][i], strict=True
         ):
             task.target = target
+        restore_observer_state(policy, ref["observer_memory"][i])
         iso = isolated_dynamics(robot)
         # eq. iso3 from the NumPy reference and from the kernel's own (the controller's path)
         for given in (iso, None):
@@ -93,9 +100,7 @@ def test_closed_loop_matches_the_recording(case: str) -> None:
     env_id, goal, mode = CASES[case]
     env = gym.make(env_id, goal=goal)
     obs, info = env.reset(seed=int(ref["seed"]))
-    policy = HierarchicalController.for_env(
-        env, HierarchicalConfig(tray_mode=mode, hand_observer_bandwidth=None)
-    )
+    policy = HierarchicalController.for_env(env, config(mode))
     policy.reset(obs, info)
     for n in range(CLOSED_LOOP_STEPS):
         action = policy(obs)

@@ -141,8 +141,7 @@ def test_the_control_loops_compiled_calls_release_the_gil() -> None:
     """A delayed MPC's thread needs the GIL to start its solve and to take its result; the
     control thread holds it through Python and gives it up only in calls that release it
     (MuJoCo's ``mj_step``, and these compiled calls). Held through them, the solve took 1.4 to
-    1.7 ms in its thread (0.85 to 0.97 ms since) and was often not done ``d = 5`` steps later
-    (docs/performance.md §13)."""
+    1.7 ms in its thread (0.85 to 0.97 ms since) and was often not done ``d = 5`` steps later."""
     kernels = (robot_update_at, rows_and_kernel, stack_rows, kernel_step, env_measures)
     for kernel in (*kernels, wipm_inputs_into):
         assert kernel.targetoptions.get("nogil") is True, kernel.__name__

@@ -320,7 +320,7 @@ def test_refusals_copies_and_the_module_on_disk(plans: dict[str, Plan], params: 
         assert options.get("nogil") is True, name
         # fused multiply-adds only: no fast-math flag that lets NaN or inf lose their meaning
         assert set(options.get("fastmath")) == {"contract"}, name
-    # every generated function carries the options asked for (benchmarks.speed.numba_options)
+    # every generated function carries the options asked for
     other = numba_ddp.module_source(mpc.problem, layout, "cache=True")
     functions = source.count("\ndef ")
     assert other.count("@numba.njit(cache=True)\ndef ") == functions > 10

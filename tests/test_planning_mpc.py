@@ -59,12 +59,15 @@ def test_3d_plan_turns_to_an_offset_goal() -> None:
     # spin, no detour); a WIP's brief backward lurch before it leans forward is allowed
     assert 0.2 < final[1] < 0.7
     assert np.hypot(2.0, 1.0) < final[0] < 1.15 * np.hypot(2.0, 1.0)
-    # past its end the plan gives its goal; x (the distance rolled) is no part of the 3-D goal,
-    # so it holds the x the plan arrived with (it used to drop to 0 there: a 2.3 m step in the
-    # reference of every controller that tracks x); the rest moves by at most the plan's
-    # arrival tolerance (1 cm, 1 cm/s)
-    before, after = plan.sample(plan.times[-1] - 1e-9), plan.sample(plan.times[-1] + 1.0)
-    assert after["x"] == pytest.approx(before["x"], abs=1e-9)
+    # past its end the plan is continued until it rests (tests/test_plan_end.py holds the
+    # reference continuous there); x (the distance rolled) is no part of the 3-D goal, so at
+    # rest the plan holds the x its continuation ends at (it used to drop to 0 there: a 2.3 m
+    # step in the reference of every controller that tracks x); the rest of the rest state is
+    # within the plan's arrival tolerance (1 cm, 1 cm/s) of where the plan ended
+    before = plan.sample(plan.times[-1] - 1e-9)
+    after = plan.sample(plan.reference_times[-1] + 1.0)
+    assert after["x"] == plan.reference_states[-1, 0] == plan.goal_state[0]
+    assert after["x"] == pytest.approx(before["x"], abs=0.01)
     for name in ("xd", "theta", "thetad", "psi", "X0", "Y0"):
         assert after[name] == pytest.approx(before[name], abs=0.01), name
 
@@ -95,10 +98,12 @@ def test_mpc_on_the_plan_reproduces_it_and_warm_starts() -> None:
         assert step.accepted
         predicted, planned = step.predicted_states[:20], plan.states[index : index + 20]
         np.testing.assert_allclose(predicted[:, [0, 2]], planned[:, [0, 2]], atol=5e-3)
-    # past the plan's end the reference is the goal: standing still at the goal is optimal
+    # past the plan's continuation the reference is its rest state, the goal (planar):
+    # standing still at the goal is optimal
     assert mpc.rejected == 0 and mpc.solves == 3
+    np.testing.assert_array_equal(plan.rest_state, plan.goal_state)
     fresh = ModelPredictiveController(plan)
-    end = fresh.step(len(plan.times) + 50, plan.goal_state, params)
+    end = fresh.step(len(plan.reference_times) + 50, plan.goal_state, params)
     assert abs(end.control[0]) < 1e-9
     np.testing.assert_allclose(end.predicted_states, np.tile(plan.goal_state, (101, 1)), atol=1e-9)
 
@@ -307,25 +312,30 @@ def test_decoupled_mpc_command_equals_the_wipm_functions() -> None:
 
 def test_plan_sample_is_np_interp_of_each_state() -> None:
     """``Plan.sample`` (``np.interp``'s arithmetic for all quantities at once) gives the floats
-    of ``np.interp`` per quantity: at random times, at the grid's times and just after them,
-    before the start (the first state) and at and after the end (the goal state); NaN refused."""
+    of ``np.interp`` per quantity of the reference (the plan, then its continuation): at random
+    times, at the grid's times and just after them, before the start (the first state), at the
+    plan's end and in its continuation, and at and after the continuation's end (the rest
+    state); NaN refused."""
     env, robot, params, state = robot_state("wip_gym/Krang-v0")
     plan = plan_to_goal(state, params, np.array([0.6, 0.2]), planar=False)
-    times = plan.times
+    times, states = plan.reference_times, plan.reference_states
+    assert len(times) > len(plan.times)  # the plan is continued past its end
+    np.testing.assert_array_equal(times[: len(plan.times)], plan.times)
     rng = np.random.default_rng(5)
     queries = [
         *rng.uniform(times[0], times[-1], size=300),
         *times[::37],
         *(times[:-1:41] + 1e-12),
         -0.5,
+        float(plan.times[-1]),
         float(times[-1]),
         times[-1] + 1.0,
     ]
     for t in queries:
         if t >= times[-1]:
-            expected = plan.goal_state
+            expected = plan.rest_state
         else:
-            expected = np.array([np.interp(t, times, column) for column in plan.states.T])
+            expected = np.array([np.interp(t, times, column) for column in states.T])
         got = np.array(list(plan.sample(float(t)).values()))
         np.testing.assert_array_equal(got, expected, err_msg=f"t = {t!r}")
     with pytest.raises(ValueError, match="NaN"):
@@ -338,5 +348,5 @@ def test_plan_sample_is_np_interp_of_each_state() -> None:
     states[5, 2] = np.nan
     broken = dataclasses.replace(plan, states=states)
     for t in (times[4], times[5], 0.5 * (times[4] + times[5]), times[6]):
-        expected = np.array([np.interp(t, times, column) for column in states.T])
+        expected = np.array([np.interp(t, plan.times, column) for column in states.T])
         np.testing.assert_array_equal(np.array(list(broken.sample(float(t)).values())), expected)

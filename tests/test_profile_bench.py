@@ -7,8 +7,6 @@ from __future__ import annotations
 
 import json
 import math
-import re
-import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -22,25 +20,20 @@ import pytest
 import benchmarks.speed.closed_loop_table as closed_loop_module
 import benchmarks.speed.profile as profile_module
 from benchmarks.cli import main
-from benchmarks.speed import mpc_inputs, mpc_phase
 from benchmarks.speed.closed_loop_table import COLUMNS as CLOSED_LOOP_COLUMNS
 from benchmarks.speed.closed_loop_table import MissingFigure, PartNotTimed, disturbed_rounds
 from benchmarks.speed.closed_loop_table import comparison as closed_loop_comparison
 from benchmarks.speed.closed_loop_table import figure as closed_loop_figure
 from benchmarks.speed.closed_loop_table import main as closed_loop_main
 from benchmarks.speed.closed_loop_table import table as closed_loop_table
-from benchmarks.speed.env_own_work import own_work
 from benchmarks.speed.profile import ROWS, floor_times, profile_episode, replay_step
 from benchmarks.speed.yardstick import (
     REFERENCE_ENV,
     ReferenceStep,
     burst_due,
-    interleaved_median_us,
-    interleaved_rounds,
     reference_step_us,
     times_between_bursts,
 )
-from benchmarks.speed.yardstick_check import main as yardstick_check_main
 
 TOP_KEYS = {
     "env",
@@ -118,6 +111,22 @@ def test_short_unified_profile_schema(tmp_path: Path, capsys: pytest.CaptureFixt
     )
     paths = result["qp_paths"]
     assert set(paths) == {"shortcut", "proxqp"} and paths["shortcut"] + paths["proxqp"] == 300
+    # the table adds up as the schema says (means, us), and the ratios are of its rows
+    mean = {name: result["per_step_us"][name]["mean"] for name in ROWS}
+    measured = ("robot_model", "qp_assembly", "qp_solve", "high_level", "python_overhead")
+    assert sum(mean[name] for name in measured) == pytest.approx(mean["control"], rel=1e-9)
+    assert mean["low_level"] + mean["high_level"] == pytest.approx(mean["control"], rel=1e-9)
+    assert mean["env_physics"] + mean["env_overhead"] == pytest.approx(mean["env_step"], rel=1e-9)
+    assert mean["control"] + mean["env_step"] == pytest.approx(mean["loop"], rel=1e-9)
+    assert mean["control"] == pytest.approx(result["control_time_ms"]["mean"] * 1e3, rel=1e-9)
+    dt_us = result["control_dt_s"] * 1e6
+    assert result["real_time_factor"] == pytest.approx(dt_us / mean["loop"], rel=1e-9)
+    floor = mean["mujoco_step"]
+    assert result["sim_only_real_time_factor"] == pytest.approx(dt_us / floor, rel=1e-9)
+    assert result["control_over_mujoco_step"] == pytest.approx(mean["control"] / floor, rel=1e-9)
+    assert result["low_level_over_mujoco_step"] == pytest.approx(
+        mean["low_level"] / floor, rel=1e-9
+    )
     assert result["setup_s"] > 0 and not result["fell"]
     # the closed loop's table (benchmarks.speed.closed_loop_table) reads this schema
     lines = closed_loop_table({"PlanarTray": [result, result]}).splitlines()
@@ -248,45 +257,6 @@ def test_a_burst_of_the_unit_is_warm_samples() -> None:
         reference.burst(0)
 
 
-def test_interleaved_medians_call_each_function_in_turn() -> None:
-    """Every function is called once untimed, then once per round, in turn; a function that
-    sleeps longer has the longer median."""
-    order: list[str] = []
-
-    def slow() -> None:
-        order.append("slow")
-        time.sleep(2e-3)
-
-    def fast() -> None:
-        order.append("fast")
-
-    medians = interleaved_median_us({"slow": slow, "fast": fast}, calls=3)
-    assert order == ["slow", "fast"] * 4
-    assert medians["slow"] >= 2000.0 > medians["fast"]
-    with pytest.raises(ValueError, match="calls must be >= 1"):
-        interleaved_median_us({"fast": fast}, calls=0)
-
-
-def test_interleaved_rounds_take_the_median_of_each_rounds_medians() -> None:
-    """Each round calls the functions in turn and then bursts the unit; the result is each
-    function's median over the rounds' medians and the unit's, in us."""
-    calls = {"a": 0, "b": 0}
-
-    def counted(name: str) -> Callable[[], None]:
-        def call() -> None:
-            calls[name] += 1
-
-        return call
-
-    reference = ReferenceStep()
-    medians, unit = interleaved_rounds({"a": counted("a"), "b": counted("b")}, 3, reference, 5)
-    assert calls == {"a": 3 * 6, "b": 3 * 6}  # an untimed call and 5 timed ones per round
-    assert set(medians) == {"a", "b"} and all(0 < v < 1e4 for v in medians.values())
-    assert 0 < unit < 1e4
-    with pytest.raises(ValueError, match="rounds must be >= 1"):
-        interleaved_rounds({"a": counted("a")}, 0, reference)
-
-
 def test_a_burst_is_due_every_so_many_steps_and_after_the_last() -> None:
     due = [step for step in range(7) if burst_due(step, 3, 7)]
     assert due == [2, 5, 6]
@@ -408,15 +378,6 @@ def test_closed_loop_table_refuses_a_profile_without_a_task_qp() -> None:
         closed_loop_figure(result, ("per_step_units", "qp_assembly", "mean"))
 
 
-def test_env_own_work_is_the_step_beyond_its_physics() -> None:
-    """``benchmarks.speed.env_own_work``: positive (the env does work beyond ``mj_step``: its
-    measures, observation and info) and finite; bad arguments refused."""
-    units, us = own_work("wip_gym/Planar-v0", states=3, repeats=20)
-    assert 0.0 < units < math.inf and 0.0 < us < math.inf
-    with pytest.raises(ValueError, match=">= 1"):
-        own_work("wip_gym/Planar-v0", states=0)
-
-
 def test_closed_loop_comparison_shows_each_columns_rounds_before_and_after() -> None:
     def profile(control: float, unit: float, physics: bool = True) -> dict[str, Any]:
         part = {"mean": 1.0, "median": 1.0}
@@ -534,111 +495,3 @@ def test_closed_loop_table_refuses_an_unknown_base(capsys: pytest.CaptureFixture
         closed_loop_main(["--base", "no-such-revision-here", "--rounds", "1"])
     assert raised.value.code == 2
     assert "no-such-revision-here" in capsys.readouterr().err
-
-
-def test_yardstick_check_prints_its_ratios(capsys: pytest.CaptureFixture[str]) -> None:
-    """``benchmarks.speed.yardstick_check`` (docs/performance.md §12) runs its blocks and the
-    MPC and prints each comparison as a finite ratio; too few steps are refused."""
-    assert yardstick_check_main(["--steps", "500", "--mpc-steps", "50"]) == 0
-    printed = capsys.readouterr().out
-    ratio = re.search(r"plain over perturbed blocks: median ([0-9.]+), mean ([0-9.]+)", printed)
-    assert ratio is not None and all(0 < float(v) < 10 for v in ratio.groups())
-    for pattern in (
-        r"warm bursts [0-9.]+ us \(ratio ([0-9.]+)\)",
-        r"replayed [0-9.]+ us .*ratio ([0-9.]+)\)",
-    ):
-        found = re.search(pattern, printed)
-        assert found is not None and 0 < float(found.group(1)) < 10, pattern
-    assert printed.count("MPC ") == 2 and "units), in warm bursts" in printed
-    with pytest.raises(SystemExit) as refused:
-        yardstick_check_main(["--steps", "100"])
-    assert refused.value.code == 2
-
-
-def test_mpc_phase_groups_the_control_steps_by_their_place_in_the_mpc_period() -> None:
-    times = np.zeros(mpc_phase.SKIPPED_STEPS + 40)
-    steps = np.arange(len(times))
-    times[:] = 1e-6 * (100.0 + (steps % 10 == 5) * 400.0)  # phase 5 waits 400 us longer
-    times[: mpc_phase.SKIPPED_STEPS] = 1.0  # the start: left out
-    rows = mpc_phase.phase_table(times, 10)
-    assert [int(r["phase"]) for r in rows] == list(range(10))
-    for row in rows:
-        expected = 500.0 if row["phase"] == 5 else 100.0
-        for key in ("mean", "median", "p90", "p99"):
-            assert row[key] == pytest.approx(expected)
-    with pytest.raises(ValueError, match="too few control steps"):
-        mpc_phase.phase_table(times[: mpc_phase.SKIPPED_STEPS + 5], 10)
-    with pytest.raises(ValueError, match="steps_per_mpc"):
-        mpc_phase.phase_table(times, 0)
-
-
-def test_mpc_phase_runs_a_delayed_episode() -> None:
-    result = mpc_phase.run("wip_gym/PlanarTray-v0", delay=3, duration=0.3, seed=0)
-    assert len(result["phases"]) == 10
-    assert all(np.isfinite(row["mean"]) and row["mean"] > 0 for row in result["phases"])
-    assert result["solve_us"]["median"] > 0 and result["wait_us"]["median"] >= 0
-    # the patches that time the solves and the waits are undone
-    assert mpc_phase.mpc_module.ModelPredictiveController.run.__name__ == "run"
-    assert mpc_phase.HighLevel._wait_pending.__name__ == "_wait_pending"
-    with pytest.raises(ValueError, match="delay must be >= 1"):
-        mpc_phase.run("wip_gym/PlanarTray-v0", delay=0, duration=0.3, seed=0)
-
-
-def test_mpc_inputs_times_both_paths_on_equal_inputs() -> None:
-    result = mpc_inputs.run("wip_gym/PlanarTray-v0", steps=30, seed=0)
-    for path in mpc_inputs.PATHS:
-        assert len(result["times_us"][path]) == 3  # one per MPC period
-        assert all(value > 0 for value in result["times_us"][path])
-    assert sum(len(result["first_us"][path]) for path in mpc_inputs.PATHS) == 3
-    with pytest.raises(ValueError, match="steps must be >= 10"):
-        mpc_inputs.run("wip_gym/PlanarTray-v0", steps=5, seed=0)
-
-
-def test_episode_stalls_prints_every_part_and_the_collector(
-    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
-) -> None:
-    """``benchmarks.speed.episode_stalls`` on a short episode: a row per part the unified
-    controller has, each with its largest sample's step inside the episode, and the
-    collector's line; the profiler's own instrumentation is restored."""
-    from benchmarks.speed import episode_stalls
-
-    monkeypatch.setattr(
-        sys, "argv", ["episode_stalls", "--env", "PlanarTray-v0", "--duration", "0.05"]
-    )
-    instrument = profile_module._instrument
-    episode_stalls.main()
-    printed = capsys.readouterr().out
-    rows = [line.split(" | ") for line in printed.splitlines() if line.startswith("| ")][1:]
-    assert [row[0][2:] for row in rows] == [
-        "robot_model",
-        "qp_assembly",
-        "qp_solve_total",
-        "high_level",
-    ]
-    for row in rows:
-        assert 0 <= int(row[4].rstrip(" |")) < 50
-    assert "collector:" in printed and "full passes:" in printed
-    assert profile_module._instrument is instrument
-
-
-def test_qp_paths_counts_the_steps_proxqp_solved() -> None:
-    """``benchmarks.speed.qp_paths``: on PlanarTray-v0 the default drive's first second takes
-    the shortcut at every step, and with a 3 kg payload put in the hand at 0.1 s some of its
-    steps go to ProxQP (the table of docs/performance.md §20: most steps once it drives)."""
-    from benchmarks.speed.qp_paths import proxqp_steps
-
-    env_id = "wip_gym/PlanarTray-v0"
-    assert proxqp_steps(env_id, "unified", None, {}, 0, 1.0) == (0, 1000)
-    payload = {"env.payload_mass": 3.0, "env.payload_time": 0.1}
-    solved, steps = proxqp_steps(env_id, "unified", None, payload, 0, 1.0)
-    assert steps == 1000 and 0 < solved <= 900
-
-
-def test_thread_wake_times_the_three_moments_of_a_job() -> None:
-    from benchmarks.speed.thread_wake import wake_costs  # noqa: PLC0415
-
-    costs = wake_costs(0.0, jobs=3)
-    assert set(costs) == {"submit", "after", "result"}
-    assert all(0.0 < median <= p90 for median, p90 in costs.values())
-    with pytest.raises(ValueError, match="jobs"):
-        wake_costs(0.001, jobs=0)

@@ -93,6 +93,48 @@ def test_quick_run_schema_and_agreement(tmp_path: Path, capsys: pytest.CaptureFi
         "plan_under_50ms_3d",
     ):
         assert set(results["targets"][key]) == {"figure", "limit", "met"}, key
+    # the figures derived in the run are what they are computed from: each ratio a peer's
+    # median over ours, each target its figure against its limit
+    for p in PROBLEMS:
+        for kind, table in (("plan", "ddp_plan_ms"), ("mpc", "mpc_step_ms")):
+            ours = results[table][p]["ours"]["median"]
+            for peer, label in (("crocoddyl", "crocoddyl"), ("numpy_ilqr", "numpy")):
+                assert results["ratios"][f"{label}_{kind}_{p}"] == pytest.approx(
+                    results[table][p][peer]["median"] / ours, rel=1e-12
+                ), (label, kind, p)
+    for env in QP_ENVS:
+        times = results["qp_solve_us"][env]
+        for s in QP_SOLVERS[2:]:
+            peer = times[s]["median"]
+            assert results["ratios"][f"qp_{s}_{env}"] == pytest.approx(
+                peer / times["proxqp"]["median"], rel=1e-12
+            )
+            assert results["ratios_controller_path"][f"qp_{s}_{env}"] == pytest.approx(
+                peer / times["proxqp_shortcut"]["median"], rel=1e-12
+            )
+    for name, target in results["targets"].items():
+        below = not name.endswith("_at_least_10x")
+        met = target["figure"] <= target["limit"] if below else target["figure"] >= target["limit"]
+        assert target["met"] is met, name
+    for p in PROBLEMS:
+        assert (
+            results["targets"][f"plan_under_10ms_{p}"]["figure"]
+            == (results["ddp_plan_ms"][p]["ours"]["median"])
+        )
+        assert (
+            results["targets"][f"crocoddyl_mpc_{p}_at_least_10x"]["figure"]
+            == (results["ratios"][f"crocoddyl_mpc_{p}"])
+        )
+    krang = results["qp_solve_us"]["krang"]
+    fastest_peer = min(krang[s]["median"] for s in QP_SOLVERS[2:])  # every peer agrees (below)
+    assert results["targets"]["qp_krang_within_2x_fastest_peer"]["figure"] == pytest.approx(
+        krang["proxqp"]["median"] / fastest_peer, rel=1e-12
+    )
+    units_3d = results["mpc_step_units"]["3d"]
+    assert results["targets"]["mpc_step_under_15_units_3d"]["figure"] == units_3d["median"]
+    assert results["targets"]["mpc_step_p99_under_2x_median_3d"]["figure"] == pytest.approx(
+        units_3d["p99"] / units_3d["median"], rel=1e-12
+    )
     # the optimum checks: every DDP solver converged to the same cost
     for p in PROBLEMS:
         for what in ("plan", "mpc_step"):
@@ -174,178 +216,3 @@ def test_qp_peers_agree_on_a_constrained_qp() -> None:
             active = np.minimum(C @ x_ref - qp.lower, qp.upper - C @ x_ref) <= 1e-9
             assert active.any()
             assert solution_error(solver.solve(qp), x_ref) <= 1e-6, solver.name
-
-
-def test_ddp_timing_script_runs() -> None:
-    """``python -m benchmarks.speed.ddp_timing`` (the DDP alone, caller vs bare compiled call): it
-    runs on the planar problem and its timed MPC steps do not retrace."""
-    from benchmarks.speed.ddp_bench import krang_params
-    from benchmarks.speed.ddp_timing import bench
-
-    params, theta0 = krang_params()
-    out = bench("planar", params, theta0, reps=1, mpc_steps=3)
-    assert out["plan_iterations"] >= 1 and out["mpc_retraces"] == 0
-    assert all(math.isfinite(v) and v > 0 for k, v in out.items() if k.endswith("_ms"))
-
-
-def test_first_call_script_runs(capsys: pytest.CaptureFixture[str]) -> None:
-    """``python -m benchmarks.speed.first_call`` plans, steps the MPC and prints both times."""
-    from benchmarks.speed.first_call import main
-
-    main([])
-    out = capsys.readouterr().out
-    assert out.startswith("first plan ") and out.rstrip().endswith("(planar)")
-
-
-@pytest.mark.parametrize("planar", [True, False])
-def test_ddp_parts_ablations_leave_out_only_what_they_say(planar: bool) -> None:
-    """``benchmarks.speed.ddp_parts``' ablated backward passes: ``backward_quadratic``'s cost
-    derivatives are the problem's where the penalty is inactive (it leaves out the penalty
-    only), and ``backward_riccati``'s stand-in Jacobians have the shapes of the problem's."""
-    import jax.numpy as jnp
-
-    from benchmarks.speed.ddp_parts import _ablated_solvers
-
-    params, _ = krang_params()
-    wipm = mpc_problem(planar, MPCConfig(), a_max=1e6, theta_max=10.0)  # penalty never active
-    quadratic, riccati = _ablated_solvers(wipm, MPCConfig().ddp)
-    rng = np.random.default_rng(3)
-    z = jnp.asarray(rng.normal(scale=0.1, size=wipm.n_state))
-    w = jnp.asarray(rng.normal(scale=0.1, size=wipm.n_control))
-    ref = (jnp.asarray(rng.normal(scale=0.1, size=wipm.n_state)), params)
-    assert not bool(wipm.penalty(z, w, params)[1])
-    exact = wipm.running_derivatives()(z, w, ref)
-    for mine, theirs in zip(quadratic.running_derivatives(z, w, ref), exact, strict=True):
-        np.testing.assert_allclose(mine, theirs, rtol=1e-14, atol=1e-14)
-    real = wipm.dynamics_derivatives()(z, w, params)
-    stand_in = riccati.dynamics_derivatives(z, w, params)
-    assert [a.shape for a in stand_in] == [a.shape for a in real]
-    # the stand-ins depend on the state and the input, so that XLA cannot fold the
-    # recursion's products away
-    moved = riccati.dynamics_derivatives(z + 0.1, w + 0.1, params)
-    assert all(not np.array_equal(a, b) for a, b in zip(stand_in, moved, strict=True))
-    with pytest.raises(ValueError, match="rate input"):
-        _ablated_solvers(planning_problem(planar, PlanConfig(), 1.0, False), MPCConfig().ddp)
-
-
-@pytest.mark.parametrize(("planar", "gradient"), [(True, False), (False, False), (False, True)])
-def test_riccati_floor_compiled_recursion_is_the_ddps(planar: bool, gradient: bool) -> None:
-    """``benchmarks.speed.riccati_floor``: the compiled recursion gives the DDP's backward pass
-    (``DDPSolver._backward`` with the problem's own derivatives, with and without the gradient
-    norm's adjoint recursion) on the same trajectory, and so does ``_backward`` over the stored
-    derivatives; a ``Q_uu + mu I`` that is not positive definite at one step fails both, and a
-    NaN gradient term makes the gradient norm NaN in both."""
-    import dataclasses
-
-    import jax.numpy as jnp
-
-    from benchmarks.speed.riccati_floor import (
-        as_result,
-        compiled_recursion,
-        problem_inputs,
-        run_compiled,
-        stored_backward,
-    )
-    from controllers.optimizer.ddp import rollout
-
-    params, _ = krang_params()
-    wipm = mpc_problem(planar, MPCConfig(), a_max=0.5, theta_max=0.1)
-    solver = ddp_solver_for(wipm, dataclasses.replace(MPCConfig().ddp, gradient_norm=gradient))
-    rng = np.random.default_rng(5)
-    steps, n, m = 30, wipm.n_state, wipm.n_control
-    U = jnp.asarray(rng.normal(scale=2.0, size=(steps, m)))
-    X = rollout(wipm.dynamics(), jnp.asarray(rng.normal(scale=0.05, size=n)), U, params)
-    refs = refs_for(rng.normal(scale=0.1, size=(steps + 1, n)), params)
-    inputs = problem_inputs(solver, X, U, params, refs)
-    mu = 1e-3
-    truth = as_result(solver._backward(X, U, params, refs, jnp.asarray(mu)))
-    assert truth.ok
-    assert np.isfinite(truth.grad_norm) == gradient
-    for result in (
-        run_compiled(inputs, mu, gradient),
-        as_result(stored_backward(inputs, gradient).call(mu)),
-    ):
-        assert result.ok
-        scale = np.abs(truth.K).max()
-        np.testing.assert_allclose(result.K, truth.K, rtol=0, atol=1e-10 * scale)
-        np.testing.assert_allclose(result.k, truth.k, rtol=0, atol=1e-10 * np.abs(truth.k).max())
-        assert result.dv1 == pytest.approx(truth.dv1, rel=1e-10)
-        assert result.dv2 == pytest.approx(truth.dv2, rel=1e-10)
-        if gradient:
-            assert result.grad_norm == pytest.approx(truth.grad_norm, rel=1e-10)
-        else:
-            assert np.isnan(result.grad_norm)
-    # Q_uu not positive definite at one step (the last, which the recursion meets first): the
-    # pass fails; with the gradient norm, a NaN in one gradient term makes it NaN in both
-    broken = inputs._replace(luu=inputs.luu.copy())
-    broken.luu[-1] = -1e6 * np.eye(m)
-    nan_grad = inputs._replace(lu=inputs.lu.copy())
-    nan_grad.lu[steps // 2, 0] = np.nan
-    for case in (broken, nan_grad):
-        compiled = run_compiled(case, mu, gradient)
-        xla = as_result(stored_backward(case, gradient).call(mu))
-        assert not compiled.ok and not xla.ok
-        if case is nan_grad:
-            assert np.isnan(compiled.grad_norm) and np.isnan(xla.grad_norm)
-    with pytest.raises(ValueError, match="m >= 1"):
-        compiled_recursion(2, 0)
-
-
-@pytest.mark.parametrize("planar", [True, False])
-def test_stage_codegen_equals_jax_on_both_sides_of_the_penalty(planar: bool) -> None:
-    """``benchmarks.speed.stage_codegen``: the scalar code generated from the jaxpr of the
-    MPC problem's stage (dynamics, its Jacobians, the running cost's derivatives) gives JAX's
-    values on random states, where the acceleration penalty is inactive and where it is active
-    (its ``cond``'s two branches); a primitive it has no form for is refused by name."""
-    import jax
-    import jax.numpy as jnp
-
-    from benchmarks.speed.stage_codegen import stage_function, stage_rows
-    from controllers.optimizer.scalar_codegen import scalar_function
-
-    params, _ = krang_params()
-    wipm = mpc_problem(planar, MPCConfig(), a_max=0.5, theta_max=0.1)
-    stage, inputs, outputs = stage_function(wipm, params)
-    n, m = wipm.n_state, wipm.n_control
-    dynamics = wipm.dynamics()
-    jacobians, derivatives = wipm.dynamics_derivatives(), wipm.running_derivatives()
-    rng = np.random.default_rng(11)
-    active = []
-    for scale in (0.01, 30.0) * 4:  # small and large torques: the penalty off and on
-        x = rng.normal(scale=0.1, size=n)
-        u = rng.normal(scale=scale, size=m)
-        s_ref = rng.normal(scale=0.1, size=n)
-        z = stage_rows(x[None], u[None], s_ref[None], params)[0]
-        assert z.shape == (inputs,)
-        out = np.empty(outputs)
-        stage(z, out)
-        xj, uj, sj = jnp.asarray(x), jnp.asarray(u), jnp.asarray(s_ref)
-        truth = jax.tree.leaves(
-            (dynamics(xj, uj, params), jacobians(xj, uj, params), derivatives(xj, uj, (sj, params)))
-        )
-        expected = np.concatenate([np.ravel(np.asarray(a)) for a in truth])
-        np.testing.assert_allclose(out, expected, rtol=1e-12, atol=1e-12 * np.abs(expected).max())
-        active.append(bool(wipm.penalty(xj, uj, params)[1]))
-    assert any(active) and not all(active)
-    # a product and a sum (dot_general, reduce_sum) written out, and a primitive refused
-    product, _, _ = scalar_function(
-        lambda a, b: (a @ b, jnp.sum(a, axis=0)), jnp.ones((2, 3)), jnp.ones(3)
-    )
-    a, b = rng.normal(size=(2, 3)), rng.normal(size=3)
-    result = np.empty(5)
-    product(np.concatenate([a.ravel(), b]), result)
-    np.testing.assert_allclose(result, np.concatenate([a @ b, a.sum(axis=0)]), rtol=1e-14)
-    with pytest.raises(NotImplementedError, match="'sort'"):
-        scalar_function(jnp.sort, jnp.ones(3))
-
-
-@pytest.mark.parametrize("problem", ["planar", "3d"])
-def test_mpc_backends_benchmark_times_equal_solves(problem: str) -> None:
-    """``benchmarks.speed.mpc_backends``: both backends timed on the same window, their
-    predictions equal to round-off (what the table's last columns report)."""
-    from benchmarks.speed.mpc_backends import measure
-
-    ((name, row),) = measure(rounds=1, indices=(100,), problems=(problem,)).items()
-    assert name == f"{problem} 100"
-    assert row["jax_us"] > 0 and row["numba_us"] > 0 and row["unit_us"] > 0
-    assert row["max_dU"] < 1e-9 and row["max_dX"] < 1e-9

@@ -112,3 +112,24 @@ def test_bad_reset_options_raise() -> None:
         planar.reset(seed=0, options={"target": 1.0})
     with pytest.raises(ValueError, match="goal must be a finite"):
         planar.reset(seed=0, options={"goal": math.nan})
+
+
+def test_the_vector_env_truncates_in_seconds_as_the_single_env() -> None:
+    """``gym.make_vec`` (the native vector env, docs/vector.md) adds no step count: each sub-env
+    truncates at its own ``time_limit``, at the step the single env does, and resets after it."""
+    vec = gym.make_vec("wip_gym/WIP-v0", num_envs=2, frame_skip=10, time_limit=0.05)
+    assert type(vec).__name__ == "WIPDriveVectorEnv"
+    single = gym.make("wip_gym/WIP-v0", frame_skip=10, time_limit=0.05)
+    assert _first_truncation(single, 10) == 5
+    vec.reset(seed=0)
+    zeros = np.zeros(vec.action_space.shape)
+    for _ in range(4):
+        _, _, terminated, truncated, _ = vec.step(zeros)
+        assert not truncated.any() and not terminated.any()
+    _, _, terminated, truncated, _ = vec.step(zeros)
+    assert truncated.all() and not terminated.any()
+    # next-step autoreset: the clock starts again
+    vec.step(zeros)
+    assert [env.unwrapped.data.time for env in vec.envs] == [0.0, 0.0]
+    vec.close()
+    single.close()

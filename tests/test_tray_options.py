@@ -18,6 +18,7 @@ from wip_gym.scene import (
     TRAY_MASS,
     SceneOptions,
     build_model,
+    tray_hand_geoms,
     tray_support_geoms,
 )
 
@@ -89,10 +90,19 @@ def test_tray_mass_rim_and_pairs(robot: str, attachment: str) -> None:
     }
     feet = [m.geom(g).name for g in range(m.ngeom) if m.geom(g).name.startswith("cup_foot")]
     assert len(feet) == CUP_FEET
-    for tray_geom in ["tray", *(m.geom(g).name for g in rims)]:
-        assert all(frozenset((tray_geom, foot)) in pairs for foot in feet)
+    # the feet stand on the plate; the rim meets the cup's cylinder (wip_gym.scene.add_cup)
+    cup_pairs = {p for p in pairs if p & {"cup", *feet}}
+    assert cup_pairs == {frozenset(("tray", foot)) for foot in feet} | {
+        frozenset((m.geom(g).name, "cup")) for g in rims
+    }
     supports = {frozenset(("tray", s)) for s in tray_support_geoms(robot)}
     assert supports <= pairs if attachment == "free" else not supports & pairs
+    hand = {
+        frozenset((t, h))
+        for t in ["tray", *(m.geom(g).name for g in rims)]
+        for h in tray_hand_geoms(robot)
+    }
+    assert hand <= pairs if attachment == "free" else not hand & pairs
     free_joint = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "tray")
     assert (free_joint >= 0) == (attachment == "free")
 

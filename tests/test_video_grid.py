@@ -73,7 +73,7 @@ def test_compare_writes_a_labelled_grid_and_render_redraws_it(tmp_path: Path) ->
             str(again),
         ]
     )
-    redrawn = _frames(again / "video_grid.mp4")
+    redrawn = _frames(again / f"video_grid.tray-{size}-{FPS}fps.mp4")  # named by its view
     assert len(redrawn) == len(grid) and redrawn[0].shape == grid[0].shape
     assert np.abs(redrawn[0].astype(int) - grid[0].astype(int)).mean() > 10  # another view
 

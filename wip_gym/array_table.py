@@ -2,7 +2,7 @@
 
 numba unboxes every array argument of a call made from Python: measured here, a call of the
 task stack's 52 arguments spent 14 us of its 36 us in that, against 22 us for the same call
-made from compiled code (docs/performance.md §11). A control step's arrays are buffers made
+made from compiled code. A control step's arrays are buffers made
 once (MuJoCo's, the task stack's, the QP kernel's), so their addresses can be taken once too:
 :class:`ArrayTable` holds one int64 row per array, ``(address, kind, d0, d1, d2)``, and compiled
 code views row ``i`` with the reader of its kind (:func:`float_vector`, :func:`float_matrix`,

@@ -6,7 +6,7 @@ another file has the callee compiled into its own machine code: the low level's 
 (``controllers.low_level.compiled_step``) holds the task rows, the motion probe and the QP
 kernel of four other modules, the QP kernel holds ``wip_gym.small_linalg``'s products. After
 an edit of a callee's file, the caller's cache still loads the old code, and nothing says so
-(two benchmarks measured stale code: docs/performance.md §14 and docs/performance.md §23).
+(two of the project's benchmarks measured stale code that way before this module).
 
 :func:`install` makes numba key the caches of :data:`PACKAGES`' files on one fingerprint of all
 their compiled source files (every ``.py`` file that imports numba) besides the file's own

@@ -1,9 +1,10 @@
 """Offscreen frames of a model's state through a named camera, with settings chosen for speed,
 and renderers that close themselves before the interpreter tears EGL down.
 
-Render settings (``python -m benchmarks.speed.render_cost``, 480 x 320, Mesa llvmpipe on the 2-core
-development machine while other jobs ran, so +-50 %; median ms per frame over two runs each of
-PlanarTray-v0 and KrangTray-v0, and the mean |pixel difference| to the chosen frame, 0-255):
+Render settings (``benchmarks/speed/render_cost.py`` at the git tag ``lab-notebook``, 480 x 320,
+Mesa llvmpipe on the 2-core development machine while other jobs ran, so +-50 %; median ms per
+frame over two runs each of PlanarTray-v0 and KrangTray-v0, and the mean |pixel difference| to
+the chosen frame, 0-255):
 chosen (no shadows, no reflections, no anti-aliasing) 15-24 ms; with shadows 64-150 ms
 (difference 5.4-5.5: the robot's shadow); with 4x multisample anti-aliasing 60-85 ms
 (difference 0.24-0.28: edges only); with reflections the identical picture (difference 0: the

@@ -24,6 +24,12 @@ simulated it). Supports of a free tray (:func:`tray_support_geoms`):
   few mm of the plate's underside; the gripper boxes (0.08 x 0.112 x 0.2025) end 6 to 11 cm short
   of the plate, so the finger plates are what the authors' tray rests on. They are massless
   collision boxes here, added only to the free-tray model (the welded model is unchanged).
+
+**Stiff pairs** (``STIFF_SOLREF``, ``STIFF_SOLIMP``; assets/mjcf/README.md, "Contacts of the
+tray and the cup"): the cup's cylinder meets each rim wall (:func:`add_cup`), and a free tray's
+plate and rim walls meet Krang's gripper boxes (:func:`tray_hand_geoms`), so that neither
+passes into the other where they meet. The contacts a body rests on (the cup's feet on the
+plate, a free tray on its supports) keep MuJoCo's default solver parameters.
 """
 
 from __future__ import annotations
@@ -55,6 +61,17 @@ FINGER_CENTRES = {
 #: of 12 to 16 mm per second, a net creep of 1 to 1.5 mm/s, measured with the robot held
 #: still). At 1e-12 that is gone (under 0.001 mm/s) at the same iteration count and step cost.
 CUP_SOLVER_TOLERANCE = 1e-12
+#: the general convex collider's tolerance (``ccd_tolerance``, m) in models with a rim, whose
+#: cup-wall pairs (cylinder-box) are the scene's only pairs MuJoCo's GJK/EPA computes. A cup
+#: leaning on a wall presses into it by about 0.1 um (at 1 m/s^2; less under less load), below
+#: MuJoCo's default 1e-6: EPA may then stop on a face of the wrong normal, and multiccd build the
+#: contact on the wall's far face (5 mm deep, facing away), which threw a cup resting on the rim
+#: over it at 14 rad/s. Among 10000 poses of the cup 1 um either side of touching a wall
+#: (tests/test_rim.py, ``test_cup_contact_with_a_wall_faces_the_wall``) the default gives 3
+#: such poses on each robot, 1e-7 gives 8 whose contact faces away at the right depth, 1e-8 and
+#: 1e-9 none; the collision's time is the same within the machine's noise (8.6 to 9.9 us for
+#: the whole model with the cup on the wall).
+RIM_CCD_TOLERANCE = 1e-9
 #: time the free tray is let settle on its supports (robot held still) when the model is built
 TRAY_SETTLE_TIME = 0.5
 #: damping of the tray's free joint while it settles (N s/m and N m s/rad): its rocking
@@ -70,6 +87,16 @@ CUP_HALF_HEIGHT = 0.04
 CUP_MASS = 0.05
 CUP_FEET = 4  # spheres the cup stands on (see add_cup)
 CUP_FOOT_RADIUS = 0.001
+#: solref of the stiff pairs (the cup's wall on the rim, a free tray on Krang's grippers): the
+#: shortest time constant MuJoCo takes at the 1 ms step (with refsafe on, solref[0] is raised to
+#: two timesteps), critically damped (no rebound). A cup meeting the rim at 0.5 m/s reaches
+#: 0.5 mm into it, a tenth of the wall's thickness (MuJoCo's default 0.02 s: 3.6 mm);
+#: assets/mjcf/README.md ("Contacts of the tray and the cup") gives the measurements.
+STIFF_SOLREF = (0.002, 1.0)
+#: solimp of the stiff pairs: an impedance of 0.99 at any depth (dmin = dmax; MuJoCo's default
+#: rises from 0.9 to 0.95 over the first mm); the wheels' 0.9999 changes none of the figures of
+#: tools/rim_contact.py
+STIFF_SOLIMP = (0.99, 0.99, 0.001, 0.5, 2.0)
 PAYLOAD_RADIUS = 0.04  # a 8 cm sphere in the hand, for its inertia and its picture
 
 
@@ -229,6 +256,23 @@ def _add_supports(spec: mujoco.MjSpec, options: SceneOptions) -> None:
                 )
 
 
+def tray_hand_geoms(robot: str) -> list[str]:
+    """Names of the hand's geoms a free tray meets sideways, beside its supports: stiff pairs
+    with the plate and every rim wall (:func:`_add_hand_pairs`).
+
+    - krang: the two gripper boxes. Their tops stand 5 to 6 mm above the plate's underside, 6
+      (right) and 11 cm (left) beyond the plate's side edges: a tray sliding that far along its
+      y meets one with its edge.
+    - planar7: none. The hand's box lies wholly under the plate (its tip face is the support,
+      paired with the plate), 11 and 4 cm inside the plate's edges: nothing of it reaches the
+      plate's edges or the rim."""
+    if robot == "krang":
+        return ["left_gripper", "right_gripper"]
+    if robot == "planar7":
+        return []
+    raise ValueError(f"robot {robot!r} has no tray support; valid: ['krang', 'planar7']")
+
+
 def _add_support_pairs(spec: mujoco.MjSpec, options: SceneOptions) -> None:
     """The tray-support contact pairs, friction ``tray_friction``."""
     mu = options.tray_friction
@@ -242,19 +286,48 @@ def _add_support_pairs(spec: mujoco.MjSpec, options: SceneOptions) -> None:
         )
 
 
+def _add_hand_pairs(spec: mujoco.MjSpec, options: SceneOptions) -> None:
+    """Stiff pairs (``STIFF_SOLREF``, ``STIFF_SOLIMP``) of the free tray's plate and rim walls
+    with the hand's geoms of :func:`tray_hand_geoms`, friction ``tray_friction``. The free tray
+    settles at reset on its supports alone (:class:`TraySettler`), which these never touch
+    there."""
+    mu = options.tray_friction
+    for hand in tray_hand_geoms(options.robot):
+        for tray_geom in _tray_geom_names(options.tray_rim):
+            spec.add_pair(
+                name=f"{tray_geom}_{hand}",
+                geomname1=tray_geom,
+                geomname2=hand,
+                condim=3,
+                friction=[mu, mu, 0.005, 0.0001, 0.0001],
+                solref=list(STIFF_SOLREF),
+                solimp=list(STIFF_SOLIMP),
+            )
+
+
 def add_cup(spec: mujoco.MjSpec, friction: float, rim: float) -> None:
     """A free cup (body and joint ``cup``) and its contact pairs of friction ``friction`` with
-    the tray's plate and rim walls (``rim`` > 0). The spec must hold the tray's geoms and the
-    ``cup`` material.
+    the tray's plate and, with a rim (``rim`` > 0), its rim walls. The spec must hold the tray's
+    geoms and the ``cup`` material.
 
     The cylinder ``cup`` carries the mass and the picture and meets the floor (plane-cylinder,
-    a primitive pair). On the tray the cup stands on ``CUP_FEET`` small spheres inside its base
+    a primitive pair). On the plate the cup stands on ``CUP_FEET`` small spheres inside its base
     rim (geoms ``cup_foot<k>``), tangent to the base: sphere-box is a primitive pair, where
     the cylinder on the plate's box is MuJoCo's general convex collision (4 points with
     multiccd). Same statics and sliding (Coulomb on a plate), same footprint; the support
     polygon is the square inscribed in the foot circle, so the cup could tip at an acceleration
     of ``0.53 g`` across a diagonal (the cylinder at ``0.75 g``): with ``cup_friction`` below
-    0.53 it slides before either can tip, as the cylinder does (tests/test_cup_metrics.py)."""
+    0.53 it slides before either can tip, as the cylinder does (tests/test_cup_metrics.py).
+
+    The rim meets the cup's wall: the cylinder ``cup`` and each wall make a stiff pair
+    (``STIFF_SOLREF``, ``STIFF_SOLIMP``; cylinder-box is MuJoCo's general convex collision, up to
+    5 points with multiccd), so the cup stops at the wall's face and can tip over its top edge
+    (tests/test_rim.py). The feet meet the plate only: a 1 mm foot sits at the foot of a wall,
+    whose nearest face becomes its bottom once the foot's centre is inside, and a foot pair
+    pushed the cup under the rim (assets/mjcf/README.md, "Contacts of the tray and the cup").
+    Only the feet touch the plate, so the cup's friction use on the plate
+    (``wip_gym.envs.base.friction_use``, over the plate's contacts with the cup's geoms) counts
+    the feet and never a rim's push."""
     cup = spec.worldbody.add_body(name="cup", pos=[0.0, 0.0, 1.0])
     cup.add_freejoint(name="cup")
     cup.add_geom(
@@ -284,15 +357,25 @@ def add_cup(spec: mujoco.MjSpec, friction: float, rim: float) -> None:
             conaffinity=0,
             material="cup",
         )
-    for tray_geom in _tray_geom_names(rim):
-        for foot in feet:
-            spec.add_pair(
-                name=f"{tray_geom}_{foot}",
-                geomname1=tray_geom,
-                geomname2=foot,
-                condim=3,
-                friction=[friction, friction, 0.005, 0.0001, 0.0001],
-            )
+    plate, *walls = _tray_geom_names(rim)
+    for foot in feet:
+        spec.add_pair(
+            name=f"{plate}_{foot}",
+            geomname1=plate,
+            geomname2=foot,
+            condim=3,
+            friction=[friction, friction, 0.005, 0.0001, 0.0001],
+        )
+    for wall in walls:
+        spec.add_pair(
+            name=f"{wall}_cup",
+            geomname1=wall,
+            geomname2="cup",
+            condim=3,
+            friction=[friction, friction, 0.005, 0.0001, 0.0001],
+            solref=list(STIFF_SOLREF),
+            solimp=list(STIFF_SOLIMP),
+        )
 
 
 def _add_payload(spec: mujoco.MjSpec, mass: float) -> None:
@@ -437,6 +520,7 @@ def _settled_free_tray(options: SceneOptions) -> mujoco.MjSpec:
     pos, quat = TraySettler(model, options).settle(data, mount, np.array([1.0, 0.0, 0.0, 0.0]))
     _add_tray(spec, options, quat, pos)
     _add_support_pairs(spec, options)
+    _add_hand_pairs(spec, options)
     body = model.site_bodyid[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, "tray_mount")]
     rel_pos = data.xmat[body].reshape(3, 3).T @ (pos - data.xpos[body])
     inv, rel_quat = np.zeros(4), np.zeros(4)
@@ -466,6 +550,8 @@ def build_spec(options: SceneOptions) -> mujoco.MjSpec:
     if options.cup:
         add_cup(spec, options.cup_friction, options.tray_rim)
         spec.option.tolerance = CUP_SOLVER_TOLERANCE
+        if options.tray_rim > 0:
+            spec.option.ccd_tolerance = RIM_CCD_TOLERANCE
     return spec
 
 

@@ -17,7 +17,7 @@ mostly zeros in a pattern fixed for a run.
   ``matmul_into``) took 0.53 us for ``T^T T`` against 1.03 through BLAS and 0.19 against 0.66
   for ``M_act calA``, and the matrix-vector loops (``row_dot``, ``matvec_into``,
   ``matvec_transposed_into``) 0.09 to 0.15 us against 0.17 to 0.37; they write into the
-  caller's buffers (docs/performance.md §23). Plain loops tried first were slower than BLAS:
+  caller's buffers. Plain loops tried first were slower than BLAS:
   20.7 us against 4.2 for ``T^T T``, ``M_act calA`` and ``jac J_tf`` (2026-11-26).
 * Operands of a few hundred entries (3 x 3 rotations): ``small_matmul`` (0.15 to 0.25 us
   against BLAS's 0.35).

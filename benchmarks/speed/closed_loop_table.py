@@ -8,14 +8,14 @@ runs it; ``--json`` files kept in ``--out``) of the ``unified`` controller on on
 setting: the paper's timing (the MPC inside every tenth control step), the MPC beside the
 loop (``--set unified.high_level.mpc_delay_steps=5``), and the paper's timing again without the
 profiler's wrappers around the controller's parts (``--no-parts``). The wrappers, which the
-rows "of which" need, cost the control step itself about 0.15 units (docs/performance.md §25):
+rows "of which" need, cost the control step itself about 0.15 units (``benchmarks.speed.profile``):
 the columns "no part timers" measure the control step and the closed loop as a user's loop
 runs them, and have no "of which" rows ("-"). The runs go round by round, every
 column once per round, so that a change of the machine's load spreads over all columns; a cell
 shows its rounds' values side by side, and a second table their median [min, max]. Every
 figure is in units of a bare, warm ``mj_step`` of Krang-v0 timed in the same process
-(``benchmarks.speed.yardstick``), so the table compares across machines; the rows are the
-issue's targets (docs/performance.md §7 to §9, §12).
+(``benchmarks.speed.yardstick``), so the table compares across machines; the last column is
+each row's target (docs/performance.md, "Targets").
 
 Below the table it names the rounds run on a disturbed machine (:func:`disturbed_rounds`: the
 env's physics in the loop, over the same steps replayed warm, more than 1.1 times its column's
@@ -273,7 +273,7 @@ def comparison(
     lines += _disturbed_note(disturbed)
     if any("env_physics" not in r["per_step_units"] for t in titles for r in before[t]):
         lines.append(
-            "the base's profiles predate the warm yardstick (docs/performance.md §12): their "
+            "the base's profiles predate the warm yardstick: their "
             "unit was sampled cold, their floor taken after the control step and their env's own "
             "work counted from it; compare them with these only as ratios within each version"
         )

@@ -23,7 +23,7 @@ minus ``_run_kernel``) and
 ``high_level.reference`` (the MPC and the reference it hands the low level, amortised: it runs
 every 10 ms), and the env's ``do_simulation`` (``env_physics``: its ``mj_step`` in the loop). A
 part the controller lacks is ``null``. The part wrappers cost the control step itself about
-0.1 to 0.15 units of its median (KrangTray-v0, ``unified``; docs/performance.md §25):
+0.1 to 0.15 units of its median (KrangTray-v0, ``unified``, five alternating pairs):
 ``--no-parts`` times the loop without them (every controller part and ``python_overhead``
 ``null``; the env's physics is still timed), for a control time comparable across controllers
 whatever parts they have. The floor, ``mujoco_step``, is a bare
@@ -34,19 +34,19 @@ episode, replaying them one by one on scratch data (the same states and model, i
 the model as the episode left it, and an env push applied one step late, as the state before
 ``env.step`` holds it: neither moves the time of a step). Replayed back to back, these steps
 find the caches warm; the loop's own ``mj_step`` (``env_physics``) does not, and costs 1.5 to
-2.5 times as much (docs/performance.md §12).
+2.5 times as much.
 
 Nothing runs between one step's ``env.step`` and the next ``policy(obs)`` but the profiler's
 bookkeeping and, once every :data:`UNIT_EVERY` steps, a burst of the unit: measuring the floor
 or the unit there at every step would evict the caches the loop works in and slow the steps
 they precede. Measured on KrangTray-v0 with ``unified`` (8000 steps, blocks of 250 steps with
 a floor and a reference step after every control step alternating with blocks without, three
-runs, docs/performance.md §12): without them, the control step's median 0.74 to 0.82 times,
+runs): without them, the control step's median 0.74 to 0.82 times,
 its mean 0.84 to 0.88 times, what it is with them.
 
 The loop and the floor run with the setup's objects frozen (``benchmarks.heap.setup_frozen``):
 a full pass of the garbage collector over them costs about 130 ms here, and fell inside some
-8 s episodes and not others, adding about 2 units to a mean (docs/performance.md §20). The
+8 s episodes and not others, adding about 2 units to a mean (``benchmarks.heap``). The
 passes that remain in the loop are reported (``collector_passes``); ``--no-freeze`` times the
 loop without the freeze.
 

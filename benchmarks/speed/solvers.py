@@ -24,7 +24,7 @@ JSON (``--json PATH``), beyond the details of each half (``ddp``, ``qp``):
 * ``optimum_checks``: the DDP cost agreement (plan and MPC step) and each QP solver's agreement;
 * ``reference_step_us``: the unit (``benchmarks.speed.yardstick``: a bare, warm ``mj_step`` of
   Krang-v0 at its reset state), the median of its timings before and after the DDP half and
-  of warm bursts every 50 timed MPC steps (the same load as the steps; docs/performance.md §12);
+  of warm bursts every 50 timed MPC steps (the same load as the steps);
   ``mpc_step_units``: ``{planar|3d: {median, p99}}``, our MPC step in that unit;
 * ``targets``: the solver speed targets and the MPC's in units, each ``{figure, limit, met}``
   (:func:`targets`).

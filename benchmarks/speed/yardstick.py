@@ -56,7 +56,7 @@ class ReferenceStep:
         One sample taken right after a benchmark's own step is not: the benchmark's work has
         evicted the caches the reference step works in, and such samples measured 1.25 to 1.33
         times a warm step between KrangTray-v0's closed-loop steps and 1.5 to 2.2 times between
-        MPC steps (docs/performance.md §12). A benchmark that follows the machine's load takes
+        MPC steps. A benchmark that follows the machine's load takes
         a burst every so many of its steps instead (:func:`burst_due`,
         :func:`times_between_bursts`)."""
         if count < 1 or warmup < 0:
@@ -108,54 +108,3 @@ def reference_step_samples(repeats: int = 400, warmup: int = 50) -> np.ndarray:
 def reference_step_us(repeats: int = 400, warmup: int = 50) -> float:
     """The unit (module docstring) in microseconds."""
     return float(np.median(reference_step_samples(repeats, warmup)) * 1e6)
-
-
-def median_call_us(function: Callable[[], object], calls: int = 200) -> float:
-    """The median wall time (us) of ``calls`` calls of ``function``, after one untimed call."""
-    if calls < 1:
-        raise ValueError(f"calls must be >= 1, got {calls}")
-    function()
-    times = np.empty(calls)
-    for i in range(calls):
-        start = time.perf_counter()
-        function()
-        times[i] = time.perf_counter() - start
-    return float(np.median(times) * 1e6)
-
-
-def interleaved_median_us(
-    functions: dict[str, Callable[[], object]], calls: int = 200
-) -> dict[str, float]:
-    """The median wall time (us) of each of ``functions`` over ``calls`` rounds that call every
-    one in turn (after one untimed call of each): on a machine whose speed drifts within
-    seconds, each sees the same drift, which ``median_call_us`` one after the other does not."""
-    if calls < 1:
-        raise ValueError(f"calls must be >= 1, got {calls}")
-    for function in functions.values():
-        function()
-    times = {name: np.empty(calls) for name in functions}
-    for i in range(calls):
-        for name, function in functions.items():
-            start = time.perf_counter()
-            function()
-            times[name][i] = time.perf_counter() - start
-    return {name: float(np.median(t) * 1e6) for name, t in times.items()}
-
-
-def interleaved_rounds(
-    functions: dict[str, Callable[[], object]],
-    rounds: int,
-    reference: ReferenceStep,
-    calls: int = 200,
-) -> tuple[dict[str, float], float]:
-    """``rounds`` runs of :func:`interleaved_median_us`, each followed by a warm burst of the
-    unit: the median over the rounds of each function's median (us), and of the unit's (us)."""
-    if rounds < 1:
-        raise ValueError(f"rounds must be >= 1, got {rounds}")
-    samples: dict[str, list[float]] = {name: [] for name in functions}
-    units: list[float] = []
-    for _ in range(rounds):
-        for name, us in interleaved_median_us(functions, calls).items():
-            samples[name].append(us)
-        units.append(float(np.median(reference.burst(50)) * 1e6))
-    return {name: float(np.median(v)) for name, v in samples.items()}, float(np.median(units))

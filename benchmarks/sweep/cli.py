@@ -3,6 +3,10 @@
 wip-bench sweep SPEC --out DIR [--address ADDRESS] [--workers N]
 wip-bench sweep SPEC --dry-run [--out DIR] [--workers N] [--no-calibration]
 wip-bench sweep --report DIR
+
+Exit status: 0 when every planned episode has an ``ok`` row; 1 when some failed (their rows,
+the summary and the report are written first; the rows hold the tracebacks); 130 after Ctrl-C;
+2 for a bad spec or bad arguments, before anything runs.
 """
 
 from __future__ import annotations
@@ -13,6 +17,7 @@ import os
 from pathlib import Path
 
 from benchmarks.sweep import estimate
+from benchmarks.sweep.keys import spec_keys_not_applied
 from benchmarks.sweep.spec import SpecError, SweepSpec, load_spec
 
 
@@ -74,6 +79,8 @@ def dry_run(
         )
     for line in frontier_lines(spec):
         print(line)
+    for key, left in spec_keys_not_applied(spec).items():
+        print(f"  {key} leaves {', '.join(left)} as configured (no offline plan)")
     todo = spec.episodes()
     if directory and Path(directory).exists():
         todo, skipped, _ = plan_run(spec, directory)
@@ -128,5 +135,20 @@ def run(args: argparse.Namespace) -> int:
         raise SpecError("--out DIR is required to run a sweep")
     from benchmarks.sweep.runner import run_sweep
 
-    summary = run_sweep(spec, args.out, address=args.address, workers=args.workers)
-    return 130 if summary["interrupted"] else 0
+    summary = run_sweep(
+        spec,
+        args.out,
+        address=args.address,
+        workers=args.workers,
+        imports=getattr(args, "imports", ()),
+    )
+    if summary["interrupted"]:
+        return 130
+    if summary["episodes_failed"]:
+        print(
+            f"{summary['episodes_failed']} episodes failed: their rows in "
+            f"{Path(args.out) / 'episodes.jsonl'} hold the tracebacks; run the same command "
+            "again to retry them"
+        )
+        return 1
+    return 0

@@ -1,8 +1,10 @@
 """The one place the sweep calls the episode runner.
 
-``run_configured_episode(env_id, controller, overrides, seed, duration, preset)`` returns one
-episode's JSON-ready metrics: the project's one rollout (:mod:`benchmarks.rollout`), the same
-function ``wip-bench compare`` runs, so a sweep's metrics are defined where compare's are.
+``run_configured_episode(env_id, controller, overrides, seed, duration, preset,
+run_controllers)`` returns one episode's JSON-ready metrics: the project's one rollout
+(:mod:`benchmarks.rollout`), the same function ``wip-bench compare`` runs, so a sweep's metrics
+are defined where compare's are, and its overrides resolved for the sweep's whole list of
+controllers as compare resolves a run (:mod:`benchmarks.sweep.keys`).
 """
 
 from __future__ import annotations
@@ -24,4 +26,5 @@ def run_episode_job(job: Mapping[str, Any]) -> dict[str, Any]:
         job["seed"],
         job["duration"],
         preset=job["preset"],
+        run_controllers=job["run_controllers"],
     )

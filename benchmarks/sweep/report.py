@@ -11,6 +11,7 @@ from typing import Any
 
 from benchmarks.metrics import outcome_counts
 from benchmarks.sweep.frontier import frontier_rows, value_label
+from benchmarks.sweep.keys import spec_keys_not_applied
 from benchmarks.sweep.spec import SweepSpec
 from benchmarks.sweep.stats import (
     describe,
@@ -167,6 +168,7 @@ def build_summary(
         "wall_s": run.get("wall_s"),
         "episodes_per_hour": run.get("episodes_per_hour"),
         "interrupted": bool(run.get("interrupted", False)),
+        "keys_not_applied": {k: list(v) for k, v in spec_keys_not_applied(spec).items()},
         "commits": commits,
         "mixed_commits": len(commits) > 1,
         "package_versions": sorted({str(r.get("package_version")) for r in rows.values()}),
@@ -204,6 +206,8 @@ def format_markdown(summary: Mapping[str, Any], plots: list[str]) -> str:
         )
         + ".",
     ]
+    for key, left in summary["keys_not_applied"].items():
+        lines += ["", f"`{key}` leaves {', '.join(left)} as configured (no offline plan)."]
     if summary["mixed_commits"]:
         lines += [
             "",

@@ -7,9 +7,10 @@ machine's by default), without dashboard or usage reporting, its temporary files
 :data:`RAY_TEMP_DIR`. With an address it joins that cluster and ``--workers`` caps the episodes
 in flight. If this process already has Ray initialised (a test's shared cluster), it is used.
 
-Workers get the DDP's JAX settings through the task's runtime environment, set before the worker
-process imports JAX (:func:`worker_env_vars`); the JAX compilation cache stays per node (its
-default directory is under each node's home). A worker that dies is retried (``max_retries``); an
+Workers get XLA's loop option for the DDP through the task's runtime environment, set before the
+worker process starts JAX (:func:`worker_env_vars`; the solvers scope float64 themselves), and
+turn JAX's persistent compilation cache on, which stays per node (its default directory is
+under each node's home). A worker that dies is retried (``max_retries``); an
 episode that raises or outlives the wall-clock limit becomes an error row and the sweep goes on.
 Ctrl-C cancels the episodes in flight (nothing is written for them) and writes the report.
 """
@@ -20,7 +21,7 @@ import contextlib
 import fcntl
 import os
 import time
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -44,22 +45,18 @@ EpisodeFn = Callable[[Mapping[str, Any]], dict[str, Any]]
 
 
 def worker_env_vars() -> dict[str, str]:
-    """The environment of a sweep worker: the JAX settings of ``controllers.optimizer.jax_setup``
-    (x64, XLA's small-while-loop threshold) before JAX starts, and one thread each for XLA, BLAS and
+    """The environment of a sweep worker: XLA's small-while-loop threshold of
+    ``controllers.optimizer.jax_setup`` before JAX starts, and one thread each for XLA, BLAS and
     OpenMP (one CPU per episode)."""
     from controllers.optimizer import jax_setup
 
     flags = os.environ.get("XLA_FLAGS", "")
-    if "xla_backend_extra_options" not in flags:
-        threshold = int(
-            os.environ.get(jax_setup.SMALL_LOOP_ENV, jax_setup.DEFAULT_SMALL_LOOP_BYTES)
-        )
-        if threshold > 0:
-            flags += f" --xla_backend_extra_options={jax_setup.SMALL_LOOP_OPTION}={threshold}"
+    option = jax_setup.loop_option()
+    if option is not None:
+        flags = jax_setup.with_loop_option(flags, option)
     if "xla_cpu_multi_thread_eigen" not in flags:
         flags += " --xla_cpu_multi_thread_eigen=false"
     env = {
-        "JAX_ENABLE_X64": "1",
         "XLA_FLAGS": flags.strip(),
         "OMP_NUM_THREADS": "1",
         "OPENBLAS_NUM_THREADS": "1",
@@ -73,12 +70,14 @@ def worker_env_vars() -> dict[str, str]:
 
 
 def make_job(spec: SweepSpec, episode: Episode) -> dict[str, Any]:
-    """What a worker needs to run ``episode``; also the identity part of its store row."""
+    """What a worker needs to run ``episode``; also the identity part of its store row.
+    ``run_controllers``: the sweep's controllers, for which the worker resolves the keys."""
     return {
         "id": episode.id,
         "env": spec.env,
         "preset": spec.preset,
         "controller": episode.controller,
+        "run_controllers": list(spec.controllers),
         "duration": spec.duration,
         "cell": episode.cell,
         "parameters": episode.parameters,
@@ -90,17 +89,26 @@ def make_job(spec: SweepSpec, episode: Episode) -> dict[str, Any]:
 
 
 def _run_task(
-    job: Mapping[str, Any], episode_fn: EpisodeFn | None, timeout_s: float
+    job: Mapping[str, Any],
+    episode_fn: EpisodeFn | None,
+    timeout_s: float,
+    imports: tuple[str, ...] = (),
 ) -> dict[str, Any]:
+    """One episode in a worker: the ``--import`` modules first (their controllers), then the
+    episode; its row says on which Ray node it ran (``node_id``)."""
     from benchmarks.sweep.worker import execute
+    from controllers import registry
     from controllers.optimizer import jax_setup
 
-    jax_setup.configure()  # before the episode's first JAX computation (idempotent)
+    registry.import_modules(imports)  # idempotent: a worker runs many episodes
+    jax_setup.use_compilation_cache()  # before the episode's first JAX compilation
     if episode_fn is None:
         from benchmarks.sweep.episode import run_episode_job
 
         episode_fn = run_episode_job
-    return execute(job, episode_fn, timeout_s)
+    row = execute(job, episode_fn, timeout_s)
+    row["node_id"] = ray.get_runtime_context().get_node_id()
+    return row
 
 
 @contextlib.contextmanager
@@ -157,9 +165,11 @@ def run_sweep(
     workers: int | None = None,
     episode_fn: EpisodeFn | None = None,
     progress: bool = True,
+    imports: Sequence[str] = (),
 ) -> dict[str, Any]:
     """Run the spec's missing and failed episodes into ``directory``; write the report and
-    return the summary (``interrupted`` after Ctrl-C)."""
+    return the summary (``interrupted`` after Ctrl-C). ``imports``: modules that register
+    controllers (``--import``), imported by every worker before its episodes."""
     if workers is not None and workers < 1:
         raise SpecError(f"--workers must be >= 1, got {workers}")
     directory = Path(directory)
@@ -183,7 +193,11 @@ def run_sweep(
         )
         run: dict[str, Any] = {"episodes_run": 0, "episodes_skipped": skipped, "wall_s": 0.0}
         if todo:
-            run.update(_execute(spec, directory, todo, address, workers, episode_fn, progress))
+            run.update(
+                _execute(
+                    spec, directory, todo, address, workers, episode_fn, progress, tuple(imports)
+                )
+            )
         summary = write_report(spec, directory, run)
         print(f"wrote {directory / 'summary.json'} and {directory / 'report.md'}")
         if todo:
@@ -203,6 +217,7 @@ def _execute(
     workers: int | None,
     episode_fn: EpisodeFn | None,
     progress: bool,
+    imports: tuple[str, ...],
 ) -> dict[str, Any]:
     timeout = spec.episode_timeout
     hard_limit = HARD_LIMIT_FACTOR * timeout + HARD_LIMIT_MARGIN_S
@@ -234,7 +249,8 @@ def _execute(
             while pending or in_flight:
                 while pending and len(in_flight) < cap:
                     job = pending.pop()
-                    in_flight[task.remote(job, episode_fn, timeout)] = (job, time.monotonic())
+                    ref = task.remote(job, episode_fn, timeout, imports)
+                    in_flight[ref] = (job, time.monotonic())
                 ready, _ = ray.wait(list(in_flight), num_returns=1, timeout=1.0)
                 for ref in ready:
                     job, submitted = in_flight.pop(ref)

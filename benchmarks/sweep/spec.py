@@ -7,7 +7,8 @@ Grammar (every table optional except the top-level keys marked required)::
     duration = 1.5                       # required: simulated seconds per episode (> 0)
     seeds = 2                            # required: replicates per cell (>= 1)
     seed = 7                             # the sweep's seed (>= 0; default 0)
-    preset = "paper"                     # a preset of the episode runner (default none)
+    preset = "paper"                     # a preset of the episode runner (default none);
+                                         # several compose: "paper,realistic" or a list
     timeout = 600                        # wall-clock limit per episode, s (default below)
     [set]                                # base overrides, any --set key: KEY = VALUE
     "env.mass_randomization" = 0.05
@@ -43,6 +44,7 @@ from typing import Any
 
 import gymnasium as gym
 
+from benchmarks import presets
 from benchmarks.scenario import resolve_env_id
 from benchmarks.sweep import keys as sweep_keys
 from benchmarks.sweep.seeding import cell_seed, episode_id, key_stream
@@ -354,10 +356,14 @@ def parse_spec(text: str, validate_env: bool = True) -> SweepSpec:
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise SpecError(f"bad value for 'seed': {seed!r} (an integer >= 0)")
     preset = data.get("preset")
-    if preset is not None and not isinstance(preset, str):
-        raise SpecError(f"bad value for 'preset': {preset!r} (a string)")
+    if preset is not None and not (
+        isinstance(preset, str)
+        or (isinstance(preset, list) and all(isinstance(p, str) for p in preset))
+    ):
+        raise SpecError(f"bad value for 'preset': {preset!r} (a name or an array of names)")
     try:
         sweep_keys.validate_preset(preset, env_id)
+        preset = presets.canonical(preset)
     except ValueError as error:
         raise SpecError(f"bad value for 'preset': {error}") from None
     timeout = data.get("timeout")

@@ -7,8 +7,11 @@ become wheel torques (``controllers.simplified.wipm.inverse_dynamics``). The aut
 upper-body joint; here the upper body is held as close to locked as the torque limits allow:
 computed torque with the base's expected acceleration as feed-forward plus a stiff joint PD
 (``controllers.low_level.posture``), and the largest joint deviation it allowed is reported
-(``counters["max_joint_deviation_rad"]``). Only the execution of the plan differs from the
-unified controller.
+(``counters["max_joint_deviation_rad"]``). The hold takes over from the reset state: its
+reference starts at the reset's joint positions and velocities and stops the joints over
+``posture_stop_time_s`` (``controllers.baselines.stopping_hold``), where a hold toward zero
+velocity stopped them in one step. Only the execution of the plan differs from the unified
+controller.
 """
 
 from __future__ import annotations
@@ -23,10 +26,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from controllers.baselines.decoupled import held_body_counters
+from controllers.baselines.stopping_hold import StoppingHold
 from controllers.high_level.mpc import param_values, params_from_vector
 from controllers.high_level.planning import Plan, PlanConfig
 from controllers.high_level.receding_horizon import HighLevel, HighLevelConfig
-from controllers.low_level.posture import PostureHold
+from controllers.optimizer import jax_setup
 from controllers.policy import ModelChoice, PolicyBase, TaskInfo
 from controllers.simplified.wipm import (
     inverse_dynamics,
@@ -58,8 +62,9 @@ def _spatial_command(state: Array, u: Array, packed: Array) -> jax.Array:
 
 # one jitted call per control step, its result fetched whole: two calls with lambda(q)'s 11
 # leaves each and JAX-array indexing (an operation per index) cost ~0.57 ms a step
-_planar_command_jit = jax.jit(_planar_command)
-_spatial_command_jit = jax.jit(_spatial_command)
+# in float64 whatever the process's JAX settings (jax_setup; about 2 us a control step)
+_planar_command_jit = jax_setup.in_float64(jax.jit(_planar_command))
+_spatial_command_jit = jax_setup.in_float64(jax.jit(_spatial_command))
 
 
 @dataclass(frozen=True)
@@ -74,6 +79,9 @@ class DecoupledMPCConfig:
         posture_frequency_hz, posture_damping_ratio: the stiff joint PD of the computed
             torque that holds the upper body (20 Hz, critically damped: 16 control steps per
             period at 1 kHz; the authors locked the joints rigidly).
+        posture_stop_time_s: how long the hold takes to stop the joints' reset velocities (a
+            minimum-jerk stop, ``controllers.baselines.stopping_hold``): 0.1 s, two periods of
+            the hold, measured against 0 s (the step stop) in docs/controllers.md §3.
     """
 
     model: ModelChoice = "nominal"
@@ -82,6 +90,7 @@ class DecoupledMPCConfig:
     kv_theta: float = 100.0
     posture_frequency_hz: float = 20.0
     posture_damping_ratio: float = 1.0
+    posture_stop_time_s: float = 0.1
 
     @classmethod
     def paper(cls) -> DecoupledMPCConfig:
@@ -98,7 +107,9 @@ class DecoupledMPCController(PolicyBase):
     def __init__(self, robot: RobotModel, task: TaskInfo, config: DecoupledMPCConfig) -> None:
         super().__init__(robot, task, config)
         self.high_level = HighLevel(config.high_level, task.control_dt)
-        self._posture = PostureHold(config.posture_frequency_hz, config.posture_damping_ratio)
+        self._posture = StoppingHold(
+            config.posture_frequency_hz, config.posture_damping_ratio, config.posture_stop_time_s
+        )
         self.plan: Plan | None = None
 
     def reset(self, observation: dict[str, Array], info: dict[str, Any]) -> None:
@@ -147,10 +158,11 @@ class DecoupledMPCController(PolicyBase):
             ).tolist()
             wheels = (tau_left, tau_right)
             base = np.array([xdd, psidd, thdd])
-        applied = self.finish(self.assemble(wheels, self._posture.torques(robot, base)))
+        t = self._step * self.task.control_dt
+        applied = self.finish(self.assemble(wheels, self._posture.torques(robot, base, t=t)))
         last = self.high_level.last_solution
         self._recorder.record(
-            t=self._step * self.task.control_dt,
+            t=t,
             wipm_state=state,
             wipm_reference=plan.state(ref.mpc_index),
             theta_d=ref.theta,

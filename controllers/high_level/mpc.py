@@ -3,17 +3,19 @@ Horizon Control").
 
 Every ``dt`` (10 ms) over ``horizon_s`` (the paper's 1 s; the authors' code used 0.1 s), from
 the current WIPM state with ``lambda(q)`` updated at every step (as the paper says; the
-authors' code froze it), the DDP tracks the plan's window by time index (padded with the goal
-state past the plan's end), warm-started from the previous solution shifted by one step, with a
-fixed budget of iterations (real-time MPC does not wait for convergence). Its result is used
-when it is finite and its cost did not rise above the warm start's; otherwise (a NaN or a
-divergence) the previous controls, shifted, are kept and the rejection is counted.
+authors' code froze it), the DDP tracks the plan's window by time index (past the plan's end,
+its continuation until it rests at the goal, then its rest state: ``Plan.reference_states``,
+``Plan.rest_state``; docs/controllers.md §3.1), warm-started from the previous solution
+shifted by one step, with a fixed budget of iterations (real-time MPC does not wait for
+convergence). Its result is used when it is finite and its cost did not rise above the warm
+start's; otherwise (a NaN or a divergence) the previous controls, shifted, are kept and the
+rejection is counted.
 
 Two backends run the same step (``MPCConfig.backend``): ``"jax"``, the DDP of
 ``controllers.optimizer.ddp`` jitted by XLA, the reference; and ``"numba"``, the same algorithm
 with every derivative from the same JAX functions, written out as scalar code and compiled by
 numba (``controllers.optimizer.numba_ddp``), equal to it to round-off (tests/test_numba_ddp.py)
-and 1.3 to 2.5 times as fast (docs/performance.md §18).
+and 1.3 to 2.5 times as fast.
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from controllers.high_level.planning import Plan
-from controllers.optimizer import numba_ddp
+from controllers.optimizer import jax_setup, numba_ddp
 from controllers.optimizer.ddp import DDPConfig, rollout
 from controllers.simplified.wipm import WIPMParams
 from controllers.simplified.wipm_problem import Weights, WIPMProblem, ddp_solver_for
@@ -46,13 +48,13 @@ class MPCConfig:
             Q = diag[0, 10, 10, 0.1, 0.1, 0.1, 10, 10] over [x, psi, theta, xd, psid, thetad,
             X0, Y0]: higher on positions than speeds, as the paper says).
         r_control: weights on [thdd, tau_0] (authors 0.01, 0.01).
-        q_terminal: terminal weights on positions and theta (authors 1e5) and speeds (1e4).
-        q_terminal_speed: see above.
+        q_terminal, q_terminal_speed: terminal weights on positions and theta (authors 1e5) and
+            on speeds (authors 1e4).
         ddp: solver settings except the iteration budget (iLQR, no tolerance stop, no backward
             pass after the last line search: the MPC uses the controls, not the gains; no
             gradient norm: nothing reads it).
-        backend: ``"numba"`` (default: the same solve to round-off, 1.3 to 2.5 times as fast;
-            docs/performance.md §18) or ``"jax"`` (the reference; it also runs the settings
+        backend: ``"numba"`` (default: the same solve to round-off, 1.3 to 2.5 times as fast)
+            or ``"jax"`` (the reference; it also runs the settings
             the numba backend refuses: ``second_order``, ``gradient_norm``).
     """
 
@@ -152,8 +154,7 @@ class _CompiledStep:
 
     The host's inputs (the plan index, the first-step flag, the state and ``lambda(q)``'s 11
     leaves) come packed in one vector (:func:`pack_inputs`): one argument to hand over instead
-    of fourteen. The results are the same to the bit, the step slightly faster
-    (docs/performance.md §13)."""
+    of fourteen. The results are the same to the bit, the step slightly faster."""
 
     def __init__(self, problem: WIPMProblem, ddp: DDPConfig, horizon: int) -> None:
         self.problem, self.ddp = problem, ddp
@@ -166,8 +167,10 @@ class _CompiledStep:
     def __call__(
         self, host: np.ndarray, warm: Any, plan_states: Any, plan_controls: Any
     ) -> tuple[Any, Any]:
-        """``(packed, next_warm)`` of one step (:meth:`_step`)."""
-        return self.jitted(host, warm, plan_states, plan_controls)
+        """``(packed, next_warm)`` of one step (:meth:`_step`), traced and run in float64
+        (``jax_setup.float64``: in any thread, whatever the process's JAX settings)."""
+        with jax_setup.float64():
+            return self.jitted(host, warm, plan_states, plan_controls)
 
     def __reduce__(self) -> tuple[Any, tuple[WIPMProblem, DDPConfig, int]]:
         # a copy or an unpickled one is the shared step of its problem, settings and horizon
@@ -228,7 +231,7 @@ class _CompiledStep:
             lambda: (X, U, cost),
             lambda: (rollout(self.dynamics, state, warm, params), warm, initial),
         )
-        # warm start of the next step: shifted by one, the plan's control past the end
+        # warm start of the next step: shifted by one, the reference's control past the end
         tail = jax.lax.dynamic_slice_in_dim(plan_controls, index + H, 1)
         next_warm = jnp.concatenate([U[1:], tail], axis=0)
         packed = jnp.concatenate(
@@ -237,6 +240,8 @@ class _CompiledStep:
         return packed, next_warm
 
 
+#: the MPC's padded reference has a multiple of this many rows (``ModelPredictiveController``)
+PADDED_ROWS = 1000
 #: the host's inputs of a packed MPC step before the state: the plan index and the first flag
 HOST_HEAD = 2
 #: WIPMParams' leaves in one vector: its scalars, with ``inertia_body``'s 9 entries (row-major)
@@ -350,7 +355,8 @@ def numba_step(problem: WIPMProblem, ddp: DDPConfig) -> _NumbaStep:
 class ModelPredictiveController:
     """Receding-horizon DDP tracking a :class:`Plan` (see the module docstring).
 
-    The plan (padded past its end: the goal state, zero controls) is put on the device once
+    The plan's reference (its states and controls, then its continuation's; padded past that
+    with its rest state and zero controls) is put on the device once
     (the JAX backend); each :meth:`step` is one call of the shared compiled step
     (:func:`compiled_step`, or :func:`numba_step`) with its host inputs packed in one vector
     (:func:`pack_inputs`) and one transfer of its packed result. ``solver`` is the JAX solver
@@ -375,22 +381,29 @@ class ModelPredictiveController:
         self.rejected = 0
         self.solves = 0
         H = self.horizon
-        states = np.vstack([plan.states, np.tile(plan.goal_state, (H + 1, 1))])
-        controls = np.vstack([plan.controls, np.zeros((H + 1, plan.controls.shape[1]))])
-        warm = np.zeros((H, plan.controls.shape[1]))
+        reference, m = len(plan.reference_states), plan.controls.shape[1]
+        # the rest state at least a horizon on; the rows rounded up to a multiple of
+        # PADDED_ROWS, so that the JAX step, traced per length, is traced a few times per plan
+        # horizon, not once per continuation's length
+        rows = -(-(reference + H + 1) // PADDED_ROWS) * PADDED_ROWS
+        states = np.vstack([plan.reference_states, np.tile(plan.rest_state, (rows - reference, 1))])
+        controls = np.vstack([plan.reference_controls, np.zeros((rows - reference, m))])
+        warm = np.zeros((H, m))
         if self.config.backend == "numba":
             self.compiled = numba_step(self.problem, ddp)
             self._plan_states, self._plan_controls, self._warm = states, controls, warm
         else:
             self.compiled = compiled_step(self.problem, ddp, self.horizon)
-            self._plan_states = jax.device_put(states)
-            self._plan_controls = jax.device_put(controls)
-            self._warm = jax.device_put(warm)
+            with jax_setup.float64():  # float64 on the device too
+                self._plan_states = jax.device_put(states)
+                self._plan_controls = jax.device_put(controls)
+                self._warm = jax.device_put(warm)
         self._first = True  # the first step warm-starts from the plan's controls
-        n, m = states.shape[1], controls.shape[1]
+        n = states.shape[1]
         self._sizes = ((H + 1) * n, H * m)
         self._shapes = ((H + 1, n), (H, m))
-        self._last_index = len(plan.states)  # dynamic_slice clamps: past it, all goal
+        # dynamic_slice clamps: past it, all rest state
+        self._last_index = len(plan.reference_states)
         self._host_size = HOST_HEAD + n + _N_PARAMS
 
     def __getstate__(self) -> dict[str, Any]:

@@ -7,6 +7,15 @@ plus a penalty on the control's rate of change (the authors' later code), and pe
 keep the axle's horizontal acceleration under ``a_max`` and ``|theta|`` under ``theta_max``.
 Every plan is checked against those bounds and against arrival (within 1 cm of the goal with
 speeds near zero by ``0.6 t_f``); a violation is reported in ``Plan.violations``.
+
+A finite-horizon plan ends where its terminal cost left it, not always at the goal (on a
+short or aggressive drive it ends leaning and still braking). Past ``t_f`` the plan is continued
+by its own problem linearised at the goal, as a receding horizon, rolled out on the WIPM from
+the plan's last state and control until it rests at the goal
+(``controllers.high_level.settling``); past that the reference holds :attr:`Plan.rest_state`.
+The reference every controller reads (:meth:`Plan.state`, :meth:`Plan.window`,
+:meth:`Plan.sample`, the MPC's window) has no step at ``t_f`` (a step there is answered by the
+MPC with a jolt; docs/controllers.md §3.1).
 """
 
 from __future__ import annotations
@@ -18,6 +27,8 @@ from typing import Literal
 import jax
 import numpy as np
 
+from controllers.high_level.settling import settle
+from controllers.optimizer import jax_setup
 from controllers.optimizer.ddp import DDPConfig
 from controllers.simplified.wipm import WIPMParams
 from controllers.simplified.wipm_problem import (
@@ -30,6 +41,9 @@ from controllers.simplified.wipm_problem import (
 )
 
 A_MAX_SPELLINGS = ("cup_safe", "none")
+#: a plan has arrived within 1 cm of the goal (m), slower than 1 cm/s and 0.01 rad/s
+ARRIVAL_DISTANCE = 0.01
+ARRIVAL_SPEED = 0.01
 
 
 @dataclass(frozen=True)
@@ -62,6 +76,13 @@ class PlanConfig:
             acceleration flips sign within ~0.1 s mid-drive.
         r_rate_spin: weight on ``tau_0``'s rate (3-D; the authors' 0.01: ``tau_0`` is in N m).
         q_terminal: terminal weight on every tracked state (authors 1e4).
+        settle_tolerance: the continuation past ``t_f`` (module docstring) ends at the first
+            step where every coordinate it steers is within this of the goal (SI units: m, rad,
+            m/s, rad/s, rad/s^2, N m); 1e-9, far below anything a controller responds to.
+        settle_max_s: the longest continuation (s); one that has not settled by then is kept
+            and reported in ``Plan.violations``. 120 s: the longest measured, KrangTray-v0
+            under the paper's weights (the spin settles with a time constant of 4.4 s), takes
+            53 s (docs/controllers.md §3.1).
         ddp: solver settings (authors: 50 iterations, iLQR; no gradient norm: the plan stops on
             the predicted decrease).
     """
@@ -81,6 +102,8 @@ class PlanConfig:
     r_rate: float = 1.0
     r_rate_spin: float = 0.01
     q_terminal: float = 1e4
+    settle_tolerance: float = 1e-9
+    settle_max_s: float = 120.0
     ddp: DDPConfig = field(
         default_factory=lambda: DDPConfig(
             max_iterations=100, tolerance=1e-9, second_order=False, gradient_norm=False
@@ -107,6 +130,10 @@ class PlanConfig:
             )
         if not (np.isfinite(self.default_a_max) and self.default_a_max > 0):
             raise ValueError(f"default_a_max must be positive, got {self.default_a_max!r}")
+        for name in ("settle_tolerance", "settle_max_s"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be positive, got {value!r}")
 
     @classmethod
     def paper(cls) -> PlanConfig:
@@ -148,16 +175,31 @@ class PlanConfig:
 
 @dataclass(frozen=True)
 class Plan:
-    """An offline plan of the WIPM.
+    """An offline plan of the WIPM, continued past its end until it rests at the goal (module
+    docstring).
 
     Attributes:
         times: (N+1,) s. states: (N+1, n) WIPM states. controls: (N, m) ``thdd`` (``tau_0``).
-        goal_state: the target state. planar: model variant.
+        goal_state: the target state (3-D: with the ``x`` the plan rests at, ``x`` being no
+            part of the goal). planar: model variant.
+        settle_states: (K, n) the states after ``t_f`` (at ``t_f + dt`` to ``t_f + K dt``) of
+            the continuation (:func:`settle`); K = 0 when the plan ends at the goal.
+        settle_controls: (K, m) its controls, from the one at ``t_f`` (the plan's last control
+            continued: the control is part of the DDP's state, so it does not jump).
+        rest_state: the state the reference holds after the continuation: ``goal_state``,
+            except in 3-D when the continuation ends beside the goal by less than
+            :data:`ARRIVAL_DISTANCE`: then ``(X0, Y0)`` is the goal moved sideways by that
+            offset, which the continuation cannot roll away, and, when the heading is free,
+            ``psi`` is where the continuation left it (it does not steer a free heading;
+            ``controllers.high_level.settling``), so that the reference has no step there
+            either. Further aside the plan did not arrive: the rest state is the goal, and the
+            step to it is reported in ``violations``.
         cost, iterations, converged: from the DDP.
-        peak_acceleration, peak_theta: measured on the plan.
+        peak_acceleration, peak_theta: measured on the plan (to ``t_f``).
         arrival_time: first time from which the plan stays within 1 cm of the goal with speeds
             under 1 cm/s (and 0.01 rad/s), None if never.
-        a_max, theta_max: the bounds it was planned under. violations: human-readable list.
+        a_max, theta_max: the bounds it was planned under. violations: human-readable list
+            (the continuation's too).
     """
 
     times: np.ndarray
@@ -174,55 +216,78 @@ class Plan:
     a_max: float
     theta_max: float
     violations: tuple[str, ...]
+    settle_states: np.ndarray
+    settle_controls: np.ndarray
+    rest_state: np.ndarray
 
     @property
     def dt(self) -> float:
         return float(self.times[1] - self.times[0])
 
+    @functools.cached_property
+    def reference_states(self) -> np.ndarray:
+        """(N+1+K, n): the plan's states, then its continuation's (read-only)."""
+        return _frozen(np.vstack([self.states, self.settle_states]))
+
+    @functools.cached_property
+    def reference_controls(self) -> np.ndarray:
+        """(N+K, m): the plan's controls, then its continuation's (read-only)."""
+        return _frozen(np.vstack([self.controls, self.settle_controls]))
+
+    @functools.cached_property
+    def reference_times(self) -> np.ndarray:
+        """(N+1+K,) s: :attr:`times`, then the continuation's (read-only)."""
+        extra = self.times[-1] + self.dt * np.arange(1, len(self.settle_states) + 1)
+        return _frozen(np.concatenate([self.times, extra]))
+
     def state(self, index: int) -> np.ndarray:
-        """The state at index ``index``, the goal state past the end (``window(index, 1)[0]``
-        without building the window: the controllers record it every control step)."""
-        return self.states[index] if index < len(self.states) else self.goal_state
+        """The reference at index ``index``: the plan's state, its continuation's past ``t_f``,
+        the rest state past that (``window(index, 1)[0]`` without building the window: the
+        controllers record it every control step)."""
+        states = self.reference_states
+        return states[index] if index < len(states) else self.rest_state
 
     def states_at(self, indices: np.ndarray) -> np.ndarray:
-        """:meth:`state` of each of ``indices`` (integers >= 0), as rows: the goal state past
-        the end."""
-        padded = np.vstack([self.states, self.goal_state[None, :]])
-        return padded[np.minimum(np.asarray(indices, dtype=np.intp), len(self.states))]
+        """:meth:`state` of each of ``indices`` (integers >= 0), as rows."""
+        states = self.reference_states
+        padded = np.vstack([states, self.rest_state[None, :]])
+        return padded[np.minimum(np.asarray(indices, dtype=np.intp), len(states))]
 
     def window(self, start: int, count: int) -> np.ndarray:
-        """``count`` states from index ``start``, padded with the goal state past the end."""
-        out = np.tile(self.goal_state, (count, 1))
-        available = self.states[start : start + count]
+        """``count`` states of the reference (:meth:`state`) from index ``start``."""
+        out = np.tile(self.rest_state, (count, 1))
+        available = self.reference_states[start : start + count]
         out[: len(available)] = available
         return out
 
     @functools.cached_property
     def _state_rows(self) -> np.ndarray | None:
-        """The states by quantity, each row contiguous (:meth:`sample` reads them every control
-        step; ``np.interp`` of a column of ``states`` copied it first); None for a plan with a
-        non-finite state, which :meth:`sample` reads through ``np.interp`` itself (whose
-        special cases for NaN and inf the shortcut does not repeat). ``plan_to_goal`` makes a
-        plan's arrays read-only, so the rows cannot go stale."""
-        if not np.isfinite(self.states).all():
+        """The reference's states by quantity, each row contiguous (:meth:`sample` reads them
+        every control step; ``np.interp`` of a column of ``states`` copied it first); None for a
+        plan with a non-finite state, which :meth:`sample` reads through ``np.interp`` itself
+        (whose special cases for NaN and inf the shortcut does not repeat). ``plan_to_goal``
+        makes a plan's arrays read-only, so the rows cannot go stale."""
+        states = self.reference_states
+        if not np.isfinite(states).all():
             return None
-        return np.ascontiguousarray(self.states.T)
+        return np.ascontiguousarray(states.T)
 
     def sample(self, t: float) -> dict[str, float]:
-        """The plan's state at time ``t`` (linear interpolation; the goal state after the end,
-        the first state before the start), by name: ``theta, thetad, x, xd`` (3-D also
-        ``psi, psid, X0, Y0``). ``np.interp``'s arithmetic for all quantities at once: the same
-        floats (tested), a fifth of the time of one ``np.interp`` per quantity."""
-        times = self.times
+        """The reference at time ``t`` (linear interpolation of the plan and its continuation;
+        the rest state after them, the first state before the start), by name: ``theta,
+        thetad, x, xd`` (3-D also ``psi, psid, X0, Y0``). ``np.interp``'s arithmetic for all
+        quantities at once: the same floats (tested), a fifth of the time of one ``np.interp``
+        per quantity."""
+        times = self.reference_times
         if t != t:
             raise ValueError("plan time t is NaN")
         rows = self._state_rows
         if t >= times[-1]:
-            state = self.goal_state
+            state = self.rest_state
         elif rows is None:
-            state = np.array([np.interp(t, times, column) for column in self.states.T])
+            state = np.array([np.interp(t, times, column) for column in self.reference_states.T])
         elif t < times[0]:
-            state = self.states[0]
+            state = self.reference_states[0]
         else:
             j = int(np.searchsorted(times, t, side="right")) - 1
             low, high = rows[:, j], rows[:, j + 1]
@@ -231,10 +296,16 @@ class Plan:
         return dict(zip(names, state.tolist(), strict=True))
 
     def control_window(self, start: int, count: int) -> np.ndarray:
+        """``count`` controls of the reference from index ``start``, zeros past it."""
         out = np.zeros((count, self.controls.shape[1]))
-        available = self.controls[start : start + count]
+        available = self.reference_controls[start : start + count]
         out[: len(available)] = available
         return out
+
+
+def _frozen(array: np.ndarray) -> np.ndarray:
+    array.flags.writeable = False
+    return array
 
 
 def planning_problem(
@@ -280,15 +351,15 @@ def _accelerations(problem: WIPMProblem):  # noqa: ANN202 (a jitted function)
 def arrival_time(
     times: np.ndarray, states: np.ndarray, goal: np.ndarray, planar: bool
 ) -> float | None:
-    """First time from which the plan stays within 1 cm of the goal, slower than 1 cm/s and
-    0.01 rad/s."""
+    """First time from which the plan stays within :data:`ARRIVAL_DISTANCE` of the goal,
+    slower than :data:`ARRIVAL_SPEED`."""
     if planar:
         distance = np.abs(states[:, 2] - goal[2])
         speeds = np.abs(states[:, [1, 3]]).max(axis=1)
     else:
         distance = np.hypot(states[:, 6] - goal[6], states[:, 7] - goal[7])
         speeds = np.abs(states[:, [3, 4, 5]]).max(axis=1)
-    ok = (distance < 0.01) & (speeds < 0.01)
+    ok = (distance < ARRIVAL_DISTANCE) & (speeds < ARRIVAL_SPEED)
     if not ok[-1]:
         return None
     bad = np.flatnonzero(~ok)
@@ -336,16 +407,44 @@ def plan_to_goal(
     result = solver(z0, np.zeros((steps, m)), params, refs)
     Z = np.asarray(result.X)
     states, controls = Z[:, :n], Z[:-1, n:]
-    accelerations = np.asarray(_accelerations(problem)(states[:-1], controls, params))
+    with jax_setup.float64():
+        accelerations = np.asarray(_accelerations(problem)(states[:-1], controls, params))
     peak_a = float(accelerations.max())
     peak_theta = float(np.abs(states[:, problem.theta_index]).max())
     times = np.arange(steps + 1) * config.dt
+    # past t_f: the plan continued until it rests at the goal (controllers.high_level.settling)
+    settle_steps = int(np.ceil(config.settle_max_s / config.dt - 1e-9))
+    with jax_setup.float64():
+        settling = settle(
+            problem,
+            Z[-1],
+            np.concatenate([goal, np.zeros(m)]),
+            params,
+            config.settle_tolerance,
+            settle_steps,
+            steps,
+            heading_free=goal_heading is None,
+        )
+    last = settling.states[-1] if len(settling.states) else states[-1]
+    rest = goal.copy()
+    sideways_step = 0.0
     if not planar:
         # x (the distance rolled) is no part of the 3-D goal (its weight is 0: the goal is
-        # (X0, Y0)), so past the end the plan holds the x it arrived with, not 0: a controller
-        # that tracks x from the plan (the decoupled baselines) must see no jump at t_f
+        # (X0, Y0)), so past the end the plan holds the x it rests at, not 0: a controller
+        # that tracks x from the plan (the decoupled baselines) must see no step; the rest
+        # state keeps a free heading where the plan left it, and the sideways offset from the
+        # goal the plan arrived with, which rolling cannot remove
+        # (controllers.high_level.settling)
         goal = goal.copy()
-        goal[0] = states[-1, 0]
+        goal[0] = rest[0] = last[0]
+        across = np.array([-np.sin(goal[1]), np.cos(goal[1])])
+        aside = float(across @ (last[6:8] - goal[6:8]))
+        if abs(aside) < ARRIVAL_DISTANCE:
+            rest[6:8] = goal[6:8] + aside * across
+            if goal_heading is None:
+                rest[1] = last[1]
+        else:  # not arrived: the reference still leads to the goal, with a step
+            sideways_step = aside
     arrival = arrival_time(times, states, goal, planar)
     violations = []
     if peak_a > a_max:
@@ -357,7 +456,28 @@ def plan_to_goal(
         violations.append(f"arrives at {arrival} s, after {deadline:.1f} s")
     if not np.all(np.isfinite(Z)):
         violations.append("non-finite plan")
-    for array in (times, states, controls, goal):
+    if settling.failure is not None:
+        violations.append(f"the continuation past t_f: {settling.failure}")
+    if sideways_step:
+        violations.append(
+            f"the continuation past t_f ends {abs(sideways_step):.3f} m beside the goal: the "
+            "reference steps to it there"
+        )
+    if len(settling.states):
+        settle_a = float(settling.accelerations.max())
+        settle_theta = float(np.abs(settling.states[:, problem.theta_index]).max())
+        if settle_a > a_max:
+            violations.append(
+                f"the continuation past t_f: peak acceleration {settle_a:.3f} m/s^2 > a_max "
+                f"{a_max:.3f}"
+            )
+        if settle_theta > config.theta_max:
+            violations.append(
+                f"the continuation past t_f: peak |theta| {settle_theta:.3f} rad > theta_max "
+                f"{config.theta_max}"
+            )
+    settle_states, settle_controls = settling.states, settling.controls
+    for array in (times, states, controls, goal, settle_states, settle_controls, rest):
         array.flags.writeable = False  # a Plan is frozen (Plan.sample keeps its states' rows)
     return Plan(
         times=times,
@@ -374,4 +494,7 @@ def plan_to_goal(
         a_max=a_max,
         theta_max=config.theta_max,
         violations=tuple(violations),
+        settle_states=settle_states,
+        settle_controls=settle_controls,
+        rest_state=rest,
     )

@@ -3,7 +3,7 @@
 A solve beside the loop (``HighLevelConfig.mpc_delay_steps > 0``) runs in this thread while the
 control thread goes on. Both share the GIL: the compiled solve releases it, but whatever Python
 the thread runs holds it, and the control thread waits for it when it comes back from its own
-compiled calls (docs/performance.md §13). So the thread runs the compiled call and nothing else:
+compiled calls. So the thread runs the compiled call and nothing else:
 the jobs and results pass through two ``queue.SimpleQueue`` (implemented in C; a ``get`` waits
 without the GIL), and the solution's Python (its arrays' views, the ``MPCStep``) is made on the
 control thread (``ModelPredictiveController.take``). A ``concurrent.futures`` executor ran a

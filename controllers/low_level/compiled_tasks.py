@@ -21,7 +21,8 @@ PD law of every task, :func:`pd_acceleration`, which both paths call.
 
 Why numba: at this size (Krang: 18 variables, 31 task rows) a task is a few dozen operations on
 3-vectors; a NumPy call costs a microsecond before any arithmetic and a jitted JAX call tens of
-microseconds (``benchmarks/speed/low_level_kernel_bench.py`` measures the three).
+microseconds (measured by ``benchmarks/speed/low_level_kernel_bench.py`` at the git tag
+``lab-notebook``).
 """
 
 from __future__ import annotations
@@ -48,7 +49,7 @@ def pd_acceleration(feedforward: Any, error: Any, rate_error: Any, kp: float, kv
     task that holds a place), ``error = x - x_d`` and ``rate_error = xd - xd_d``, floats or
     arrays. The Python tasks (``controllers.low_level.tasks``) call it, and :func:`task_rows`
     its compiled form; it lives in this file because numba keys the cache of a compiled
-    function on its own file (docs/performance.md §14), so an edit here reaches both."""
+    function on its own file, so an edit here reaches both."""
     return feedforward - kp * error - kv * rate_error
 
 

@@ -20,7 +20,7 @@ matrix product); 3. ``H = T^T T + eps I``, ``g = -T^T b``;
 Compiled by numba, one call for the five steps. For these sizes (KrangTray-v0: 18 variables,
 30 task rows, 34 constraint rows) the arithmetic costs less than one call of a jitted JAX
 function, and NumPy spends more in its per-call overhead than in arithmetic:
-``benchmarks/speed/low_level_kernel_bench.py`` measures the three.
+``benchmarks/speed/low_level_kernel_bench.py`` at the git tag ``lab-notebook`` measured the three.
 """
 
 from __future__ import annotations

@@ -302,7 +302,7 @@ class TaskQP:
         """The rows and the kernel in one compiled call (``controllers.low_level.compiled_step``):
         whether the unconstrained minimiser is feasible (its solution terms then computed), or
         None when the settings or a task's kind ask for the two-call path (the control step's
-        common case, docs/performance.md §22)."""
+        common case)."""
         if not self.settings.one_call:
             return None
         stack = self._compiled_stack(robot, tasks)
@@ -342,7 +342,7 @@ class TaskQP:
         ``tasks``, and no observer advanced at this state yet. Then its checks are those
         identities, and ``prepare_parameters`` and ``memoise_observers`` are done inline (what
         they do in that case): 0.37 units (about 2.8 us) off KrangTray-v0's control step in the
-        closed loop (docs/performance.md §25). None when anything differs: :meth:`_one_call`
+        closed loop (against the full one-call step). None when anything differs: :meth:`_one_call`
         then."""
         steady = self._steady
         if steady is None:

@@ -2,9 +2,9 @@
 MPC's settings (iLQR, no gradient norm), every derivative still written by JAX's autodiff.
 
 Why: an MPC step is two DDP iterations over 100 steps of an 8-state model. In XLA:CPU the
-small scans' per-step overheads, not the arithmetic, set its time (docs/performance.md §15 to
-§17); the same solve as straight-line scalar code runs 1.3 to 2.5 times
-as fast (docs/performance.md §18).
+small scans' per-step overheads, not the arithmetic, set its time; the same solve as
+straight-line scalar code runs 1.3 to 2.5 times as fast (both backends on the same inputs,
+interleaved call by call).
 
 How: :func:`generated_module` traces three per-step functions of a :class:`WIPMProblem` to
 jaxprs and writes them out as scalar code (``controllers.optimizer.scalar_codegen``, folding the
@@ -54,6 +54,7 @@ from typing import Any
 
 import numpy as np
 
+from controllers.optimizer import jax_setup
 from controllers.optimizer.ddp import DDPConfig
 from controllers.optimizer.scalar_codegen import nan_max, nan_min
 
@@ -421,6 +422,7 @@ OPTIONS = 'cache=True, error_model="numpy", nogil=True, fastmath={"contract"}'
 # Generation
 
 
+@jax_setup.in_float64  # traced in float64 whatever the process's JAX settings
 def _stage_sources(problem: Any, params: Any) -> list[str]:
     """The three stage functions of ``problem`` (a :class:`WIPMProblem` of the MPC: state
     ``s``, input ``u``) as scalar source, its constants and ``params``' leaves inputs."""
@@ -514,7 +516,7 @@ def generated_module(problem: Any, params: Any) -> ModuleType:
     if problem.rate_input:
         # the plan's problem: written out and solved as well (the driver reads the DDP state's
         # and the reference's sizes apart), but untested here, and only 6 to 8 % faster over
-        # the plan's 2000 steps when tried (docs/performance.md §18)
+        # the plan's 2000 steps when tried
         raise ValueError("the numba DDP runs the MPC's problem (state s, input u), not rate input")
     import jax  # noqa: PLC0415
 
@@ -533,8 +535,8 @@ def generated_module(problem: Any, params: Any) -> ModuleType:
 
 def _write_and_load(problem: Any, params: Any, options: str = OPTIONS) -> ModuleType:
     """The module of ``module_source(problem, params, options)``, written (:func:`_written`)
-    and loaded, apart from the table of :func:`generated_module` (``benchmarks.speed.
-    numba_options`` loads variants side by side)."""
+    and loaded, apart from the table of :func:`generated_module`, so that variants of
+    ``options`` load side by side."""
     source = module_source(problem, params, options)
     digest = hashlib.sha256(source.encode()).hexdigest()[:16]
     name = f"wipm_mpc_{'planar' if problem.planar else 'spatial'}_{digest}"

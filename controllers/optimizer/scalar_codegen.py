@@ -13,8 +13,7 @@ division by zero gives inf or NaN, as in JAX) and so are JAX's NaN semantics of 
 ``min``.
 
 The MPC's compiled backend (``controllers.optimizer.numba_ddp``) writes its per-step functions
-with it; ``benchmarks.speed.stage_codegen`` times them. Tested against JAX on random inputs and
-corner cases (tests/test_scalar_codegen.py).
+with it. Tested against JAX on random inputs and corner cases (tests/test_scalar_codegen.py).
 """
 
 from __future__ import annotations

@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 
 from wip_gym.assets import mjcf_path
 from wip_gym.camera import COMPUTED_CAMERAS
+from wip_gym.display import require_display
 from wip_gym.envs import measures as ms
 from wip_gym.envs.measures import (  # noqa: F401  (the cup's and tray's thresholds, here too)
     CUP_PLATE_GAP,
@@ -27,6 +28,8 @@ from wip_gym.envs.measures import (  # noqa: F401  (the cup's and tray's thresho
     action_effort,
     env_measures,
 )
+from wip_gym.envs.perturbations import Perturbations, Perturber, build_task_model
+from wip_gym.floor import FloorOptions
 from wip_gym.overlay import OverlayValues, draw_overlay
 from wip_gym.registration import EPISODE_SECONDS
 from wip_gym.renderer import FrameRenderer
@@ -39,11 +42,13 @@ from wip_gym.scene import (
     TRAY_RESET_SETTLE_TIME,
     SceneOptions,
     TraySettler,
-    build_model,
     reset_qpos,
 )
 
 DEFAULT_CAMERA_CONFIG: dict[str, Any] = {}
+#: how far the reset puts the wheels into the floor (m): enough for their contacts to carry
+#: the robot from the first step (a contact exactly at distance 0 is not yet active)
+WHEEL_RESET_DEPTH = 1e-6
 
 
 def _goal_array(goal: Any, planar: bool) -> NDArray[np.float64]:
@@ -158,6 +163,23 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         cup_loss_penalty: float = 10.0,
         frame_skip: int = 1,
         time_limit: float | None = EPISODE_SECONDS,
+        sensor_noise: float = 0.0,
+        obs_delay_steps: int = 0,
+        obs_delay_jitter_steps: int = 0,
+        action_delay_steps: int = 0,
+        action_delay_jitter_steps: int = 0,
+        actuator_lag_s: float = 0.0,
+        joint_lag_s: float | None = None,
+        torque_noise: float = 0.0,
+        com_offset: float = 0.0,
+        inertia_randomization: float = 0.0,
+        joint_damping: float = 0.0,
+        joint_friction: float = 0.0,
+        floor_friction: float | tuple[float, float] = 1.0,
+        floor_slope_deg: float = 0.0,
+        bump_height: float = 0.0,
+        bump_spacing: float = 1.0,
+        bump_width: float = 0.1,
         width: int = 480,
         height: int = 320,
         **kwargs: Any,
@@ -187,6 +209,25 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             raise ValueError(f"mass_randomization must be in [0, 1), got {mass_randomization}")
         _check_frame_skip(frame_skip)
         _check_time_limit(time_limit)
+        # the robot as hardware sees it (wip_gym.envs.perturbations; docs/realism.md)
+        self._perturbations = Perturbations(
+            sensor_noise=sensor_noise,
+            obs_delay_steps=obs_delay_steps,
+            obs_delay_jitter_steps=obs_delay_jitter_steps,
+            action_delay_steps=action_delay_steps,
+            action_delay_jitter_steps=action_delay_jitter_steps,
+            actuator_lag_s=actuator_lag_s,
+            joint_lag_s=joint_lag_s,
+            torque_noise=torque_noise,
+            com_offset=com_offset,
+            inertia_randomization=inertia_randomization,
+            joint_damping=joint_damping,
+            joint_friction=joint_friction,
+            floor_friction=tuple(floor_friction)  # type: ignore[arg-type]
+            if isinstance(floor_friction, list | tuple)
+            else floor_friction,
+            floor=FloorOptions(floor_slope_deg, bump_height, bump_spacing, bump_width),
+        )
         self._scene = SceneOptions(
             robot=robot,
             tray=tray,
@@ -227,6 +268,23 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             "cup_loss_penalty": cup_loss_penalty,
             "frame_skip": int(frame_skip),
             "time_limit": None if time_limit is None else float(time_limit),
+            "sensor_noise": sensor_noise,
+            "obs_delay_steps": obs_delay_steps,
+            "obs_delay_jitter_steps": obs_delay_jitter_steps,
+            "action_delay_steps": action_delay_steps,
+            "action_delay_jitter_steps": action_delay_jitter_steps,
+            "actuator_lag_s": actuator_lag_s,
+            "joint_lag_s": joint_lag_s,
+            "torque_noise": torque_noise,
+            "com_offset": com_offset,
+            "inertia_randomization": inertia_randomization,
+            "joint_damping": joint_damping,
+            "joint_friction": joint_friction,
+            "floor_friction": self._perturbations.floor_friction,
+            "floor_slope_deg": floor_slope_deg,
+            "bump_height": bump_height,
+            "bump_spacing": bump_spacing,
+            "bump_width": bump_width,
         }
         self._tray = tray
         self._free_tray = tray and tray_attachment == "free"
@@ -242,6 +300,8 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         # the make-time goal; reset(options={"goal": ...}) sets another for one episode
         self._default_goal = self._goal.copy()
 
+        if kwargs.get("render_mode") == "human":  # a window: GLFW aborts the process without one
+            require_display("render_mode='human'")
         # render(): the camera (wip_gym.camera: "follow", "tray" or an MJCF camera) and overlay
         self._render_camera = kwargs.pop("camera_name", None) or "follow"
         self._render_overlay = bool(kwargs.pop("render_overlay", False))
@@ -318,6 +378,18 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             self._tray_settler = TraySettler(m, self._scene)
         if payload_mass > 0:
             self._payload_body = m.body("payload").id
+        self._perturber = Perturber(
+            self._perturbations,
+            m,
+            lay,
+            self.dt,
+            self._robot_bodies,
+            m.body("payload").id if self._spec.tray_capable else -1,
+        )
+        # the step's hooks run only for a perturbation that acts there
+        self._perturb_model = self._perturbations.active
+        self._perturb_action = self._perturbations.on_action
+        self._perturb_observation = self._perturbations.on_observation
         self._action_low = self.action_space.low.astype(np.float64)
         self._action_high = self.action_space.high.astype(np.float64)
         # made once: the accepted band (limits +- 1e-6 of the range) and the reward's scale
@@ -380,10 +452,24 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
 
     # ----------------------------------------------------------------- model
     def _initialize_simulation(self) -> tuple[mujoco.MjModel, mujoco.MjData]:
-        model = build_model(self._scene)
+        model = build_task_model(self._scene, self._perturbations, self._goal_xy_of_task())
         model.vis.global_.offwidth = max(model.vis.global_.offwidth, self.width)
         model.vis.global_.offheight = max(model.vis.global_.offheight, self.height)
         return model, mujoco.MjData(model)
+
+    def _goal_xy_of_task(self) -> tuple[float, float]:
+        return (float(self._goal[0]), float(self._goal[1]))
+
+    @property
+    def perturbations(self) -> Perturbations:
+        """The perturbation arguments in effect (docs/realism.md)."""
+        return self._perturbations
+
+    @property
+    def perturber(self) -> Perturber:
+        """The perturbations at run time (its ``sensors`` hold the last observation's
+        errors)."""
+        return self._perturber
 
     @property
     def scene_options(self) -> SceneOptions:
@@ -465,6 +551,8 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         m, d, lay = self.model, self.data, self.robot.layout
         rng = self.np_random
         self._solve_by_islands(False)  # as built again, before any of the reset's physics
+        if self._perturb_model:  # the perturbations' own streams seeded (none drawn from rng)
+            self._perturber.begin_episode(rng, self.np_random_seed)
         m.body_mass[:] = self._nominal_mass
         m.body_inertia[:] = self._nominal_inertia
         if self._mass_randomization > 0:
@@ -473,6 +561,8 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             )
             m.body_mass[self._robot_bodies] *= scale
             m.body_inertia[self._robot_bodies] *= scale[:, None]
+        if self._perturb_model:
+            self._perturber.perturb_model(m)
         self._payload_attached = self._payload_mass <= 0 or self._payload_time <= 0.0
         self._events_due = self._push[0] != 0.0 or not self._payload_attached
         if self._payload_mass > 0 and not self._payload_attached:
@@ -490,10 +580,17 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         q[first:] += rng.uniform(-s, s, lay.n_min - first)
         nu[first:] += rng.uniform(-s, s, lay.n_min - first)
         qpos_robot, qvel_robot = self.robot.full_state(q, nu)
+        # the wheels WHEEL_RESET_DEPTH into the floor, as the cup into the tray below: at
+        # distance 0 their contacts carry no force at the reset, and the robot dropped onto
+        # its wheels in the first step (17 to 20 mm/s down, a bounce of the wheels' contact
+        # that shook the tray)
+        qpos_robot[lay.root_qpos + (1 if lay.planar else 2)] -= WHEEL_RESET_DEPTH
         qpos = self.init_qpos.copy()
         qvel = np.zeros(m.nv)
         qpos[: lay.nq] = qpos_robot
         qvel[: lay.nv] = qvel_robot
+        if self._perturb_model:
+            self._perturber.place_on_floor(qpos)
         if self._tray:
             if self._free_tray:
                 self._place_free_tray(qpos)
@@ -518,6 +615,8 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         # _measure found ee_error from the previous reference: from this one it is 0
         self._measures[ms.EE_ERROR] = self._block[ms.EE_ERROR] = values[ms.EE_ERROR] = 0.0
         self._cup_lost = False
+        if self._perturb_observation:
+            return self._perturber.observe(self._get_obs(), first=True)
         return self._get_obs()
 
     def _move_with_hand(self, qpos: NDArray[np.float64], qvel: NDArray[np.float64]) -> None:
@@ -581,6 +680,8 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             effort = float(np.sum(np.square(a / self._action_scale)))
         if self._events_due:
             self._apply_events()
+        if self._perturb_action:  # the torques applied: delayed, noisy (docs/realism.md)
+            a = self._perturber.actuate(a)
         self.do_simulation(a, self.frame_skip)
         values = self._measure()
         fallen = values[ms.FALLEN] != 0.0
@@ -606,8 +707,10 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         truncated = limit is not None and self.data.time >= limit - 0.5 * self.model.opt.timestep
         if self.render_mode == "human":
             self.render()
-        reward = float(progress + ctrl + fall + cup_loss)
-        return self._get_obs(), reward, terminated, truncated, info
+        obs = self._get_obs()
+        if self._perturb_observation:  # what the sensors report, when it arrives
+            obs = self._perturber.observe(obs)
+        return obs, float(progress + ctrl + fall + cup_loss), terminated, truncated, info
 
     def _solve_by_islands(self, cup_lost: bool) -> None:
         """Constraint islands, off in the models (assets/mjcf/README.md: while the cup rides the
@@ -615,7 +718,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         work), are switched on from a cup's loss to the next reset: the cup (or the free tray)
         on the floor is an island of its own, and one joint solve stops when the robot's
         forces have converged, leaving the cup's up to 1e-4 m/s off where the solve by islands
-        converges each (docs/performance.md §24). Only the island flag is touched, only if it
+        converges each. Only the island flag is touched, only if it
         is set at the loss, and only what this switched on is switched off at the reset: a
         user's own setting stands. ``model.opt`` shows the change."""
         bit = int(mujoco.mjtDisableBit.mjDSBL_ISLAND)

@@ -24,6 +24,8 @@ _COMMON = """
 
     `qpos`/`qvel` are all a model-based controller needs: `wip_gym.RobotModel` rebuilds the
     minimal coordinates `[x, psi, q1..qn]`, `theta`, `lambda(q)` and the dynamics from them.
+    With `sensor_noise` or an observation delay they are what the robot's IMU and encoders
+    report, late (docs/realism.md); `info` always holds the true state.
 
     ## Action Space
 
@@ -68,7 +70,8 @@ _COMMON = """
 
     ## Starting State
 
-    The `home` pose at the origin, heading along +x, the base pitched about the axle so the
+    The `home` pose at the origin (on a sloped floor, the axle raised to put the wheels on
+    it), heading along +x, the base pitched about the axle so the
     body's CoM is exactly above it (a welded tray is level there); then uniform noise of
     `reset_noise_scale` (rad, rad/s) on the base pitch, body joints and their rates, applied in
     minimal coordinates so the wheels stay rolling on the floor. Without control it falls.
@@ -109,16 +112,34 @@ _COMMON = """
     | `payload_mass` | 0.0 | kg welded to the hand (`ee` site) |
     | `payload_time` | 0.0 | s at which the payload appears (0: from the start) |
     | `push_force` | 0.0 | N along the heading at the torso's CoM (sign = direction); with a push the env owns that body's `data.xfrc_applied` (zeroed outside the push), without one it never writes it |
-    | `push_time`, `push_duration` | 1.0, 0.1 | s of simulated time: the push acts from the first step starting at or after `push_time` while a step's start is before `push_time + push_duration` |
-    | `reset_noise_scale` | 0.01 | rad and rad/s |
+    | `push_time` | 1.0 | s at which the push starts (simulated time: the push acts on the steps that start in `[push_time, push_time + push_duration)`) |
+    | `push_duration` | 0.1 | s the push lasts |
+    | `reset_noise_scale` | 0.01 | half-width of the uniform reset noise on the base pitch, body joints and their rates (rad, rad/s) |
     | `mass_randomization` | 0.0 | each link's mass and inertia scaled by `1 + U(-f, f)` per reset |
     | `wheel_torque_limit` | 150.0 | N m per wheel (authors' simulation); 63.6 for Krang's hardware |
     | `terminate_on_cup_loss` | True | end the episode when the cup leaves the tray |
     | `fall_angle` | 0.8 | rad of `theta` counted as a fall |
     | `progress_weight`, `ctrl_cost_weight` | 1.0, 0.1 | reward weights |
     | `fall_penalty`, `cup_loss_penalty` | 10.0, 10.0 | reward penalties |
-    | `frame_skip` | 1 | MuJoCo steps (1 ms) per env step: the control step `dt` = `frame_skip` ms; no duration below depends on it |
+    | `frame_skip` | 1 | MuJoCo steps (1 ms) per env step: the control step `dt` = `frame_skip` ms; the arguments in s do not depend on it (the `*_delay_steps` count control steps) |
     | `time_limit` | 25.0 | s of simulated time after which the episode is truncated; None: never (the plan's 20 s horizon plus 5 s to settle) |
+    | `sensor_noise` | 0.0 | scale on the documented noise, biases and steps of the IMU and the encoders, 0 for the exact state (docs/realism.md §2) |
+    | `obs_delay_steps` | 0 | control steps by which the observation arrives late (until the first arrives, the reset's) |
+    | `obs_delay_jitter_steps` | 0 | each step's observation delay is `obs_delay_steps` plus a uniform integer in `[0, j]` |
+    | `action_delay_steps` | 0 | control steps by which the action is applied late (zero torque before the first arrives) |
+    | `action_delay_jitter_steps` | 0 | each step's action delay is `action_delay_steps` plus a uniform integer in `[0, j]` |
+    | `actuator_lag_s` | 0.0 | s, time constant of a first-order lag on every actuator's torque (MuJoCo's activation dynamics; docs/realism.md §4) |
+    | `joint_lag_s` | None | s, the body joints' own lag time constant (None: `actuator_lag_s`) |
+    | `torque_noise` | 0.0 | standard deviation of white torque noise per step, as a fraction of each actuator's torque limit |
+    | `com_offset` | 0.0 | m, each link's CoM moved by `U(-c, c)` per axis per reset (wheels excepted) |
+    | `inertia_randomization` | 0.0 | each link's inertia scaled by `1 + U(-f, f)` per reset |
+    | `joint_damping` | 0.0 | N m s/rad, viscous damping `U(0, d)` added to every actuated joint per reset |
+    | `joint_friction` | 0.0 | N m, dry friction (`frictionloss`) `U(0, f)` added to every actuated joint per reset |
+    | `floor_friction` | 1.0 | wheel-floor friction coefficient, or a range `(low, high)` drawn per reset |
+    | `floor_slope_deg` | 0.0 | deg, the floor's slope, rising toward +x when positive; the robot starts on it (docs/realism.md §5) |
+    | `bump_height` | 0.0 | m, height of bumps across the path (flat-topped boxes the wheels roll over), 0 for none |
+    | `bump_spacing` | 1.0 | m, distance between bumps along the floor (none at the start) |
+    | `bump_width` | 0.1 | m, length of each bump's top along the path |
     | `render_mode`, `width`, `height` | None, 480, 320 | `human`, `rgb_array`, `depth_array` |
 """
 

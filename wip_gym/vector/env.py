@@ -1,0 +1,420 @@
+"""The native vector env: the single env N times, stepped in one call (docs/vector.md).
+
+``gymnasium.make_vec(id, num_envs=N)`` makes a :class:`WIPVectorEnv` (each env's
+``vector_entry_point``, ``wip_gym/registration.py``). Sub-env ``i`` is ``gymnasium.make(id,
+**kwargs)`` itself (its own MjModel and MjData, since an episode may change its model: mass
+randomisation, a payload; its own time limit), reset with seed ``S + i`` by ``reset(seed=S)``,
+so that it equals the single env bit for bit, through autoresets. What it saves over
+Gymnasium's ``SyncVectorEnv`` is the batching around the sub-envs' steps: observations are
+written row by row into the batch's arrays, infos are batched a few conversions per step
+(``wip_gym.vector.infos``); with ``num_threads`` > 1, threads overlap one sub-env's physics
+(which releases the GIL) with another's Python (``wip_gym.vector.threads``).
+"""
+
+from __future__ import annotations
+
+import copy
+import os
+import weakref
+from collections.abc import Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from gymnasium.error import ResetNeeded
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+from gymnasium.wrappers import TimeLimit
+from numpy.typing import NDArray
+
+from wip_gym.vector.infos import InfoBatcher
+from wip_gym.vector.threads import ParallelLoop
+
+_MODES = {mode.value: mode for mode in AutoresetMode}
+#: the default number of threads: one. A sub-env's step holds the GIL for about half its time
+#: (its Python; MuJoCo's step and the env's compiled measures release it) and hands it over
+#: four times, so two threads can at best bring it to that half, and measured on a shared
+#: 2-core machine they were slower than one (docs/vector.md §3)
+DEFAULT_THREADS = 1
+
+
+def available_cores() -> int:
+    """The cores this process may run on (``taskset`` and cgroups' affinity respected)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def _autoreset_mode(mode: AutoresetMode | str) -> AutoresetMode:
+    if isinstance(mode, AutoresetMode):
+        return mode
+    if mode in _MODES:
+        return _MODES[mode]
+    raise ValueError(
+        f"autoreset_mode must be an AutoresetMode or one of {sorted(_MODES)}, got {mode!r}"
+    )
+
+
+def make_sub_env(
+    env_id: str, max_episode_steps: int | None = None, **env_kwargs: Any
+) -> gym.Env[Any, Any]:
+    """One sub-env: ``gymnasium.make(env_id, **env_kwargs)`` (its time limit included), without
+    the order-enforcing and checker wrappers (the vector env keeps the order itself).
+
+    ``max_episode_steps`` is passed on only when it differs from the registered one (what
+    ``make_vec`` hands every vector entry point): otherwise the sub-env gets the time limit
+    ``gymnasium.make`` gives the single env, however that is derived from the arguments."""
+    spec = copy.deepcopy(gym.spec(env_id))
+    spec.order_enforce = False
+    spec.disable_env_checker = True
+    if max_episode_steps is not None and max_episode_steps != spec.max_episode_steps:
+        return gym.make(spec, max_episode_steps=max_episode_steps, **env_kwargs)
+    return gym.make(spec, **env_kwargs)
+
+
+def step_path(env: gym.Env[Any, Any]) -> tuple[gym.Env[Any, Any], int | None]:
+    """What to step for the made env ``env`` and the time limit to count beside it: the base
+    env and the ``TimeLimit``'s step count when ``env`` is exactly ``TimeLimit(base)`` (the
+    vector env counts the steps as ``TimeLimit`` does: truncated at the step whose count
+    reaches it), the base env and None when ``env`` is the base env, else ``env`` itself with
+    whatever wrappers ``gymnasium.make`` gave it."""
+    base = env.unwrapped
+    if env is base:
+        return base, None
+    if type(env) is TimeLimit and env.env is base and env.spec is not None:
+        return base, env.spec.max_episode_steps
+    return env, None
+
+
+class _SubEnvs:
+    """The sub-envs and what one pass over them reads and writes (kept apart from the vector
+    env so that its threads hold no reference to it: an unclosed vector env is collected)."""
+
+    def __init__(
+        self, envs: list[gym.Env[Any, Any]], observation_keys: tuple[str, ...], batcher: InfoBatcher
+    ) -> None:
+        self.envs = envs
+        paths = [step_path(env) for env in envs]
+        self.stepped = [path for path, _ in paths]
+        self.limits = [limit for _, limit in paths]
+        self.keys = observation_keys
+        self.batcher = batcher
+        n = len(envs)
+        self.elapsed = [0] * n  # steps since the reset, against the limits
+        # one pass's inputs
+        self.stepping = True
+        self.actions: NDArray[Any] = np.zeros(0)
+        self.reset_first = np.zeros(n, dtype=np.bool_)  # next-step autoreset
+        self.same_step = False
+        self.seeds: Sequence[int | None] = [None] * n
+        self.options: dict[str, Any] | None = None
+        self.reset_mask = np.ones(n, dtype=np.bool_)
+        # its outputs
+        self.observations: dict[str, NDArray[np.float64]] = {}
+        self.rewards: list[Any] = [0.0] * n
+        self.terminations: list[Any] = [False] * n
+        self.truncations: list[Any] = [False] * n
+        self.infos: list[dict[str, Any] | None] = [None] * n
+        self.last: list[dict[str, Any] | None] = [None] * n  # each sub-env's last observation
+        self.finals: list[tuple[int, Any, dict[str, Any]]] = []
+
+    def write(self, i: int, observation: dict[str, Any], info: dict[str, Any] | None) -> None:
+        self.last[i] = observation
+        observations = self.observations
+        for key in self.keys:
+            observations[key][i] = observation[key]
+        self.infos[i] = info
+        self.batcher.write(i, info)
+
+    def reset_one(self, i: int, seed: int | None, options: dict[str, Any] | None) -> Any:
+        self.elapsed[i] = 0
+        return self.stepped[i].reset(seed=seed, options=options)
+
+    def __call__(self, i: int) -> None:
+        """Sub-env ``i``'s part of the pass (a step or a reset)."""
+        if not self.stepping:
+            if self.reset_mask[i]:
+                observation, info = self.reset_one(i, self.seeds[i], self.options)
+                self.write(i, observation, info)
+            else:  # not reset: its observation stands
+                last = self.last[i]
+                if last is None:
+                    raise RuntimeError(f"sub-env {i} was never reset: reset it first")
+                self.write(i, last, None)
+            return
+        if self.reset_first[i]:
+            observation, info = self.reset_one(i, None, None)
+            self.rewards[i], self.terminations[i], self.truncations[i] = 0.0, False, False
+            self.write(i, observation, info)
+            return
+        try:
+            observation, reward, terminated, truncated, info = self.stepped[i].step(self.actions[i])
+        except ValueError as error:
+            raise ValueError(f"sub-env {i}: {error}") from error
+        limit = self.limits[i]
+        if limit is not None:
+            self.elapsed[i] = elapsed = self.elapsed[i] + 1
+            if elapsed >= limit:
+                truncated = True
+        if self.same_step and (terminated or truncated):
+            self.finals.append((i, observation, info))
+            observation, info = self.reset_one(i, None, None)
+        self.rewards[i] = reward
+        self.terminations[i] = terminated
+        self.truncations[i] = truncated
+        # write(), inline: the common case of every step
+        self.last[i] = observation
+        observations = self.observations
+        for key in self.keys:
+            observations[key][i] = observation[key]
+        self.infos[i] = info
+        self.batcher.write(i, info)
+
+
+class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArray[Any]]):
+    """``num_envs`` copies of the env ``env_id`` stepped in one call (docs/vector.md).
+
+    Args:
+        env_id: a registered wip-gym env.
+        num_envs: sub-envs.
+        max_episode_steps: as ``gymnasium.make``'s (``make_vec`` passes the registered value;
+            see :func:`make_sub_env`).
+        autoreset_mode: ``NextStep`` (the default, as Gymnasium's), ``SameStep`` or
+            ``Disabled`` (an ``AutoresetMode`` or its value), with Gymnasium's semantics.
+        num_threads: threads that step the sub-envs (the caller's included; at most
+            ``num_envs``); default :data:`DEFAULT_THREADS`.
+        copy: return fresh observation arrays at every call (True, as Gymnasium's vector
+            envs) or the same buffers, overwritten by the next call.
+        **env_kwargs: the single env's arguments (``gymnasium.make(env_id, **env_kwargs)``);
+            ``render_mode`` ``rgb_array`` or ``depth_array`` (``render()`` gives one frame per
+            sub-env), not ``human``.
+    """
+
+    def __init__(
+        self,
+        env_id: str,
+        num_envs: int = 1,
+        *,
+        max_episode_steps: int | None = None,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        num_threads: int | None = None,
+        copy: bool = True,
+        **env_kwargs: Any,
+    ) -> None:
+        if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
+            raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
+        if env_kwargs.get("render_mode") == "human":
+            raise ValueError(
+                "a vector env draws no window: make it with render_mode='rgb_array' and call "
+                "render() (a frame per sub-env), or watch one env with `wip-bench view` "
+                "(docs/videos.md §6)"
+            )
+        threads = DEFAULT_THREADS if num_threads is None else num_threads
+        if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
+            raise ValueError(f"num_threads must be a positive integer, got {num_threads!r}")
+        mode = _autoreset_mode(autoreset_mode)
+        self.env_id = env_id
+        self.num_envs = num_envs
+        self.copy = copy
+        envs = [make_sub_env(env_id, max_episode_steps, **env_kwargs) for _ in range(num_envs)]
+        first = envs[0]
+        observation_space = first.observation_space
+        if not isinstance(observation_space, spaces.Dict) or not all(
+            isinstance(s, spaces.Box) for s in observation_space.spaces.values()
+        ):
+            raise TypeError(f"{env_id}: expected a Dict of Box observations")
+        self.single_observation_space = observation_space
+        self.single_action_space = first.action_space
+        self.observation_space = batch_space(observation_space, num_envs)
+        self.action_space = batch_space(first.action_space, num_envs)
+        self.render_mode = first.render_mode
+        self.metadata = {
+            "autoreset_mode": mode,
+            "render_modes": [m for m in first.metadata.get("render_modes", []) if m != "human"],
+            "render_fps": first.metadata.get("render_fps"),
+        }
+        self.spec = None  # make_vec sets it
+        self._autoreset_mode = mode
+        self._batcher = InfoBatcher(num_envs, self._add_info)
+        self._sub = _SubEnvs(envs, tuple(observation_space.spaces), self._batcher)
+        self._shapes: dict[str, tuple[int, ...]] = {
+            key: tuple(space.shape or ()) for key, space in observation_space.spaces.items()
+        }
+        self._buffers = self._new_observations()
+        self._ended = np.zeros(num_envs, dtype=np.bool_)  # ended at the last step
+        self._has_reset = False
+        self._loop = ParallelLoop(self._sub, num_envs, min(threads, num_envs))
+        self._finalizer = weakref.finalize(self, self._loop.close)
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def envs(self) -> tuple[gym.Env[Any, Any], ...]:
+        """The sub-envs (for reading; stepping one by hand breaks the batch's bookkeeping)."""
+        return tuple(self._sub.envs)
+
+    @property
+    def num_threads(self) -> int:
+        """Threads that step the sub-envs (the caller's included)."""
+        return self._loop.threads
+
+    def _new_observations(self) -> dict[str, NDArray[np.float64]]:
+        n = self.num_envs
+        return {key: np.empty((n, *shape)) for key, shape in self._shapes.items()}
+
+    def _observations_out(self) -> dict[str, NDArray[np.float64]]:
+        """Where this call's observations go: fresh arrays (``copy``), or the buffers."""
+        return self._new_observations() if self.copy else self._buffers
+
+    # ------------------------------------------------------------------ reset, step
+    def reset(
+        self,
+        *,
+        seed: int | Sequence[int | None] | None = None,
+        options: dict[str, Any] | None = None,
+    ) -> tuple[dict[str, NDArray[np.float64]], dict[str, Any]]:
+        """Reset the sub-envs: ``seed`` an int (sub-env ``i`` gets ``seed + i``), a list (one
+        per sub-env) or None; ``options`` passed to each, with ``reset_mask`` (a bool array
+        over the sub-envs) resetting only those (as Gymnasium's vector envs)."""
+        n = self.num_envs
+        if seed is None:
+            seeds: list[int | None] = [None] * n
+        elif isinstance(seed, int | np.integer):
+            if isinstance(seed, bool):
+                raise ValueError(f"seed must be an int, a list of them or None, got {seed!r}")
+            seeds = [int(seed) + i for i in range(n)]
+        else:
+            seeds = list(seed)
+            if len(seeds) != n:
+                raise ValueError(f"seed: {len(seeds)} seeds for {n} sub-envs")
+        options = dict(options) if options is not None else None
+        mask = np.ones(n, dtype=np.bool_)
+        if options is not None and "reset_mask" in options:
+            mask = options.pop("reset_mask")
+            if not isinstance(mask, np.ndarray) or mask.shape != (n,) or mask.dtype != np.bool_:
+                raise ValueError(f"options['reset_mask'] must be a bool array of shape ({n},)")
+            if not mask.any():
+                raise ValueError("options['reset_mask'] resets no sub-env")
+        sub = self._sub
+        sub.stepping = False
+        sub.seeds, sub.options, sub.reset_mask = seeds, options, mask
+        sub.observations = observations = self._observations_out()
+        self._loop.run()
+        self._ended[mask] = False
+        self._has_reset = True
+        return observations, self._batcher.batch(sub.infos)
+
+    def step(
+        self, actions: NDArray[Any]
+    ) -> tuple[
+        dict[str, NDArray[np.float64]],
+        NDArray[np.float64],
+        NDArray[np.bool_],
+        NDArray[np.bool_],
+        dict[str, Any],
+    ]:
+        """Step every sub-env with its row of ``actions`` (``(num_envs, nu)`` torques); a
+        sub-env that ended at the last step is reset instead (``NextStep``: reward 0, its
+        action ignored), or at the step it ends (``SameStep``: ``final_obs``, ``final_info``).
+        """
+        if not self._has_reset:
+            raise ResetNeeded("call reset() before step()")
+        actions = np.asarray(actions)
+        if actions.shape != self.action_space.shape:
+            raise ValueError(
+                f"actions must have shape {self.action_space.shape} (num_envs x actuators), "
+                f"got {actions.shape}"
+            )
+        mode = self._autoreset_mode
+        if mode is AutoresetMode.DISABLED and self._ended.any():
+            raise RuntimeError(
+                f"sub-envs {np.flatnonzero(self._ended).tolist()} ended and autoreset is "
+                "disabled: reset them with reset(options={'reset_mask': ...})"
+            )
+        sub = self._sub
+        sub.stepping = True
+        sub.actions = actions
+        sub.reset_first = self._ended if mode is AutoresetMode.NEXT_STEP else self._no_resets()
+        sub.same_step = mode is AutoresetMode.SAME_STEP
+        sub.finals = []
+        sub.observations = observations = self._observations_out()
+        self._loop.run()
+        rewards = np.array(sub.rewards, dtype=np.float64)
+        terminations = np.array(sub.terminations, dtype=np.bool_)
+        truncations = np.array(sub.truncations, dtype=np.bool_)
+        self._ended = terminations | truncations
+        finals = sorted(sub.finals, key=lambda f: f[0]) if sub.finals else ()
+        infos = self._batcher.batch(sub.infos, finals)
+        return observations, rewards, terminations, truncations, infos
+
+    def _no_resets(self) -> NDArray[np.bool_]:
+        return np.zeros(self.num_envs, dtype=np.bool_)
+
+    # ------------------------------------------------------------------ the rest
+    def render(self) -> tuple[Any, ...] | None:
+        """A frame per sub-env (``rgb_array``/``depth_array``), None without a render mode."""
+        if self.render_mode is None:
+            return None
+        return tuple(env.render() for env in self._sub.envs)
+
+    def call(self, name: str, *args: Any, **kwargs: Any) -> tuple[Any, ...]:
+        """Call ``name`` on every sub-env (an attribute: its value), as Gymnasium's."""
+        results = []
+        for env in self._sub.envs:
+            attribute = env.get_wrapper_attr(name)
+            results.append(attribute(*args, **kwargs) if callable(attribute) else attribute)
+        return tuple(results)
+
+    def get_attr(self, name: str) -> tuple[Any, ...]:
+        """Every sub-env's attribute ``name``."""
+        return self.call(name)
+
+    def set_attr(self, name: str, values: Any) -> None:
+        """Set ``name`` on every sub-env: one value each (a list or tuple) or one for all."""
+        if not isinstance(values, list | tuple):
+            values = [values] * self.num_envs
+        if len(values) != self.num_envs:
+            raise ValueError(f"set_attr: {len(values)} values for {self.num_envs} sub-envs")
+        for env, value in zip(self._sub.envs, values, strict=True):
+            env.set_wrapper_attr(name, value)
+
+    def close_extras(self, **kwargs: Any) -> None:
+        self._finalizer()  # stops the threads
+        for env in self._sub.envs:
+            env.close()
+
+
+class WIPDriveVectorEnv(WIPVectorEnv):
+    """``wip_gym/WIP-v0`` x ``num_envs`` (its ``vector_entry_point``)."""
+
+    def __init__(self, num_envs: int = 1, **kwargs: Any) -> None:
+        super().__init__("wip_gym/WIP-v0", num_envs, **kwargs)
+
+
+class PlanarVectorEnv(WIPVectorEnv):
+    """``wip_gym/Planar-v0`` x ``num_envs`` (its ``vector_entry_point``)."""
+
+    def __init__(self, num_envs: int = 1, **kwargs: Any) -> None:
+        super().__init__("wip_gym/Planar-v0", num_envs, **kwargs)
+
+
+class PlanarTrayVectorEnv(WIPVectorEnv):
+    """``wip_gym/PlanarTray-v0`` x ``num_envs`` (its ``vector_entry_point``)."""
+
+    def __init__(self, num_envs: int = 1, **kwargs: Any) -> None:
+        super().__init__("wip_gym/PlanarTray-v0", num_envs, **kwargs)
+
+
+class KrangVectorEnv(WIPVectorEnv):
+    """``wip_gym/Krang-v0`` x ``num_envs`` (its ``vector_entry_point``)."""
+
+    def __init__(self, num_envs: int = 1, **kwargs: Any) -> None:
+        super().__init__("wip_gym/Krang-v0", num_envs, **kwargs)
+
+
+class KrangTrayVectorEnv(WIPVectorEnv):
+    """``wip_gym/KrangTray-v0`` x ``num_envs`` (its ``vector_entry_point``)."""
+
+    def __init__(self, num_envs: int = 1, **kwargs: Any) -> None:
+        super().__init__("wip_gym/KrangTray-v0", num_envs, **kwargs)
