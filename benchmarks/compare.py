@@ -94,8 +94,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--env", default=DEFAULT_ENV, help="env id (wip_gym/NAME or NAME)")
     parser.add_argument(
         "--controllers",
-        help="comma-separated registry names (default: every registered controller: "
-        f"{', '.join(registry.controller_names())}, and those of --import modules)",
+        help="comma-separated registry names (default: every registered controller but the "
+        f"learned ppo, which runs where it has a checkpoint: "
+        f"{', '.join(registry.default_controller_names())}, and those of --import modules)",
     )
     parser.add_argument("--episodes", type=int, default=1)
     parser.add_argument("--seed", type=int, default=0)
@@ -155,9 +156,10 @@ def named_env_flags(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def controller_list(args: argparse.Namespace) -> list[str]:
-    """``--controllers``, or every registered controller (``--import`` modules included)."""
+    """``--controllers``, or every default controller (``--import`` modules' included; the
+    learned ``ppo`` only by name, ``registry.default_controller_names``)."""
     if args.controllers is None:
-        return registry.controller_names()
+        return registry.default_controller_names()
     return parse_controllers(args.controllers)
 
 

@@ -51,6 +51,8 @@ from wip_gym.envs.base import wip_env
 
 FIXED_ENV_ARGUMENTS = ("robot", "tray")  # set by the task class
 RENDER_ENV_ARGUMENTS = ("render_mode", "width", "height")  # how to draw, not what happens
+# the run's --duration ends its episodes (benchmarks.rollout turns the env's own limit off)
+EPISODE_ENV_ARGUMENTS = ("time_limit",)
 _MISSING = object()
 
 
@@ -201,7 +203,7 @@ def _env_signature(env_id: str) -> tuple[tuple[str, Any, Any], ...]:
             if hint is _MISSING and default is not _MISSING and default is not None:
                 hint = type(default)
             found[parameter.name] = (hint, default)
-    skip = set(FIXED_ENV_ARGUMENTS) | set(RENDER_ENV_ARGUMENTS)
+    skip = set(FIXED_ENV_ARGUMENTS) | set(RENDER_ENV_ARGUMENTS) | set(EPISODE_ENV_ARGUMENTS)
     return tuple((name, h, d) for name, (h, d) in found.items() if name not in skip)
 
 

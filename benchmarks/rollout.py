@@ -108,8 +108,9 @@ def rollout(
     """
     if not (np.isfinite(duration) and duration > 0):
         raise ValueError(f"duration must be positive, got {duration}")
-    # -1: no TimeLimit (None would mean the registered 25 000 steps); the duration ends it
-    env = gym.make(env_id, max_episode_steps=-1, **env_kwargs)
+    # no time limit (neither a TimeLimit nor the env's own 25 s) unless env_kwargs set one:
+    # the duration ends the episode
+    env = gym.make(env_id, max_episode_steps=-1, **{"time_limit": None, **env_kwargs})
     try:
         setup_start = time.perf_counter()
         observation, info = env.reset(seed=seed)

@@ -28,7 +28,13 @@ if TYPE_CHECKING:
     from controllers.hierarchical import HierarchicalConfig, HierarchicalController
     from controllers.high_level.planning import PlanConfig
     from controllers.policy import Policy, PolicyBase, TaskInfo
-    from controllers.registry import controller_names, default_config, make_policy, register
+    from controllers.registry import (
+        controller_names,
+        default_config,
+        default_controller_names,
+        make_policy,
+        register,
+    )
 
 _EXPORTS = {
     "DecoupledConfig": "controllers.baselines.decoupled",
@@ -44,6 +50,7 @@ _EXPORTS = {
     "PolicyBase": "controllers.policy",
     "TaskInfo": "controllers.policy",
     "controller_names": "controllers.registry",
+    "default_controller_names": "controllers.registry",
     "default_config": "controllers.registry",
     "make_policy": "controllers.registry",
     "register": "controllers.registry",
@@ -63,6 +70,7 @@ __all__ = [
     "PolicyBase",
     "TaskInfo",
     "controller_names",
+    "default_controller_names",
     "default_config",
     "make_policy",
     "register",

@@ -6,6 +6,11 @@
     config = default_config("unified", preset="paper")   # the frozen config dataclass
     policy = make_policy("unified", env, config)          # Controller.for_env(env, config)
 
+``controller_names()`` lists every name; ``default_controller_names()`` those a run uses when it
+names none (``wip-bench compare``'s default): the model-based controllers, which drive every
+env. A learned policy (``ppo``, ``controllers.learned``) drives the envs it has a checkpoint
+for, so it is registered outside the defaults and run by name.
+
 A name maps to a controller class (a :class:`controllers.policy.PolicyBase` subclass, or any
 class with ``for_env(env, config)`` returning a :class:`controllers.policy.Policy`), its config
 dataclass and the config fields the name fixes (``unified-waiter`` is the hierarchical
@@ -67,6 +72,7 @@ class Registration:
     controller: Any
     config: Any
     fields: dict[str, Any]
+    default: bool = True  # in default_controller_names()
 
     def controller_class(self) -> Any:
         return _load(self.controller)
@@ -110,6 +116,10 @@ _REGISTRY: dict[str, Registration] = {
     ),
     "unified-upright": Registration(
         "controllers.upright:UprightController", "controllers.upright:UprightConfig", {}
+    ),
+    # a learned policy: runs where it has a checkpoint, by name only (docs/learning.md §8)
+    "ppo": Registration(
+        "controllers.learned:LearnedController", "controllers.learned:LearnedConfig", {}, False
     ),
 }
 
@@ -170,6 +180,14 @@ def controller_names() -> list[str]:
     """Every registered name, in registration order (the plug-ins loaded first)."""
     load_plugins()
     return list(_REGISTRY)
+
+
+def default_controller_names() -> list[str]:
+    """The names a run uses when it names none, in registration order: every registered
+    controller but the learned ones (each drives only the envs it was trained for), the
+    plug-ins' included."""
+    load_plugins()
+    return [name for name, entry in _REGISTRY.items() if entry.default]
 
 
 def register(name: str, controller_cls: Any, config_cls: Any, **fields: Any) -> None:

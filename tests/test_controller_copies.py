@@ -1,6 +1,6 @@
-"""Every registered controller copied or pickled mid-episode (its plan made, its MPC and QP
-run) goes on as the original: on the same observations, the same actions to the bit (while
-no step goes to ProxQP, whose solver a copy starts anew)."""
+"""Every default controller (``default_controller_names``) copied or pickled mid-episode (its
+plan made, its MPC and QP run) goes on as the original: on the same observations, the same
+actions to the bit (while no step goes to ProxQP, whose solver a copy starts anew)."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import wip_gym  # noqa: F401
-from controllers.registry import controller_names, make_policy
+from controllers.registry import default_controller_names, make_policy
 
 COPIERS: dict[str, Callable[[Any], Any]] = {
     "deepcopy": copy.deepcopy,
@@ -23,7 +23,7 @@ COPIERS: dict[str, Callable[[Any], Any]] = {
 
 
 @pytest.mark.parametrize("copier", sorted(COPIERS))
-@pytest.mark.parametrize("name", controller_names())
+@pytest.mark.parametrize("name", default_controller_names())
 def test_a_controller_copied_mid_episode_goes_on_as_the_original(name: str, copier: str) -> None:
     env = gym.make("wip_gym/PlanarTray-v0")
     obs, info = env.reset(seed=2)

@@ -1,5 +1,6 @@
-"""Every registered controller drives both tray envs through the one rollout, in both tray
-attachments, for a short episode: it does not fall, keeps the cup, and every metric is finite.
+"""Every default controller (the model-based ones, ``default_controller_names``) drives both
+tray envs through the one rollout, in both tray attachments, for a short episode: it does not
+fall, keeps the cup, and every metric is finite.
 """
 
 from __future__ import annotations
@@ -10,7 +11,7 @@ import pytest
 
 from benchmarks.overrides import resolve_run
 from benchmarks.rollout import rollout, run_configured_episode
-from controllers.registry import controller_names
+from controllers.registry import default_controller_names
 
 DURATION_S = 1.0
 ENVS = ("wip_gym/PlanarTray-v0", "wip_gym/KrangTray-v0")
@@ -18,7 +19,7 @@ ENVS = ("wip_gym/PlanarTray-v0", "wip_gym/KrangTray-v0")
 
 @pytest.mark.parametrize("attachment", ["welded", "free"])
 @pytest.mark.parametrize("env_id", ENVS)
-@pytest.mark.parametrize("controller", controller_names())
+@pytest.mark.parametrize("controller", default_controller_names())
 def test_every_controller_carries_the_cup_on_both_tray_envs(
     controller: str, env_id: str, attachment: str
 ) -> None:
@@ -57,8 +58,8 @@ def test_run_configured_episode_returns_a_json_row() -> None:
 
 
 def test_the_rollout_runs_past_the_registered_time_limit() -> None:
-    """The envs register 25 000 steps (25 s); an episode's duration is the rollout's, so the
-    rollout's env carries no TimeLimit."""
+    """The envs truncate themselves at their ``time_limit`` (25 s); an episode's duration is
+    the rollout's, so the rollout's env carries no TimeLimit and no time limit of its own."""
     import gymnasium as gym
 
     spec = resolve_run("wip_gym/Planar-v0", ["decoupled"])
@@ -72,6 +73,7 @@ def test_the_rollout_runs_past_the_registered_time_limit() -> None:
         wrappers.append(type(env).__name__)
         env = env.env
     assert "TimeLimit" not in wrappers, wrappers
+    assert env.time_limit is None
     episode.env.close()
 
 

@@ -254,7 +254,7 @@ def floor_times(
 
 def make_env(env_id: str, env_kwargs: dict[str, Any]) -> gym.Env:
     """The profiled env: no time limit (the episode lasts ``--duration``)."""
-    return gym.make(env_id, max_episode_steps=-1, **env_kwargs)
+    return gym.make(env_id, max_episode_steps=-1, **{"time_limit": None, **env_kwargs})
 
 
 def profile_episode(

@@ -31,6 +31,7 @@ from wip_gym.envs.perturbations import Perturbations, Perturber, build_task_mode
 from wip_gym.envs.step_reference import friction_use  # noqa: F401  (its home was here)
 from wip_gym.floor import FloorOptions
 from wip_gym.overlay import OverlayValues, draw_overlay
+from wip_gym.registration import EPISODE_SECONDS
 from wip_gym.renderer import FrameRenderer
 from wip_gym.robot_model import RobotModel
 from wip_gym.robots import robot_spec
@@ -59,6 +60,15 @@ def _goal_array(goal: Any, planar: bool) -> NDArray[np.float64]:
     if planar and arr[1] != 0.0:
         raise ValueError(f"a planar robot's goal has y = 0, got {goal!r}")
     return arr
+
+
+def _check_time_limit(time_limit: Any) -> None:
+    """``ValueError`` unless ``time_limit`` is None or a finite positive number of seconds."""
+    if time_limit is None:
+        return
+    number = isinstance(time_limit, int | float | np.integer | np.floating)
+    if isinstance(time_limit, bool) or not number or not (0.0 < time_limit < math.inf):
+        raise ValueError(f"time_limit must be None or a positive number of s, got {time_limit!r}")
 
 
 def _check_frame_skip(frame_skip: Any) -> None:
@@ -105,6 +115,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         fall_penalty: float = 10.0,
         cup_loss_penalty: float = 10.0,
         frame_skip: int = 1,
+        time_limit: float | None = EPISODE_SECONDS,
         sensor_noise: float = 0.0,
         obs_delay_steps: int = 0,
         obs_delay_jitter_steps: int = 0,
@@ -150,6 +161,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         if not 0.0 <= mass_randomization < 1.0:
             raise ValueError(f"mass_randomization must be in [0, 1), got {mass_randomization}")
         _check_frame_skip(frame_skip)
+        _check_time_limit(time_limit)
         # the robot as hardware sees it (wip_gym.envs.perturbations; docs/realism.md)
         self._perturbations = Perturbations(
             sensor_noise=sensor_noise,
@@ -208,6 +220,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             "fall_penalty": fall_penalty,
             "cup_loss_penalty": cup_loss_penalty,
             "frame_skip": int(frame_skip),
+            "time_limit": None if time_limit is None else float(time_limit),
             "sensor_noise": sensor_noise,
             "obs_delay_steps": obs_delay_steps,
             "obs_delay_jitter_steps": obs_delay_jitter_steps,
@@ -236,6 +249,9 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         self._terminate_on_cup_loss = terminate_on_cup_loss
         self._fall_angle = fall_angle
         self._weights = (progress_weight, ctrl_cost_weight, fall_penalty, cup_loss_penalty)
+        self._time_limit = None if time_limit is None else float(time_limit)
+        # the make-time goal; reset(options={"goal": ...}) sets another for one episode
+        self._default_goal = self._goal.copy()
 
         if kwargs.get("render_mode") == "human":  # a window: GLFW aborts the process without one
             require_display("render_mode='human'")
@@ -463,8 +479,36 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         takes it (render arguments excluded)."""
         return dict(self._arguments)
 
+    @property
+    def time_limit(self) -> float | None:
+        """The episode's time limit in simulated seconds (None: none); ``step`` reports
+        ``truncated`` at the first step that reaches it."""
+        return self._time_limit
+
     # ----------------------------------------------------------------- reset
     # MujocoEnv types observations as one array; ours is the Dict space's dict
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, NDArray[np.float64]], dict[str, Any]]:
+        """Gymnasium's reset; ``options={"goal": x or (X, Y)}`` sets the goal of this episode
+        (a reset without it goes back to the goal the env was made with). ``ValueError`` for
+        another option or a goal the robot cannot have (a planar robot's goal has y = 0)."""
+        goal = self._default_goal
+        if options:
+            unknown = sorted(set(options) - {"goal"})
+            if unknown:
+                raise ValueError(f"unknown reset options {unknown}; valid: ['goal']")
+            goal = _goal_array(options["goal"], self._spec.planar)
+        self._set_goal(goal)
+        return super().reset(seed=seed, options=options)
+
+    def _set_goal(self, goal: NDArray[np.float64]) -> None:
+        """The goal the observation, the reward and the info measure from (``reset`` places
+        its marker)."""
+        self._goal = goal.copy()
+        self._goal_xy = (float(goal[0]), float(goal[1]))
+        self._measure_floats[ms.F_GOAL_X], self._measure_floats[ms.F_GOAL_Y] = self._goal_xy
+
     def reset_model(self) -> dict[str, NDArray[np.float64]]:  # type: ignore[override]
         m, d, lay = self.model, self.data, self.robot.layout
         rng = self.np_random
@@ -620,12 +664,16 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         info["reward_cup_loss"] = cup_loss = -cup_pen if newly_lost else 0.0
         self._prev_distance = distance
         terminated = bool(fallen or (self._tray and self._terminate_on_cup_loss and self._cup_lost))
+        # the time limit in simulated seconds, whatever frame_skip is (half a MuJoCo step of
+        # margin for the sum of the steps' rounding)
+        limit = self._time_limit
+        truncated = limit is not None and self.data.time >= limit - 0.5 * self.model.opt.timestep
         if self.render_mode == "human":
             self.render()
         obs = self._get_obs()
         if self._perturb_observation:  # what the sensors report, when it arrives
             obs = self._perturber.observe(obs)
-        return obs, float(progress + ctrl + fall + cup_loss), terminated, False, info
+        return obs, float(progress + ctrl + fall + cup_loss), terminated, truncated, info
 
     def _solve_by_islands(self, cup_lost: bool) -> None:
         """Constraint islands, off in the models (assets/mjcf/README.md: while the cup rides the

@@ -81,14 +81,20 @@ _COMMON = """
     other by a few mm; about 10 ms per reset), and it and the cup get the hand's velocity.
     The cup starts upright at the plate's centre, exactly touching it (1 micron in).
     The free tray is not in `theta` (it is not part of the robot).
+    `reset(options={"goal": x or (X, Y)})` sets the goal of that episode (observation, reward,
+    info and marker); a reset without it goes back to the `goal` the env was made with.
 
     ## Episode End
 
     Terminated when the robot has fallen (a body link touches the floor or |theta| exceeds
     `fall_angle`) and, in tray tasks with `terminate_on_cup_loss`, when the cup is lost: not
     `cup_on_tray` (off the plate, or tilted beyond 30 deg) or, with a free tray, not
-    `tray_on_hand` (`reward_cup_loss` is paid on that step). Truncated after 25 s
-    (`max_episode_steps` = 25000 at the 1 ms step). Without `terminate_on_cup_loss`, the
+    `tray_on_hand` (`reward_cup_loss` is paid on that step). Truncated by the env itself at
+    `time_limit` (25 s) of simulated time, whatever `frame_skip` is: after 25,000 steps at the
+    1 ms step, 2,500 at `frame_skip=10` (the first step whose end reaches the limit). The specs
+    register no `max_episode_steps`; `gym.make(id, max_episode_steps=N)` adds Gymnasium's
+    `TimeLimit` of N steps on top (the first of the two ends the episode) and
+    `time_limit=None` removes the env's own (docs/learning.md §4). Without `terminate_on_cup_loss`, the
     episode goes on with MuJoCo's constraint islands switched on from the loss to the next
     reset (the models have them off: one island while the cup rides the tray; the cup on the
     floor is an island of its own, which they solve to its own convergence).
@@ -106,7 +112,7 @@ _COMMON = """
     | `payload_mass` | 0.0 | kg welded to the hand (`ee` site) |
     | `payload_time` | 0.0 | s at which the payload appears (0: from the start) |
     | `push_force` | 0.0 | N along the heading at the torso's CoM (sign = direction); with a push the env owns that body's `data.xfrc_applied` (zeroed outside the push), without one it never writes it |
-    | `push_time` | 1.0 | s at which the push starts |
+    | `push_time` | 1.0 | s at which the push starts (simulated time: the push acts on the steps that start in `[push_time, push_time + push_duration)`) |
     | `push_duration` | 0.1 | s the push lasts |
     | `reset_noise_scale` | 0.01 | half-width of the uniform reset noise on the base pitch, body joints and their rates (rad, rad/s) |
     | `mass_randomization` | 0.0 | each link's mass and inertia scaled by `1 + U(-f, f)` per reset |
@@ -115,7 +121,8 @@ _COMMON = """
     | `fall_angle` | 0.8 | rad of `theta` counted as a fall |
     | `progress_weight`, `ctrl_cost_weight` | 1.0, 0.1 | reward weights |
     | `fall_penalty`, `cup_loss_penalty` | 10.0, 10.0 | reward penalties |
-    | `frame_skip` | 1 | MuJoCo steps (1 ms) per env step |
+    | `frame_skip` | 1 | MuJoCo steps (1 ms) per env step: the control step `dt` = `frame_skip` ms; the arguments in s do not depend on it (the `*_delay_steps` count control steps) |
+    | `time_limit` | 25.0 | s of simulated time after which the episode is truncated; None: never (the plan's 20 s horizon plus 5 s to settle) |
     | `sensor_noise` | 0.0 | scale on the documented noise, biases and steps of the IMU and the encoders, 0 for the exact state (docs/realism.md §2) |
     | `obs_delay_steps` | 0 | control steps by which the observation arrives late (until the first arrives, the reset's) |
     | `obs_delay_jitter_steps` | 0 | each step's observation delay is `obs_delay_steps` plus a uniform integer in `[0, j]` |
