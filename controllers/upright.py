@@ -147,10 +147,13 @@ class UprightController(HierarchicalController):
         reference = self.tray_reference
         assert reference is not None
         plate, _, J_p, _ = site_in_axle_frame(robot, self._tray_site)
-        t = self._step * self.task.control_dt + reference.gains.lead
+        now = self._step * self.task.control_dt
         assert self.plan is not None
         targets = reference.targets(
-            plan_acceleration(self.plan, t), plate - self._plate_reset, J_p @ robot.nu
+            plan_acceleration(self.plan, now + reference.gains.lead),
+            plate - self._plate_reset,
+            J_p @ robot.nu,
+            reference.gains.level_fraction(now),
         )
         for (position, rotation), hand, orientation in zip(
             targets, self._hands, self.orientation_tasks, strict=True

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import wip_gym  # noqa: F401
-from controllers.registry import controller_names, make_policy
+from controllers.registry import default_controller_names, make_policy
 from wip_gym import mujoco_c
 
 STEPS = 150
@@ -30,7 +30,7 @@ def _readable_policy(name: str, env: gym.Env[Any, Any]) -> Any:
 
 
 @pytest.mark.parametrize("env_id", ["wip_gym/PlanarTray-v0", "wip_gym/KrangTray-v0"])
-@pytest.mark.parametrize("name", controller_names())
+@pytest.mark.parametrize("name", default_controller_names())
 def test_a_controller_on_the_readable_path_acts_as_on_the_fast_one(env_id: str, name: str) -> None:
     env = gym.make(env_id)
     obs, info = env.reset(seed=6)

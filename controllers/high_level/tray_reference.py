@@ -78,15 +78,27 @@ class TrayGains:
         lead: how far ahead the plan's acceleration is read (s): the orientation tasks' lag.
         kp, kv: the outer loop's gains on the tray's drift over the axle (1/s^2, 1/s).
         max_tilt_deg: the tilt's bound (deg).
+        level_s: a tray that rests tilted at reset is levelled over this time (s), along a
+            smooth step (a free tray on Krang's finger plates rests 3 to 4 deg off level: turned
+            level at once, the turn's own acceleration slid the cup within 20 ms).
     """
 
     lead: float = 0.1
     kp: float = 4.0
     kv: float = 4.0
     max_tilt_deg: float = 35.0
+    level_s: float = 1.0
+
+    def level_fraction(self, t: float) -> float:
+        """How far the levelling has gone at ``t`` s after reset: ``3 u^2 - 2 u^3``,
+        ``u = t / level_s`` within [0, 1]."""
+        if self.level_s <= 0.0:
+            return 1.0
+        u = min(max(t / self.level_s, 0.0), 1.0)
+        return u * u * (3.0 - 2.0 * u)
 
     def __post_init__(self) -> None:
-        for name in ("lead", "kp", "kv"):
+        for name in ("lead", "kp", "kv", "level_s"):
             if not (np.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
                 raise ValueError(f"{name} must be finite and >= 0, got {getattr(self, name)!r}")
         if not 0 < self.max_tilt_deg < 90:
@@ -118,7 +130,8 @@ class TrayReference:
             raise ValueError("one reset position and rotation per hand, at least one hand")
         if not np.asarray(normal, dtype=float)[2] > 0:
             raise ValueError(f"the plate's normal must point up, got {normal!r}")
-        self.level = leveling_rotation(np.asarray(normal, dtype=float))
+        self._normal = np.asarray(normal, dtype=float) / np.linalg.norm(normal)
+        self.level = leveling_rotation(self._normal)
         self.pivot = np.array(pivot, dtype=float)
         self._arms = [np.array(p, dtype=float) - self.pivot for p in hand_positions]
         self._rotations = [np.array(R, dtype=float) for R in hand_rotations]
@@ -138,15 +151,27 @@ class TrayReference:
             - g.kv * np.asarray(drift_rate[:2])
         )
 
+    def leveling(self, fraction: float) -> Array:
+        """The levelling rotation ``fraction`` (0 to 1) of the way: about the same axis, by
+        the angle whose tangent is ``fraction`` times the reset tilt's (1: :attr:`level`)."""
+        if fraction >= 1.0:
+            return self.level
+        n = self._normal
+        return tilt_toward(np.array([-n[0], -n[1]]) * fraction * GRAVITY / n[2], 90.0)
+
     def targets(
-        self, plan_acceleration: tuple[float, float], drift: Array, drift_rate: Array
+        self,
+        plan_acceleration: tuple[float, float],
+        drift: Array,
+        drift_rate: Array,
+        level_fraction: float = 1.0,
     ) -> list[tuple[Array, Array]]:
         """Each hand's target ``(position, rotation)`` in the axle frame: its reset pose
         levelled and turned by the tilt toward ``a_d - g``, about the plate's centre at its
         reset place."""
         a = self.desired_acceleration(plan_acceleration, drift, drift_rate)
         self.tilt = tilt_toward(a, self.gains.max_tilt_deg)
-        R = self.tilt @ self.level
+        R = self.tilt @ self.leveling(level_fraction)
         return [
             (self.pivot + R @ arm, R @ rotation)
             for arm, rotation in zip(self._arms, self._rotations, strict=True)

@@ -507,7 +507,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         its marker)."""
         self._goal = goal.copy()
         self._goal_xy = (float(goal[0]), float(goal[1]))
-        self._measure_floats[ms.F_GOAL_X], self._measure_floats[ms.F_GOAL_Y] = self._goal_xy
+        self._measure_floats[ms.FLOAT.goal : ms.FLOAT.goal + 2] = self._goal_xy
 
     def reset_model(self) -> dict[str, NDArray[np.float64]]:  # type: ignore[override]
         m, d, lay = self.model, self.data, self.robot.layout
