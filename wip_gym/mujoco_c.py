@@ -33,7 +33,7 @@ from numba import types
 
 _PATTERNS = ("libmujoco.so*", "libmujoco*.dylib", "mujoco.dll")
 
-VERIFIED_RELEASES = ("3.10", "3.11", "3.12", "3.13", "3.14", "3.15", "3.16", "3.17")
+VERIFIED_RELEASES = ("3.10", "3.11", "3.12", "3.13", "3.14", "3.17")
 """MuJoCo releases on which the fast path was verified (module docstring): each one's
 ``mujoco.h`` declares every function of :data:`DECLARATIONS` so, and the compiled calls give
 what the bindings give."""
