@@ -248,10 +248,15 @@ def test_ctrl_c_loses_only_the_episodes_in_flight(cluster, tmp_path):
             time.sleep(0.05)
         os.kill(os.getpid(), signal.SIGINT)
 
+    # Python's own handler (raises KeyboardInterrupt), whatever an earlier test's Ray left
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     timer = threading.Thread(target=interrupt_after_the_first_rows)
     timer.start()
-    summary = run_sweep(spec, tmp_path, workers=2, episode_fn=slow, progress=False)
-    timer.join()
+    try:
+        summary = run_sweep(spec, tmp_path, workers=2, episode_fn=slow, progress=False)
+    finally:
+        timer.join()
+        signal.signal(signal.SIGINT, previous)
     rows = read_rows(tmp_path)
     assert summary["interrupted"] is True
     assert 0 < len(rows) < 16

@@ -199,15 +199,29 @@ def test_welded_tray_reports_no_tray_slip(env_id: str) -> None:
 
 @pytest.mark.parametrize("env_id", TRAY_IDS)
 def test_nominal_model_welds_the_free_tray(env_id: str) -> None:
+    """A controller's nominal model welds a free tray where it rests on the hand (the env's
+    ``tray_rest`` site), not level at the mount: the same bodies and masses as a welded tray,
+    the tray's pose in its body the rest pose."""
     env = gym.make(env_id, tray_attachment="free", tray_rim=AUTHORS_TRAY_RIM)
     nominal = controller_model(env, "nominal")
-    welded = build_model(
-        SceneOptions(env.unwrapped.scene_options.robot, tray=True, tray_rim=AUTHORS_TRAY_RIM)
+    robot = env.unwrapped.scene_options.robot
+    welded = build_model(SceneOptions(robot, tray=True, tray_rim=AUTHORS_TRAY_RIM))
+    rest = env.unwrapped.model.site("tray_rest")
+    at_rest = build_model(
+        SceneOptions(
+            robot,
+            tray=True,
+            tray_rim=AUTHORS_TRAY_RIM,
+            tray_weld=(*rest.pos.tolist(), *rest.quat.tolist()),
+        )
     )
     assert mujoco.mj_name2id(nominal, mujoco.mjtObj.mjOBJ_JOINT, "tray") < 0
     assert nominal.nq == welded.nq and nominal.nbody == welded.nbody
     np.testing.assert_array_equal(nominal.body_mass, welded.body_mass)
-    np.testing.assert_array_equal(nominal.body_quat, welded.body_quat)
+    np.testing.assert_array_equal(nominal.body_quat, at_rest.body_quat)
+    np.testing.assert_array_equal(nominal.body_pos, at_rest.body_pos)
+    tray = nominal.body("tray").id
+    np.testing.assert_allclose(nominal.body_quat[tray], rest.quat, atol=1e-12)
 
 
 @pytest.mark.parametrize("env_id", TRAY_IDS)
