@@ -39,13 +39,13 @@ demo: $(STAMP)
 clean:
 	rm -rf $(VENV) build dist *.egg-info
 
-# numba's on-disk cache checks only the file that defines a compiled function; `import wip_gym`
-# keys the packages' caches on all their compiled files (wip_gym/compiled_cache.py), so an edit
-# of compiled code takes effect by itself. Left to this target: a module-level constant of a
-# file without compiled code that compiled code reads. It deletes the caches and compiles again
-# what `warm_caches` runs (the rest compiles on first use).
+# Deletes the compiled caches: numba's (wip_gym/compiled_cache.py keys them on the compiled
+# sources and the modules they import, so an edit takes effect by itself; each edit leaves the
+# previous directory behind) and the MPC's generated modules, then compiles again what
+# `warm_caches` runs (the rest compiles on first use).
 clean-caches: $(STAMP)
 	find wip_gym controllers benchmarks -name '*.nbi' -delete -o -name '*.nbc' -delete
+	rm -rf $${NUMBA_CACHE_DIR:+$$NUMBA_CACHE_DIR/wip-gym} $$HOME/.cache/wip-gym/compiled
 	cd $${WIP_GYM_NUMBA_CACHE:-$$HOME/.cache/wip-gym/numba} 2>/dev/null && \
 		rm -rf wipm_mpc_*.py .wipm_mpc_*.tmp __pycache__ || true  # the MPC's generated modules
 	$(PY) -m benchmarks.warm_caches

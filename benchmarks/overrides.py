@@ -215,6 +215,8 @@ def _plain(value: Any) -> Any:
         return {f.name: _plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
     if isinstance(value, Mapping):
         return {str(k): _plain(v) for k, v in value.items()}
+    if callable(value):  # a config's factory (HierarchicalConfig.extra_tasks): its name
+        return f"{getattr(value, '__module__', '?')}.{getattr(value, '__qualname__', value)}"
     return value
 
 

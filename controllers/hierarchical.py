@@ -23,6 +23,7 @@ acceleration).
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -32,7 +33,9 @@ from numpy.typing import NDArray
 
 from controllers.high_level.planning import Plan, PlanConfig
 from controllers.high_level.receding_horizon import HighLevel, HighLevelConfig
+from controllers.high_level.tray_reference import tilt_toward
 from controllers.low_level.disturbance_tasks import DisturbanceRejectingTask, ObserverSettings
+from controllers.low_level.priority_qp import PRIORITIES, Priority, PriorityQP, PriorityStep
 from controllers.low_level.task_qp import QPSettings, TaskQP
 from controllers.low_level.tasks import (
     FrameOrientationTask,
@@ -48,7 +51,8 @@ from wip_gym.robot_model import RobotModel
 from wip_gym.wheel_torques import generalized_to_wheel_matrix
 
 Array = NDArray[np.float64]
-GRAVITY = 9.81
+#: a user's task (or constraint) for the controller: made at every reset from its robot model
+TaskFactory = Callable[[RobotModel], Any]
 
 
 @dataclass(frozen=True)
@@ -95,6 +99,17 @@ class HierarchicalConfig:
             estimate measured up to 47 rad/s^2 (orientation) and 8 m/s^2 (position), and a
             clamp of 15 (the authors' Kp times 2 cm or 0.1 rad) let the tray tip 32 deg: 100
             leaves a factor 2 over the largest measured need and still stops a runaway.
+        extra_tasks: the user's own tasks, as factories: each is called at every reset with the
+            controller's robot model (updated to the reset state: a factory may read its pose,
+            as the paper's tasks do) and gives a task (``controllers.low_level.tasks``), added
+            to the stack after the paper's. A task of a class without compiled rows makes the
+            QP take its readable path (docs/extending.md §1).
+        constraints: the user's own constraints of the task QP, as factories likewise
+            (``controllers.low_level.constraints``).
+        priority: ``weighted`` (the paper: one QP trading every task by its weight) or
+            ``strict`` (balance, then the hands and heading, then posture, as lexicographic
+            levels under the torque and joint limits; ``controllers.low_level.priority_qp``,
+            docs/upright.md §4).
         high_level: plan and MPC settings. qp: QP settings.
     """
 
@@ -123,10 +138,22 @@ class HierarchicalConfig:
     hand_observer_bandwidth: float | None = 50.0
     hand_observer_position_bound: float = 100.0
     hand_observer_orientation_bound: float = 100.0
+    extra_tasks: tuple[TaskFactory, ...] = ()
+    constraints: tuple[TaskFactory, ...] = ()
+    priority: Priority = "weighted"
     high_level: HighLevelConfig = field(default_factory=HighLevelConfig)
     qp: QPSettings = field(default_factory=QPSettings)
 
     def __post_init__(self) -> None:
+        for name in ("extra_tasks", "constraints"):
+            factories = getattr(self, name)
+            if not isinstance(factories, tuple) or not all(map(callable, factories)):
+                raise ValueError(
+                    f"{name} must be a tuple of factories, each called with the robot model at "
+                    f"reset, got {factories!r}"
+                )
+        if self.priority not in PRIORITIES:
+            raise ValueError(f"priority must be one of {PRIORITIES}, got {self.priority!r}")
         if self.tray_mode not in ("level", "specific_force"):
             raise ValueError(f"tray_mode must be level or specific_force, got {self.tray_mode!r}")
         if self.spin_source not in ("heading_task", "mpc_tau_0"):
@@ -215,22 +242,6 @@ def authors_joint_weights(robot: RobotModel) -> tuple[Array, Array]:
     return np.array(posture), np.array(speed)
 
 
-def tilt_toward(acceleration: Array, max_tilt_deg: float) -> Array:
-    """Rotation (axle frame) taking ``e_z`` to the direction of ``a - g``, tilt bounded."""
-    specific = np.array([acceleration[0], acceleration[1], GRAVITY])
-    n = specific / np.linalg.norm(specific)
-    axis = np.cross([0.0, 0.0, 1.0], n)
-    s = np.linalg.norm(axis)
-    angle = min(np.arctan2(s, n[2]), np.radians(max_tilt_deg))
-    if s < 1e-12:
-        return np.eye(3)
-    quat = np.zeros(4)
-    mujoco.mju_axisAngle2Quat(quat, axis / s, angle)
-    R = np.zeros(9)
-    mujoco.mju_quat2Mat(R, quat)
-    return R.reshape(3, 3)
-
-
 # the per-step diagnostics, in the order __call__ records them (DiagnosticsRecorder.record_row);
 # the first two are stored as the robot update's scalars and the MPC index, and made into the
 # WIPM state and the plan's state when the diagnostics are read (cheaper per step)
@@ -264,6 +275,7 @@ class HierarchicalController(PolicyBase):
         super().__init__(robot, task, config)
         self.high_level = HighLevel(config.high_level, task.control_dt)
         self.qp = TaskQP(robot, task.torque_low, task.torque_high, config.qp)
+        self.priority_qp = PriorityQP(self.qp)
         m = robot.model
         self._sites = [
             mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, name) for name in ("ee", "ee_right")
@@ -354,11 +366,13 @@ class HierarchicalController(PolicyBase):
                     columns=speed_columns,
                 )
             )
-        self.tasks = tasks
+        self.tasks = tasks + [make(robot) for make in cfg.extra_tasks]
+        self.constraints = [make(robot) for make in cfg.constraints]
         self.qp.failures = 0
         # one QP now (creates and compiles the solver object), from the current state
         self.theta_task.theta_d, self.theta_task.thetad_d = robot.theta, robot.thetad
-        first = self.qp.solve(robot, None, self.tasks)  # None: eq. iso3 inside the QP's kernel
+        # None: eq. iso3 inside the QP's kernel
+        first = self.qp.solve(robot, None, self.tasks, self.constraints)
         self._last_tau_0_qp = float(first.generalized[0])
         for task in self.tasks:
             if isinstance(task, DisturbanceRejectingTask):
@@ -412,7 +426,7 @@ class HierarchicalController(PolicyBase):
         self._set_references(robot)
         mpc_time = time.perf_counter() - tick
         tick = time.perf_counter()
-        solution = self.qp.solve(robot, None, self.tasks)  # None: eq. iso3 in the QP's kernel
+        solution = self._solve(robot).solution
         qp_time = time.perf_counter() - tick
         actuators = solution.actuators
         if not solution.solved:
@@ -452,6 +466,11 @@ class HierarchicalController(PolicyBase):
         )
         self._step += 1
         return action
+
+    def _solve(self, robot: RobotModel) -> PriorityStep:
+        """This step's task QP (eq. iso3 from ``robot`` in the QP's kernel), by the
+        configured priority."""
+        return self.priority_qp.solve(robot, self.tasks, self.constraints, self.config.priority)
 
     @property
     def diagnostics(self) -> dict[str, Array]:

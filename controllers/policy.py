@@ -79,9 +79,9 @@ def controller_model(env: gym.Env, choice: ModelChoice) -> mujoco.MjModel:
     """The MuJoCo model a controller plans with: ``nominal`` (robot + tray, no cup, no payload,
     no randomisation, the env's wheel torque limit) or ``oracle`` (the env's own model).
 
-    A free tray (``tray_attachment="free"``) is welded at its nominal place in the nominal model
-    (level on the hand at the reset pose, as in a welded-tray env): the designer knows the
-    tray's mass, not its contact with the hand."""
+    A free tray (``tray_attachment="free"``) is welded in the nominal model where it rests on
+    the hand (the env's ``tray_rest`` site: on Krang's finger plates 2.9 deg from level): the
+    designer knows the tray's mass and where it sits, not its contact with the hand."""
     base = wip_env(env)
     if choice == "oracle":
         return base.model
@@ -90,6 +90,9 @@ def controller_model(env: gym.Env, choice: ModelChoice) -> mujoco.MjModel:
     options = dataclasses.replace(
         base.scene_options, cup=False, payload_mass=0.0, tray_attachment="welded"
     )
+    if base.scene_options.tray_attachment == "free":
+        rest = base.model.site("tray_rest")
+        options = dataclasses.replace(options, tray_weld=(*rest.pos.tolist(), *rest.quat.tolist()))
     return build_model(options)
 
 

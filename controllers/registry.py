@@ -108,6 +108,9 @@ _REGISTRY: dict[str, Registration] = {
         "controllers.hierarchical:HierarchicalConfig",
         {"tray_mode": "specific_force"},
     ),
+    "unified-upright": Registration(
+        "controllers.upright:UprightController", "controllers.upright:UprightConfig", {}
+    ),
 }
 
 

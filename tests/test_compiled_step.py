@@ -1,10 +1,11 @@
-"""The low level's one-call step (``controllers.low_level.compiled_step``) and the table of
-arrays it reads (``wip_gym.array_table``).
+"""The low level's one-call step (``controllers.low_level.compiled_step``), the declared tables of
+arrays it reads (``wip_gym.array_table``) and the task QP's two paths.
 
-The one call runs the rows' and the kernel's own arithmetic, so it must equal the two calls to
-the bit: on random states of both robots (observers advancing over consecutive steps), every
-kernel buffer and the feasibility agree exactly. The table is built again whenever what it
-points at is made anew, and the robot model's arrays in it are written in place."""
+The one call runs the task objects' and the kernel's own arithmetic: its rows equal the
+readable path's to 1e-12 of their scale (``tests/test_compiled_tasks.py`` tests each kind), and
+its kernel buffers equal, to the bit, a kernel run on its rows; the solutions equal the
+readable path's to 1e-9. The table is built again whenever what it points at is made anew, and
+the robot model's arrays in it are written in place."""
 
 from __future__ import annotations
 
@@ -18,10 +19,17 @@ from dynamics_reference import random_minimal_state
 from test_compiled_tasks import _task_set
 from test_wbc import _limits, _load, _realistic_tasks
 
-from controllers.low_level.compiled_step import ENTRIES
+from controllers.low_level.compiled_tasks import STEP
+from controllers.low_level.kernel import KERNEL, LowLevelKernel
 from controllers.low_level.task_qp import QPSettings, TaskQP
+from controllers.low_level.task_stack import CompiledTaskStack
 from wip_gym.array_table import (
+    FLOAT_MATRIX,
+    FLOAT_VECTOR,
+    INT_VECTOR,
     ArrayTable,
+    TableSpec,
+    field_offsets,
     float_cube,
     float_matrix,
     float_vector,
@@ -30,31 +38,45 @@ from wip_gym.array_table import (
 )
 from wip_gym.robot_model import RobotModel
 
+_ROWS = ("J", "target", "jdot_nu", "w")
 _BUFFERS = ("T", "b", "H", "g", "C", "lower", "upper", "x", "calA", "Ph", "E", "e")
 
 
 def _pair(robot: RobotModel) -> tuple[TaskQP, TaskQP]:
+    """The compiled path and the readable one, on their own torque-limit arrays."""
     low, high = robot.model.actuator_ctrlrange.T.copy()
-    one = TaskQP(robot, low, high, QPSettings())
-    two = TaskQP(robot, low.copy(), high.copy(), QPSettings(one_call=False))
-    return one, two
+    compiled = TaskQP(robot, low, high, QPSettings())
+    readable = TaskQP(robot, low.copy(), high.copy(), QPSettings(compiled_tasks=False))
+    return compiled, readable
 
 
-def _assert_same_step(one: TaskQP, two: TaskQP) -> None:
+def _close(actual: np.ndarray, expected: np.ndarray, tol: float) -> None:
+    scale = max(1.0, float(np.abs(expected).max())) if expected.size else 1.0
+    np.testing.assert_allclose(actual, expected, rtol=0.0, atol=tol * scale)
+
+
+def _assert_same_step(compiled: TaskQP, readable: TaskQP, robot: RobotModel) -> None:
+    """The rows to 1e-12 and what the kernel makes of them to 1e-9 (the minimiser ``x`` aside:
+    ``H`` is regularised by only 1e-6, and amplifies the rows' last bits), and the compiled
+    call's kernel buffers to the bit as a kernel run on its own rows (the readable path's
+    kernel, on those rows)."""
+    one, two = compiled.kernel, readable.kernel
+    assert one is not None and two is not None
+    for name in (*_ROWS, *_BUFFERS):
+        if name != "x":
+            _close(getattr(one, name), getattr(two, name), 1e-12 if name in _ROWS else 1e-9)
+    rows = [getattr(one, name).copy() for name in _ROWS]
+    feasible = two.run(robot.A, robot.h, *rows, robot.q, robot.nu)
     for name in _BUFFERS:
-        np.testing.assert_array_equal(getattr(one.kernel, name), getattr(two.kernel, name), name)
-    np.testing.assert_array_equal(one._J, two._J)
-    np.testing.assert_array_equal(one._target, two._target)
-    np.testing.assert_array_equal(one._bias, two._bias)
-    np.testing.assert_array_equal(one._w, two._w)
-    assert one._feasible == two._feasible
+        np.testing.assert_array_equal(getattr(one, name), getattr(two, name), name)
+    assert feasible == compiled._feasible
 
 
 @pytest.mark.parametrize("name", ["krang", "planar7"])
 @pytest.mark.parametrize("observed", [False, True])
-def test_one_call_equals_the_two_calls_to_the_bit(name: str, observed: bool) -> None:
+def test_the_compiled_step_equals_the_readable_one(name: str, observed: bool) -> None:
     robot = RobotModel(_load(name))
-    one, two = _pair(robot)
+    compiled, readable = _pair(robot)
     rng = np.random.default_rng(21)
     q, nu = random_minimal_state(robot, rng)
     robot.update(*robot.full_state(q, nu))
@@ -64,40 +86,30 @@ def test_one_call_equals_the_two_calls_to_the_bit(name: str, observed: bool) -> 
         if step == 5:
             q, nu = random_minimal_state(robot, rng)
         robot.update(*robot.full_state(q + 1e-3 * step * nu, nu + 0.05 * step))
-        one.assemble(robot, None, tasks_one)
-        two.assemble(robot, None, tasks_two)
-        assert one.compiled and two.compiled and one._table is not None and two._table is None
-        _assert_same_step(one, two)
+        compiled.assemble(robot, None, tasks_one)
+        readable.assemble(robot, None, tasks_two)
+        assert compiled.compiled and not readable.compiled
+        _assert_same_step(compiled, readable, robot)
         if observed:
-            np.testing.assert_array_equal(
-                one._stack.observer_memory,  # type: ignore[union-attr]
-                two._stack.observer_memory,  # type: ignore[union-attr]
-            )
-        # the solutions: on a shortcut step the one call's torques (computed in it) equal the
-        # two calls' (solution_terms after them) to the bit; ProxQP (the first step, and any
-        # with an active constraint) agrees to its tolerance (its SIMD sums may depend on the
-        # buffers' alignment)
-        a, b = one.solve(robot, None, tasks_one), two.solve(robot, None, tasks_two)
+            for one, two in zip(tasks_one, tasks_two, strict=True):
+                if hasattr(one, "memory"):
+                    _close(one.memory, two.memory, 1e-12)  # type: ignore[attr-defined]
+        a, b = compiled.solve(robot, None, tasks_one), readable.solve(robot, None, tasks_two)
         assert (a.solved, a.iterations == 0) == (b.solved, b.iterations == 0)
         for field in ("qdd", "nu_dot", "generalized", "actuators"):
-            if a.iterations == 0:
-                np.testing.assert_array_equal(getattr(a, field), getattr(b, field), field)
-            else:
-                scale = max(1.0, float(np.abs(getattr(b, field)).max()))
-                np.testing.assert_allclose(
-                    getattr(a, field), getattr(b, field), rtol=0, atol=1e-9 * scale
-                )
+            _close(getattr(a, field), getattr(b, field), 1e-9)
 
 
 @pytest.mark.parametrize("name", ["krang", "planar7"])
-def test_solve_alone_takes_the_common_case_and_equals_the_two_calls(name: str) -> None:
+def test_solve_alone_takes_the_common_case(name: str) -> None:
     """``solve`` without an ``assemble`` before it, step after step (the control loop's use):
     once ProxQP is warm, its common case (one compiled call, the solution from the kernel's
-    buffers) returns what the two-call path returns, to the bit, with the same bookkeeping."""
+    buffers, computed in that call) returns what the readable path returns, with the same
+    bookkeeping, and what the kernel's own solution terms give, to the bit."""
     robot = RobotModel(_load(name))
     low, high = _limits(robot)
-    one = TaskQP(robot, low, high, QPSettings())
-    two = TaskQP(robot, low.copy(), high.copy(), QPSettings(one_call=False))
+    compiled = TaskQP(robot, low, high, QPSettings())
+    readable = TaskQP(robot, low.copy(), high.copy(), QPSettings(compiled_tasks=False))
     # a still state where no constraint binds (test_task_qp_shortcut), then small moves
     q, nu = random_minimal_state(robot, np.random.default_rng(500))
     nu[:] = 0.0
@@ -107,56 +119,62 @@ def test_solve_alone_takes_the_common_case_and_equals_the_two_calls(name: str) -
     shortcuts = 0
     for step in range(8):
         robot.update(*robot.full_state(q + step * drift, drift))
-        a, b = one.solve(robot, None, tasks_one), two.solve(robot, None, tasks_two)
-        assert one.compiled and one._table is not None and two._table is None
-        _assert_same_step(one, two)
-        assert one._terms_ready == one._feasible and one.proxqp_calls == two.proxqp_calls
+        a, b = compiled.solve(robot, None, tasks_one), readable.solve(robot, None, tasks_two)
+        assert compiled.compiled and not readable.compiled
+        assert compiled._terms_ready == compiled._feasible
+        assert compiled.proxqp_calls == readable.proxqp_calls
         assert (a.solved, a.iterations == 0) == (b.solved, b.iterations == 0)
+        for field in ("qdd", "nu_dot", "generalized", "actuators"):
+            _close(getattr(a, field), getattr(b, field), 1e-9)
         if a.iterations == 0:
             shortcuts += 1
-            for field in ("qdd", "nu_dot", "generalized", "actuators"):
-                np.testing.assert_array_equal(getattr(a, field), getattr(b, field), field)
-            assert one._last_actuators is a.actuators
+            assert compiled._last_actuators is a.actuators
+            c = compiled.solution_for(a.qdd.copy(), 0)
+            for field in ("nu_dot", "generalized", "actuators"):
+                np.testing.assert_array_equal(getattr(a, field), getattr(c, field), field)
     assert shortcuts >= 5  # the first step goes to ProxQP; the rest take the common case
 
 
-def test_the_table_follows_new_torque_limits_row_buffers_and_tasks() -> None:
+def test_the_table_follows_new_torque_limits_and_tasks() -> None:
     robot = RobotModel(_load("krang"))
-    one, two = _pair(robot)
+    compiled, readable = _pair(robot)
     robot.update(*robot.full_state(*random_minimal_state(robot, np.random.default_rng(22))))
     tasks = _realistic_tasks(robot)
-    one.assemble(robot, None, tasks)
-    first = one._table
+    compiled.assemble(robot, None, tasks)
+    stack = compiled._stack
+    assert stack is not None
+    first = stack.table
     # limits changed in place: read through the same table
-    one.torque_low[:] *= 0.5
-    two.torque_low[:] *= 0.5
-    one.assemble(robot, None, tasks)
-    two.assemble(robot, None, tasks)
-    assert one._table is first
-    _assert_same_step(one, two)
-    # limits replaced by new arrays: a new kernel, so a new table
-    one.torque_high = one.torque_high * 0.25
-    two.torque_high = two.torque_high * 0.25
-    one.assemble(robot, None, tasks)
-    two.assemble(robot, None, tasks)
-    assert one._table is not first
-    _assert_same_step(one, two)
-    # another task list of the same rows (new task objects): a new stack, so a new table
-    second = one._table
+    compiled.torque_low[:] *= 0.5
+    readable.torque_low[:] *= 0.5
+    compiled.assemble(robot, None, tasks)
+    readable.assemble(robot, None, tasks)
+    assert compiled._stack is stack and stack.table is first
+    _assert_same_step(compiled, readable, robot)
+    # limits replaced by new arrays: a new kernel, so a new stack and table
+    compiled.torque_high = compiled.torque_high * 0.25
+    readable.torque_high = readable.torque_high * 0.25
+    compiled.assemble(robot, None, tasks)
+    readable.assemble(robot, None, tasks)
+    assert compiled._stack is not stack
+    _assert_same_step(compiled, readable, robot)
+    # another task list of the same rows (new task objects): a new stack
+    stack = compiled._stack
     again = _realistic_tasks(robot)
-    one.assemble(robot, None, again)
-    two.assemble(robot, None, again)
-    assert one._table is not second
-    assert one._table.arrays[ENTRIES.index("kinds")] is one._stack.kinds  # type: ignore[union-attr]
-    _assert_same_step(one, two)
-    # another task list of other rows: a new stack, new row buffers, a new table
-    second = one._table
+    compiled.assemble(robot, None, again)
+    readable.assemble(robot, None, again)
+    assert compiled._stack is not stack and compiled._stack is not None
+    table = compiled._stack.table
+    assert table.arrays[STEP.index.parameters] is compiled._stack.parameters
+    _assert_same_step(compiled, readable, robot)
+    # another task list of other rows: a new kernel with its row buffers, a new stack
+    kernel = compiled.kernel
     fewer = tasks[:-1]
-    one.assemble(robot, None, fewer)
-    two.assemble(robot, None, fewer)
-    assert one._table is not second
-    assert one._table.arrays[list(one._table.names).index("J")] is one._J  # type: ignore[union-attr]
-    _assert_same_step(one, two)
+    compiled.assemble(robot, None, fewer)
+    readable.assemble(robot, None, fewer)
+    assert compiled.kernel is not kernel and compiled._stack is not None
+    assert compiled._stack.table.arrays[STEP.index.J] is compiled.kernel.J  # type: ignore[union-attr]
+    _assert_same_step(compiled, readable, robot)
 
 
 def test_the_robot_arrays_in_the_table_are_written_in_place() -> None:
@@ -187,13 +205,16 @@ def test_a_copied_task_qp_builds_its_own_table(copier: object) -> None:
     robot.update(*robot.full_state(*random_minimal_state(robot, np.random.default_rng(24))))
     one.assemble(robot, None, _realistic_tasks(robot))
     clone = copier(one)  # type: ignore[operator]
-    assert clone._table is None and clone._stack is None
+    assert clone._stack is None
+    # the kernel's table points at the copy's own buffers
+    assert clone.kernel._table.rows[KERNEL.index.H, 0] == clone.kernel.H.ctypes.data
+    assert clone.kernel._table.rows[KERNEL.index.H, 0] != one.kernel._table.rows[KERNEL.index.H, 0]
     # (stepping a copied controller on its own data: test_compiled_tasks.py's
     # test_a_copied_controller_steps_on_its_own_data)
     with pytest.raises(TypeError, match="addresses"):
-        copy.deepcopy(one._table)
+        copy.deepcopy(one._stack.table)
     with pytest.raises(TypeError, match="addresses"):
-        pickle.dumps(one._table)
+        pickle.dumps(one._stack.table)
 
 
 @pytest.mark.parametrize("copier", [copy.deepcopy, lambda qp: pickle.loads(pickle.dumps(qp))])
@@ -281,91 +302,56 @@ def test_the_table_refuses_what_compiled_code_cannot_view(array: object, message
         ArrayTable([np.zeros(2), array], ["fine", "bad"])  # type: ignore[list-item]
 
 
-def test_the_step_table_refuses_a_kernel_of_other_rows() -> None:
-    from controllers.low_level.compiled_step import step_table
-
+def test_a_stack_refuses_a_kernel_of_other_rows() -> None:
     robot = RobotModel(_load("krang"))
     one, _ = _pair(robot)
     robot.update(*robot.full_state(*random_minimal_state(robot, np.random.default_rng(26))))
     tasks = _realistic_tasks(robot)
     one.assemble(robot, None, tasks)
-    other = dataclasses.replace(one.kernel.layout, rows=one.kernel.layout.rows + 1)
-    from controllers.low_level.kernel import LowLevelKernel
-
+    assert one.kernel is not None
+    other = LowLevelKernel(dataclasses.replace(one.kernel.layout, rows=one.kernel.layout.rows + 1))
     with pytest.raises(ValueError, match="rows"):
-        step_table(
-            one._stack,  # type: ignore[arg-type]
-            LowLevelKernel(other),
-            robot,
-            one._J,  # type: ignore[arg-type]
-            one._target,
-            one._bias,
-            one._w,
-        )
+        CompiledTaskStack(robot, one.motion, other, tasks)
+
+
+def test_a_declared_table_checks_its_arrays_and_folds_its_indices() -> None:
+    """A ``TableSpec`` gives each name its row (a base's first), builds the table from arrays by
+    name and refuses a missing, unknown or other-kind array, or a name declared twice;
+    ``field_offsets`` lays out a vector of fields."""
+    base = TableSpec("base", (("a", FLOAT_VECTOR), ("b", INT_VECTOR)))
+    spec = TableSpec("more", (("c", FLOAT_MATRIX),), base=base)
+    assert spec.names == ("a", "b", "c") and spec.index.b == base.index.b == 1
+    assert spec.index.c == 2
+    arrays = {"a": np.zeros(3), "b": np.arange(2, dtype=np.int64), "c": np.ones((2, 2))}
+    table = spec.table(arrays)
+    np.testing.assert_array_equal(float_matrix(table.rows[spec.index.c]), arrays["c"])
+    with pytest.raises(ValueError, match=r"missing \['c'\], unknown \['d'\]"):
+        spec.table({"a": arrays["a"], "b": arrays["b"], "d": arrays["c"]})
+    with pytest.raises(ValueError, match="'b' is float64 of 1 dimensions, declared int64"):
+        spec.table({**arrays, "b": np.zeros(2)})
+    with pytest.raises(ValueError, match=r"fields \['a'\] declared twice"):
+        TableSpec("twice", (("a", FLOAT_VECTOR),), base=base)
+    offsets, size = field_offsets("v", (("x", 1), ("axle", 3), ("y", 1)))
+    assert (offsets.x, offsets.axle, offsets.y, size) == (0, 1, 4, 5)
+    # the one-call step's table begins with the kernel's: kernel_step reads either
+    assert STEP.names[: len(KERNEL.names)] == KERNEL.names
 
 
 @pytest.mark.parametrize("name", ["krang", "planar7"])
-def test_the_robot_update_through_its_table_equals_the_call_with_arguments(name: str) -> None:
-    """``RobotModel.update`` calls ``robot_update_at`` (its arrays in one table): the same
-    results, to the bit, as ``robot_update`` with each array passed, on a second model; the
-    properties are copies that stay as they were after the next update."""
-    from wip_gym.minimal_kernels import UPDATE_SCALARS, robot_update
-
-    robot, reference = RobotModel(_load(name)), RobotModel(_load(name))
-    r = reference
+def test_the_robot_updates_properties_are_copies_of_its_table(name: str) -> None:
+    """``RobotModel.update`` writes its table's buffers (``minimal_kernels.UPDATE``): the
+    scalars, the WIPM state and the properties are theirs, and the properties are copies that
+    stay as they were after the next update."""
+    robot = RobotModel(_load(name))
     rng = np.random.default_rng(27)
     kept = None
     for dynamics in (True, False, True):
         qpos, qvel = robot.full_state(*random_minimal_state(robot, rng))
         robot.update(qpos, qvel, dynamics=dynamics)
-        r._qpos_in[:], r._qvel_in[:] = qpos, qvel
-        scalars, com, J_com, J_theta = (
-            np.zeros(len(UPDATE_SCALARS)),
-            np.zeros(3),
-            np.zeros((3, r.layout.n_min)),
-            np.zeros(r.layout.n_min),
-        )
-        A, h, B = np.zeros_like(r._A_buffer), np.zeros_like(r._h_buffer), np.zeros_like(r._B_buffer)
-        robot_update(
-            r.model._address,
-            r.data._address,
-            r._qpos_in,
-            r._qvel_in,
-            r._mj_qpos,
-            r._mj_qvel,
-            r._mj_xmat,
-            r._mj_xpos,
-            r._mj_xipos,
-            r._mj_qfrc_passive,
-            r._mj_body_mass,
-            r._mj_subtree_mass,
-            r._bodies,
-            r._body_ids,
-            r._layout_ints,
-            r._body_qpos,
-            r._body_dof,
-            r.layout.wheel_radius,
-            r._q,
-            r._nu,
-            r._J,
-            r._J_pattern,
-            r._Jdot_nu,
-            r._jacp,
-            r._jac_wheels,
-            r._jac_origin,
-            r._M,
-            r._bias,
-            r._S,
-            scalars,
-            com,
-            J_com,
-            J_theta,
-            A,
-            h,
-            B,
-            dynamics,
-        )
-        psi, psid, c, s, mass, theta, thetad, x, xd, axle_x, axle_y = scalars.tolist()
+        buffers = robot.update_buffers()
+        psi, psid, c, s, mass, theta, thetad, x, xd, axle_x, axle_y = buffers[
+            "robot_scalars"
+        ].tolist()
         assert (robot.theta, robot.thetad, robot.body_mass, robot.psi) == (theta, thetad, mass, psi)
         np.testing.assert_array_equal(
             robot.wipm_state(),
@@ -373,21 +359,15 @@ def test_the_robot_update_through_its_table_equals_the_call_with_arguments(name:
             if robot.layout.planar
             else [x, psi, theta, xd, psid, thetad, axle_x, axle_y],
         )
-        np.testing.assert_array_equal(robot.com, com)
-        np.testing.assert_array_equal(robot.J_com, J_com)
-        np.testing.assert_array_equal(robot.J_theta, J_theta)
-        np.testing.assert_array_equal(robot.q, r._q)
-        np.testing.assert_array_equal(robot.nu, r._nu)
-        np.testing.assert_array_equal(robot.J_tf, r._J)
+        np.testing.assert_array_equal(robot.J_theta, buffers["J_theta"])
         np.testing.assert_array_equal(
             robot.heading_rotation, [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
         )
         assert robot.has_dynamics == dynamics
         if dynamics:
-            np.testing.assert_array_equal(robot.A, A)
-            np.testing.assert_array_equal(robot.h, h)
-            np.testing.assert_array_equal(robot.B, B)
-            assert robot.A is robot.A  # one copy per update
+            np.testing.assert_array_equal(robot.A, buffers["A"])
+            np.testing.assert_array_equal(robot.h, buffers["h"])
+            assert robot.A is robot.A and robot.A is not buffers["A"]  # one copy per update
             if kept is not None:
                 # what a caller kept from an earlier update is as it was
                 for array, value in zip(kept[0], kept[1], strict=True):
@@ -419,34 +399,35 @@ def test_the_one_call_step_needs_the_dynamics() -> None:
 
 
 @pytest.mark.parametrize("env_id", ["wip_gym/PlanarTray-v0", "wip_gym/KrangTray-v0"])
-def test_a_closed_loop_with_one_call_equals_it_with_two_to_the_bit(env_id: str) -> None:
-    """The default controller (hand observers on, the MPC every tenth step) in closed loop on
-    two copies of the env, one with each path: the same actions, bit for bit, over 150 steps
-    that take the QP's shortcut (where the one call also computes the torques)."""
+def test_a_closed_loop_takes_the_compiled_path_as_the_readable_one(env_id: str) -> None:
+    """The default controller (hand observers on, the MPC every tenth step) in closed loop, and
+    a second one on the readable QP path fed the same observations: the same actions to 1e-9
+    of their scale over 150 steps, every one by the QP's shortcut, the compiled one on the
+    stack it built at reset."""
     import gymnasium as gym
 
     import wip_gym  # noqa: F401
     from controllers.hierarchical import HierarchicalConfig, HierarchicalController
 
-    runs = []
-    for one_call in (True, False):
-        env = gym.make(env_id)
-        obs, info = env.reset(seed=4)
-        config = HierarchicalConfig(qp=QPSettings(one_call=one_call))
-        policy = HierarchicalController.for_env(env, config)
+    env = gym.make(env_id)
+    obs, info = env.reset(seed=4)
+    policies = [
+        HierarchicalController.for_env(env, HierarchicalConfig(qp=QPSettings(compiled_tasks=on)))
+        for on in (True, False)
+    ]
+    for policy in policies:
         policy.reset(obs, info)
-        runs.append((env, policy, obs))
-    (env_a, policy_a, obs_a), (env_b, policy_b, obs_b) = runs
-    calls = policy_a.qp.proxqp_calls
+    fast, readable = policies
+    calls, stack = fast.qp.proxqp_calls, fast.qp._stack
     for _ in range(150):
-        action_a, action_b = policy_a(obs_a), policy_b(obs_b)
-        np.testing.assert_array_equal(action_a, action_b)
-        obs_a, *_ = env_a.step(action_a)
-        obs_b, *_ = env_b.step(action_b)
-    assert policy_a.qp.proxqp_calls == calls  # every step by the shortcut
-    assert policy_a.qp._table is not None and policy_b.qp._table is None
-    env_a.close()
-    env_b.close()
+        action = fast(obs)
+        _close(readable(obs), action, 1e-9)
+        obs, *_ = env.step(action)
+    assert fast.qp.proxqp_calls == calls and fast.qp._stack is stack  # shortcut, one stack
+    assert fast.qp.compiled and not readable.qp.compiled
+    env.close()
+    for policy in policies:
+        policy.high_level.close()
 
 
 def test_the_heading_before_any_update_is_the_identity() -> None:

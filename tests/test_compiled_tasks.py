@@ -16,6 +16,7 @@ from test_wbc import _load, _realistic_tasks
 
 from controllers.low_level import compiled_tasks as ct
 from controllers.low_level import tasks as tasks_module
+from controllers.low_level.compiled_tasks import ITEM
 from controllers.low_level.disturbance_tasks import (
     ADVANCED_IN_MEMORY,
     DisturbanceRejectingTask,
@@ -23,7 +24,7 @@ from controllers.low_level.disturbance_tasks import (
 )
 from controllers.low_level.motion_probe import MotionProbe
 from controllers.low_level.task_qp import QPSettings, TaskQP
-from controllers.low_level.task_stack import CompiledTaskStack, supports
+from controllers.low_level.task_stack import supports
 from controllers.low_level.tasks import (
     FrameOrientationTask,
     FramePositionTask,
@@ -117,16 +118,8 @@ def test_compiled_rows_equal_the_task_objects(name: str, observed: bool) -> None
     reference_robot.update(*robot.full_state(q, nu))
     # two copies of the same tasks: one run compiled, one by the objects
     compiled_tasks, python_tasks = _task_set(robot, observed), _task_set(reference_robot, observed)
-    assert supports(compiled_tasks, robot.layout.planar)
-    stack = CompiledTaskStack(robot, MotionProbe(robot), compiled_tasks)
-    probe = MotionProbe(reference_robot)
-    rows = stack.rows
-    J, target, jdot, w = (
-        np.zeros((rows, robot.layout.n_min)),
-        np.zeros(rows),
-        np.zeros(rows),
-        np.zeros(rows),
-    )
+    assert supports(compiled_tasks, (), robot.layout.planar)
+    compiled, python = _paths(robot)
     for step in range(12):
         # a trajectory of nearby states, every other one off the manifold
         q = q + 1e-3 * nu
@@ -142,9 +135,12 @@ def test_compiled_rows_equal_the_task_objects(name: str, observed: bool) -> None
         if isinstance(compiled_tasks[0], ThetaTask):
             for tasks in (compiled_tasks, python_tasks):
                 tasks[0].theta_d = robot.theta + 0.01 * step  # a moving target, read every step
-        stack.fill(robot, J, target, jdot, w)
-        expected = _python_rows(reference_robot, probe, python_tasks)
-        for ours, theirs in zip((J, target, jdot, w), expected, strict=True):
+        compiled.assemble(robot, None, compiled_tasks)
+        assert compiled.compiled
+        expected = _python_rows(reference_robot, MotionProbe(reference_robot), python_tasks)
+        kernel = compiled.kernel
+        rows = (kernel.J, kernel.target, kernel.jdot_nu, kernel.w)
+        for ours, theirs in zip(rows, expected, strict=True):
             _close(ours, theirs)
     if observed:
         memories = [t.memory for t in compiled_tasks if isinstance(t, DisturbanceRejectingTask)]
@@ -259,9 +255,10 @@ def test_an_observer_advanced_by_the_compiled_path_gives_its_rows_to_the_python_
             assert robot.cache[task.cache_key] is ADVANCED_IN_MEMORY
         for k, task in enumerate(tasks):
             if task in observed:
-                start, stop = stack.row_start[k], stack.row_start[k + 1]
+                start = stack.items[k, ITEM.row]
+                stop = start + stack.items[k, ITEM.rows]
                 command = task.reference_acceleration(robot)
-                np.testing.assert_array_equal(command, compiled._target[start:stop])
+                np.testing.assert_array_equal(command, compiled.kernel.target[start:stop])
                 assert task.reference_acceleration(robot) is command  # memoised from now on
         np.testing.assert_array_equal(stack.observer_memory, memory)  # nothing advanced
     # the Python path first at a new state: the compiled step then does not advance it again
@@ -299,42 +296,39 @@ def test_the_advanced_marker_survives_copies_and_follows_the_stack_that_owns_the
     assert not first._stack.owns_its_observers() and second._stack.owns_its_observers()
     robot.update(*robot.full_state(q + 1e-3 * nu, nu + 0.1))
     first.solve(robot, None, tasks)  # advances its own memory, not the adopted one
-    assert first._steady is None  # no steady step while another stack holds the memory
     for k, task in observed:
-        start, stop = first._stack.row_start[k], first._stack.row_start[k + 1]
-        np.testing.assert_array_equal(task.reference_acceleration(robot), first._target[start:stop])
+        start = first._stack.items[k, ITEM.row]
+        stop = start + first._stack.items[k, ITEM.rows]
+        np.testing.assert_array_equal(
+            task.reference_acceleration(robot), first.kernel.target[start:stop]
+        )
     python.solve(robot, None, tasks)  # reads the memoised commands: no error, no advance
 
 
-def test_the_steady_step_takes_the_cheap_check_and_a_change_the_full_one() -> None:
-    """Between steps where nothing structural changed, the task QP's one-call step finds its
-    stack, buffers and table by ``CompiledTaskStack.unchanged`` alone (``_compiled_stack`` is
-    not called); a task list changed in place, a posture task's columns changed in place, or
-    new torque limits send it through the full checks, and it solves as the Python path
-    does."""
+def test_a_step_keeps_its_stack_until_the_structure_changes() -> None:
+    """Between steps where nothing structural changed, the task QP's compiled step keeps its
+    stack (it copies the tasks' parameters in, a changed target or gain included); a task list
+    changed in place, a posture task's columns changed in place, or new torque limits make a
+    new stack, which solves as the readable path does."""
     robot = RobotModel(_load("krang"))
     compiled, python = _paths(robot)
     rng = np.random.default_rng(12)
     q, nu = random_minimal_state(robot, rng)
     tasks = _realistic_tasks(robot)
-    full: list[int] = []
-    original = compiled._compiled_stack
-
-    def counted(robot_: RobotModel, tasks_: list[Task]) -> CompiledTaskStack | None:
-        full.append(1)
-        return original(robot_, tasks_)
-
-    compiled._compiled_stack = counted  # type: ignore[method-assign]
 
     def step(k: int) -> None:
         robot.update(*robot.full_state(q + 1e-3 * k * nu, nu))
         a, b = compiled.solve(robot, None, tasks), python.solve(robot, None, tasks)
         _close(a.actuators, b.actuators, 1e-9)
 
-    for k in range(3):
-        step(k)
-    assert len(full) == 1  # the first step built the stack; the others took the cheap check
+    step(0)
+    stack = compiled._stack
     posture = next(t for t in tasks if isinstance(t, PostureTask))
+    for k in range(1, 4):
+        posture.target = posture.target + 0.01  # a parameter: copied in, same stack
+        posture.kp = 10.0 + k
+        step(k)
+        assert compiled._stack is stack
     changes = [
         lambda: tasks.insert(0, tasks.pop()),  # the list, in place: the rows' order
         lambda: posture.columns.__setitem__(0, posture.columns[1]),  # in place
@@ -345,11 +339,24 @@ def test_the_steady_step_takes_the_cheap_check_and_a_change_the_full_one() -> No
         change()
         python.torque_high = compiled.torque_high
         step(10 + n)
-        assert len(full) == 2 + n
-        if n < 2:
-            assert compiled._stack is not stack  # built anew for the new structure
+        assert compiled._stack is not stack  # built anew for the new structure
+        stack = compiled._stack
         step(20 + n)
-        assert len(full) == 2 + n  # and steady again
+        assert compiled._stack is stack  # and kept again
+
+
+def test_a_parameter_of_another_size_is_refused_by_name() -> None:
+    """The per-step copy refuses a target of another size than the stack was built for (its
+    rows read a fixed count), naming the task."""
+    robot = RobotModel(_load("krang"))
+    compiled, _ = _paths(robot)
+    robot.update(*robot.full_state(*random_minimal_state(robot, np.random.default_rng(15))))
+    tasks = _realistic_tasks(robot)
+    compiled.solve(robot, None, tasks)
+    posture = next(t for t in tasks if isinstance(t, PostureTask))
+    posture.target = np.append(posture.target, 0.0)
+    with pytest.raises(ValueError, match="task 'posture'"):
+        compiled.solve(robot, None, tasks)
 
 
 def test_a_changed_site_or_columns_rebuilds_the_compiled_stack() -> None:
@@ -482,5 +489,5 @@ def test_a_site_or_column_out_of_range_is_refused_by_name() -> None:
     fresh, _ = _paths(robot)
     posture.joint_weights = weights[1:]
     for qp in (fresh, python):
-        with pytest.raises(ValueError, match="task 'posture': .*one weight per column"):
+        with pytest.raises(ValueError, match=r"task 'posture': joint weights .*\(one per row"):
             qp.solve(robot, None, tasks)

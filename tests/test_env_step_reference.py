@@ -1,10 +1,17 @@
-"""The env's step gives the same observation, reward, termination and info as the step it
-replaced (tests/env_step_reference.py keeps that computation), on the states of controlled
-episodes on every env, and in the tray variants whose branches the defaults leave out (a free
-tray, a push, a payload appearing in the hand, a cup that is lost)."""
+"""The env's fast path (the compiled ``wip_gym.envs.measures.env_measures``) against its readable
+definition (``wip_gym.envs.step_reference``), step by step, on the states of controlled episodes
+on every env and in the tray variants whose branches the defaults leave out (a free tray, a
+push, a payload appearing in the hand, a cup that is lost):
+
+* at every step, the readable measures of the fast env's own data equal its compiled ones;
+* an env made on the readable path (``wip_gym.mujoco_c.set_fast_path``) and the fast env, run
+  in lockstep with the same actions, give the same observation, reward, termination and info
+  (and the same physics, to the bit), and each reward term is its definition's value.
+"""
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import gymnasium as gym
@@ -13,13 +20,10 @@ import pytest
 
 import wip_gym  # noqa: F401
 from controllers.registry import make_policy
-from tests.env_step_reference import (
-    friction_use,
-    goal_distance,
-    reference_reset_info,
-    reference_step,
-    tray_tilt_deg,
-)
+from wip_gym import mujoco_c
+from wip_gym.envs import measures as ms
+from wip_gym.envs.base import WIPEnv
+from wip_gym.envs.step_reference import friction_use, measures
 
 DURATION_S = 0.6
 CASES: list[tuple[str, dict[str, Any]]] = [
@@ -69,15 +73,48 @@ def _assert_same(new: Any, old: Any, what: str) -> None:
         assert new == old, (what, new, old)
 
 
+def readable_env(env_id: str, **kwargs: Any) -> gym.Env[Any, Any]:
+    """``gym.make(env_id, **kwargs)`` on the readable path."""
+    mujoco_c.set_fast_path(False)
+    try:
+        return gym.make(env_id, **kwargs)
+    finally:
+        mujoco_c.set_fast_path(None)
+
+
+def _readable_measures(base: WIPEnv) -> np.ndarray:
+    """The readable measures of the env's current data (its kinematics are recomputed: the
+    same as the step's)."""
+    out = base._measures.copy()
+    measures(base.model, base.data, base._measure_ints, base._measure_floats, out)
+    return out
+
+
+def _check_rewards(base: WIPEnv, action: np.ndarray, info: dict[str, Any], prev: float) -> float:
+    """Each reward term is its definition's value; returns the reward."""
+    progress_w, ctrl_w, fall_pen, cup_pen = base._weights
+    scaled = action / base._action_scale
+    expected = {
+        "reward_progress": progress_w * (prev - info["goal_distance"]),
+        "reward_ctrl": -ctrl_w * float(scaled @ scaled) * base.dt,
+        "reward_fall": -fall_pen if info["fallen"] else 0.0,
+    }
+    for key, value in expected.items():
+        _assert_same(info[key], value, key)
+    assert info["reward_cup_loss"] in (0.0, -cup_pen)
+    return sum(info[key] for key in (*expected, "reward_cup_loss"))
+
+
 @pytest.mark.parametrize(("env_id", "kwargs"), CASES)
-def test_step_matches_the_reference_step(env_id: str, kwargs: dict[str, Any]) -> None:
-    env = gym.make(env_id, **kwargs)  # steps with WIPEnv.step
-    ref = gym.make(env_id, **kwargs)  # steps with reference_step, in lockstep
+def test_the_fast_step_equals_its_readable_definition(env_id: str, kwargs: dict[str, Any]) -> None:
+    env = gym.make(env_id, **kwargs)  # the fast path
+    ref = readable_env(env_id, **kwargs)  # the readable path, in lockstep
     base, ref_base = env.unwrapped, ref.unwrapped
+    assert base._measure_table is not None and ref_base._measure_table is None
     obs, info = env.reset(seed=1)
-    ref_obs, _ = ref.reset(seed=1)
+    ref_obs, ref_info = ref.reset(seed=1)
     _assert_same(obs, ref_obs, "reset obs")
-    _assert_same(info, reference_reset_info(ref_base), "reset info")
+    _assert_same(info, ref_info, "reset info")
     policy = make_policy("unified", env)
     policy.reset(obs, info)
     rng = np.random.default_rng(0)
@@ -85,6 +122,7 @@ def test_step_matches_the_reference_step(env_id: str, kwargs: dict[str, Any]) ->
     steps = round(DURATION_S / base.dt)
     seen = {"fallen": False, "cup_lost": False}
     throw = CUP_THROWS.get(CASES.index((env_id, kwargs)))
+    prev = info["goal_distance"]
     for n in range(steps):
         if n == throw:  # both envs' cups leave the plate with the same velocity
             for b in (base, ref_base):
@@ -93,7 +131,11 @@ def test_step_matches_the_reference_step(env_id: str, kwargs: dict[str, Any]) ->
         if n % 7 == 3:  # now and then a kick, to leave the controller's neighbourhood
             action = np.clip(action + rng.normal(0.0, 0.3, action.shape) * high, low, high)
         out = env.step(action)
-        ref_out = reference_step(ref_base, action.copy())
+        compiled = base._measures.copy()
+        np.testing.assert_allclose(
+            _readable_measures(base), compiled, rtol=1e-12, atol=1e-12, err_msg=f"step {n}"
+        )
+        ref_out = ref.step(action.copy())
         for name, new, old in zip(
             ("obs", "reward", "terminated", "truncated", "info"), out, ref_out, strict=True
         ):
@@ -101,8 +143,9 @@ def test_step_matches_the_reference_step(env_id: str, kwargs: dict[str, Any]) ->
         np.testing.assert_array_equal(base.data.qpos, ref_base.data.qpos)
         np.testing.assert_array_equal(base.data.qvel, ref_base.data.qvel)
         assert base._cup_lost == ref_base._cup_lost
-        assert base._prev_distance == pytest.approx(ref_base._prev_distance, rel=1e-12, abs=1e-12)
         obs, info = out[0], out[4]
+        _assert_same(out[1], _check_rewards(base, action, info, prev), f"step {n} reward")
+        prev = info["goal_distance"]
         seen["fallen"] |= info["fallen"]
         seen["cup_lost"] |= base._cup_lost
         if out[2]:
@@ -110,18 +153,29 @@ def test_step_matches_the_reference_step(env_id: str, kwargs: dict[str, Any]) ->
     assert seen["fallen"] == (kwargs.get("push_force", 0.0) in (3000.0, -2000.0))
     assert seen["cup_lost"] == (throw is not None)
     # the overlay's numbers read the same state
-    shown = base.overlay_values()
-    assert shown.time == ref_base.data.time and shown.cup_lost == ref_base._cup_lost
-    _assert_same(shown.goal_distance, goal_distance(ref_base), "overlay goal_distance")
+    shown, ref_shown = base.overlay_values(), ref_base.overlay_values()
+    _assert_same(dataclasses.asdict(shown), dataclasses.asdict(ref_shown), "overlay")
+    _assert_same(shown.goal_distance, info["goal_distance"], "overlay goal_distance")
     if base._tray:
-        _assert_same(shown.tray_tilt_deg, tray_tilt_deg(ref_base), "overlay tray_tilt_deg")
+        _assert_same(shown.tray_tilt_deg, info["tray_tilt_deg"], "overlay tray_tilt_deg")
         used = friction_use(
-            ref_base.model,
-            ref_base.data,
-            ref_base._cup_geoms,
-            ref_base._tray_geom,
-            ref_base._cup_friction,
+            base.model, base.data, base._cup_geoms, base._tray_geom, base._cup_friction
         )
         _assert_same(shown.friction_use, used, "overlay friction_use")
+        _assert_same(used, info["cup_friction_use"], "friction_use")
     env.close()
     ref.close()
+
+
+def test_the_readable_measures_fill_every_entry() -> None:
+    """Every entry of the measures is written by the readable definition on a tray task (a
+    vector of NaN comes back without one), and is the layout's."""
+    env = gym.make("wip_gym/KrangTray-v0", tray_attachment="free")
+    env.reset(seed=2)
+    base = env.unwrapped
+    out = np.full(ms.N_OUT, np.nan)
+    measures(base.model, base.data, base._measure_ints, base._measure_floats, out)
+    assert np.isfinite(out).all()
+    np.testing.assert_allclose(out, base._measures, rtol=1e-12, atol=1e-12)
+    assert ms.OUT.cup_friction_use == ms.N_OUT - 1
+    env.close()

@@ -52,7 +52,7 @@ def test_kernel_equals_the_plain_computation(name: str) -> None:
         J = np.vstack([task.jacobian(robot) for task in tasks])
         target = np.concatenate([task.reference_acceleration(robot) for task in tasks])
         w = np.concatenate([task.weights() for task in tasks])
-        jdot_nu = qp._jdot_nu(robot, tasks)
+        jdot_nu = qp.jdot_nu(robot, tasks)
         T = w[:, None] * (J @ iso.E)
         b = w * (target - jdot_nu - J @ iso.e)
         _close(H, T.T @ T + settings.regularization * np.eye(len(T.T)))
@@ -131,7 +131,7 @@ def test_a_nonfinite_row_is_never_feasible() -> None:
         J = np.vstack([task.jacobian(robot) for task in tasks])
         target = np.concatenate([task.reference_acceleration(robot) for task in tasks])
         w = np.concatenate([task.weights() for task in tasks])
-        jdot_nu = qp._jdot_nu(robot, tasks)
+        jdot_nu = qp.jdot_nu(robot, tasks)
         qp.assemble(robot, None, tasks)
         if qp.kernel.run(robot.A, robot.h, J, target, jdot_nu, w, robot.q, robot.nu):
             break
@@ -214,7 +214,7 @@ def test_a_layout_or_input_of_the_wrong_size_is_refused() -> None:
         qp.solve(robot, None, tasks)
     qp.torque_low = low
     qp.solve(robot, None, tasks)
-    J, target, w = qp._J, qp._target, qp._w
+    J, target, w = qp.kernel.J, qp.kernel.target, qp.kernel.w
     jdot_nu = np.zeros_like(target)
     kernel = qp.kernel
     with pytest.raises(ValueError, match="J must be"):

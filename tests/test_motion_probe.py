@@ -37,7 +37,7 @@ def test_exact_jdot_nu_equals_the_finite_difference(env_id: str, goal, mode: str
         nu = rng.uniform(-1.5, 1.5, n)  # psid up to 1.5 rad/s in 3-D
         qpos, qvel = robot.full_state(q, nu, rng.uniform(-1, 1, 2))
         robot.update(qpos, qvel)
-        exact = qp._jdot_nu(robot, policy.tasks)
+        exact = qp.jdot_nu(robot, policy.tasks)
         finite = central_difference_jdot_nu(robot, policy.tasks)
         assert np.abs(finite).max() > 0.05  # the states move: the drift is not trivially zero
         # the finite difference's own error (round-off over a 1e-6 step) is ~1e-9 here

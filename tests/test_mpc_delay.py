@@ -19,7 +19,6 @@ from controllers.high_level.receding_horizon import HighLevel, HighLevelConfig
 from controllers.high_level.solve_thread import SolveThread
 from controllers.low_level.compiled_step import rows_and_kernel
 from controllers.low_level.kernel import kernel_step
-from controllers.low_level.task_stack import stack_rows
 from wip_gym.envs.measures import env_measures
 from wip_gym.minimal_kernels import robot_update_at, wipm_inputs_into
 
@@ -142,7 +141,7 @@ def test_the_control_loops_compiled_calls_release_the_gil() -> None:
     control thread holds it through Python and gives it up only in calls that release it
     (MuJoCo's ``mj_step``, and these compiled calls). Held through them, the solve took 1.4 to
     1.7 ms in its thread (0.85 to 0.97 ms since) and was often not done ``d = 5`` steps later."""
-    kernels = (robot_update_at, rows_and_kernel, stack_rows, kernel_step, env_measures)
+    kernels = (robot_update_at, rows_and_kernel, kernel_step, env_measures)
     for kernel in (*kernels, wipm_inputs_into):
         assert kernel.targetoptions.get("nogil") is True, kernel.__name__
 

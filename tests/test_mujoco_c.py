@@ -1,8 +1,14 @@
-"""``wip_gym.mujoco_c``: every MuJoCo C function declared for compiled code gives, called from
-numba, exactly what the Python bindings give, on a random state of Krang (the robot with the
-most joints, a free base and sites)."""
+"""``wip_gym.mujoco_c``: the installed MuJoCo declares every C function as the fast path does,
+and each gives, called from numba, exactly what the Python bindings give, on a random state of
+Krang (the robot with the most joints, a free base and sites); the fast path's gate and switch.
+``tools/verify_mujoco_releases.py`` runs this file on every MuJoCo release of pyproject's
+range."""
 
 from __future__ import annotations
+
+import os
+import re
+import warnings
 
 import mujoco
 import numpy as np
@@ -11,8 +17,27 @@ from dynamics_reference import random_minimal_state
 from numba import carray, njit
 
 from wip_gym import mujoco_c as mjc
+from wip_gym.array_table import float64_view, int32_pointer
 from wip_gym.assets import mjcf_path
 from wip_gym.robot_model import RobotModel
+
+
+def _normalised(declaration: str) -> str:
+    return re.sub(r"\s+", " ", declaration).replace("( ", "(").strip()
+
+
+def test_the_installed_header_declares_every_function_as_the_fast_path_does() -> None:
+    """``mujoco/include/mujoco/mujoco.h`` of the installed release declares each C function
+    the compiled code calls as ``DECLARATIONS`` has it, whitespace aside: a changed signature
+    would corrupt memory instead of raising."""
+    header = os.path.join(os.path.dirname(mujoco.__file__), "include", "mujoco", "mujoco.h")
+    with open(header) as file:
+        text = file.read()
+    for name, (declaration, arguments) in mjc.DECLARATIONS.items():
+        found = re.findall(rf"MJAPI\s+(void\s+{name}\s*\([^;]*\));", text)
+        assert len(found) == 1, (name, found)
+        assert _normalised(found[0]) == _normalised(declaration), name
+        assert declaration.count(",") + 1 == len(arguments), name
 
 
 @njit
@@ -66,7 +91,7 @@ def test_compiled_calls_equal_the_bindings() -> None:
         point = np.array([0.1, -0.2, 0.7])
         dst, result = np.zeros((model.nv, model.nv)), np.zeros(model.nv)
         if run is _compiled:
-            run(model._address, data._address, jacs, point, body, site, dst, result)
+            run(*mjc.addresses(model, data), jacs, point, body, site, dst, result)
         else:
             run(model, data, jacs, point, body, site, dst, result)
         results.append(
@@ -87,17 +112,42 @@ def test_compiled_calls_equal_the_bindings() -> None:
     assert np.isfinite(results[0][-1]).all() and np.abs(results[0][-1]).max() > 0
 
 
-def test_an_untested_mujoco_release_is_refused(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_the_fast_path_runs_on_verified_releases_only(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Another release is refused with its reason, and what the readable path costs is said
+    once, whatever the number of objects that ask; the switch turns the fast path off, and on
+    only where it can run."""
+    assert mjc.release() in mjc.VERIFIED_RELEASES and mjc.available()
     monkeypatch.setattr(mujoco, "__version__", "3.99.0")
-    with pytest.raises(ImportError, match=r"3\.99\.0 is not one of the releases"):
-        mjc._check_version()
-    monkeypatch.setattr(mujoco, "__version__", "3.17.2")
-    mjc._check_version()  # a patch release of a tested one is accepted
+    assert "3.99.0 is not one of the releases" in str(mjc._unavailable())
+    monkeypatch.setattr(mjc, "_available", None)
+    monkeypatch.setattr(mjc, "_chosen", None)
+    with pytest.warns(RuntimeWarning, match=r"3\.99\.0 .* about \d+ times slower") as caught:
+        assert not mjc.fast_path()
+        assert not mjc.fast_path() and not mjc.available()
+    assert len(caught) == 1
+    with pytest.raises(ValueError, match="cannot run here"):
+        mjc.set_fast_path(True)
+    with pytest.raises(RuntimeError, match="not available"):
+        mjc.addresses(mujoco.MjModel.from_xml_string("<mujoco/>"), None)  # type: ignore[arg-type]
+    monkeypatch.setattr(mujoco, "__version__", "3.17.2")  # a patch release of a verified one
+    monkeypatch.setattr(mjc, "_available", None)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert mjc.fast_path()
+    for value, expected in (("0", False), ("1", True), (" 0 ", False)):
+        monkeypatch.setenv(mjc.FAST_PATH_ENV, value)
+        mjc.set_fast_path(None)  # the environment, read again
+        assert mjc.fast_path() is expected
+    mjc.set_fast_path(False)
+    assert not mjc.fast_path()
+    mjc.set_fast_path(True)
+    assert mjc.fast_path()
+    mjc.set_fast_path(None)
 
 
 @njit
 def _through_pointer(address, rows, cols, out) -> None:
-    view = mjc.float64_view(address, (rows, cols))
+    view = float64_view(address, (rows, cols))
     for i in range(rows):
         for j in range(cols):
             out[i, j] = view[i, j]
@@ -116,26 +166,6 @@ def test_float64_view_is_the_array_at_an_address() -> None:
 
 
 @njit
-def _quat2mat(quat, out) -> None:
-    mjc.mju_quat2Mat(out.ctypes.data, quat.ctypes.data)
-
-
-def test_compiled_quat2mat_equals_the_binding() -> None:
-    """``mju_quat2Mat`` from compiled code (the wheel's inertial frame in
-    ``minimal_kernels.wipm_values``) is the binding's, on random unit quaternions and on its
-    identity shortcut."""
-    rng = np.random.default_rng(29)
-    quats = [np.array([1.0, 0.0, 0.0, 0.0]), np.array([-1.0, 0.0, 0.0, 0.0])]
-    quats += [q / np.linalg.norm(q) for q in rng.normal(size=(200, 4))]
-    for quat in quats:
-        expected = np.zeros(9)
-        mujoco.mju_quat2Mat(expected, quat)
-        got = np.full(9, np.nan)
-        _quat2mat(quat, got)
-        np.testing.assert_array_equal(got, expected)
-
-
-@njit
 def _contacts(
     model: int,
     data: int,
@@ -147,7 +177,7 @@ def _contacts(
 ) -> None:
     result = np.empty(6)
     for i in range(ncon):
-        pair = carray(mjc.int32_pointer(np.uint64(geom_address + i * stride)), 2)
+        pair = carray(int32_pointer(np.uint64(geom_address + i * stride)), 2)
         geoms[i, 0], geoms[i, 1] = pair[0], pair[1]
         mjc.mj_contactForce(model, data, i, result.ctypes.data)
         forces[i] = result
@@ -166,7 +196,7 @@ def test_compiled_contact_reads_equal_the_bindings(cone: mujoco.mjtCone) -> None
     assert n >= 2
     geoms, forces = np.full((n, 2), -1, np.int32), np.full((n, 6), np.nan)
     geom = data.contact.geom
-    _contacts(model._address, data._address, n, geom.ctypes.data, geom.strides[0], geoms, forces)
+    _contacts(*mjc.addresses(model, data), n, geom.ctypes.data, geom.strides[0], geoms, forces)
     expected = np.zeros((n, 6))
     for i in range(n):
         mujoco.mj_contactForce(model, data, i, expected[i])

@@ -489,3 +489,34 @@ def test_body_inertia_about_the_axle_equals_the_sum_over_bodies(robot: RobotMode
         np.testing.assert_allclose(robot.body_inertia_about_axle(), inertia, rtol=0, atol=1e-12)
         pitch = robot.body_inertia_about_axle()[1, 1]
         assert pitch == pytest.approx(robot.A[lay.index_q1, lay.index_q1], rel=1e-10)
+
+
+def test_the_readable_update_equals_the_fast_one_to_the_bit(robot: RobotModel) -> None:
+    """A model made with the fast path switched off (``wip_gym.mujoco_c.set_fast_path``) updates
+    through MuJoCo's Python bindings: every output, the WIPM's inputs and MuJoCo's data equal
+    the fast path's to the bit, on and off the rolling manifold, with and without dynamics."""
+    from wip_gym import mujoco_c
+
+    assert robot.fast_path
+    mujoco_c.set_fast_path(False)
+    try:
+        readable = RobotModel(robot.model)
+    finally:
+        mujoco_c.set_fast_path(None)
+    assert not readable.fast_path
+    assert RobotModel(robot.model).fast_path  # the default again
+    for k, (qpos, qvel) in enumerate(_states_on_and_off_the_manifold(robot, 31)):
+        dynamics = k != 3
+        for model in (robot, readable):
+            model.update(qpos, qvel, dynamics=dynamics)
+        outputs = [lambda r: r.q, lambda r: r.nu, lambda r: r.J_tf, lambda r: r.Jdot_tf_nu]
+        outputs += [lambda r: r.com, lambda r: r.J_com, lambda r: r.J_theta]
+        outputs += [lambda r: r.update_scalars(), lambda r: r.wipm_inputs()]
+        outputs += [lambda r: r.data.xpos, lambda r: r.data.qvel, lambda r: r.data.cdof]
+        if dynamics:
+            outputs += [lambda r: r.A, lambda r: r.h, lambda r: r.B]
+        for output in outputs:
+            np.testing.assert_array_equal(output(readable), output(robot))
+        assert readable.has_dynamics is dynamics
+    with pytest.raises(ValueError, match="NaN or inf"):
+        readable.update(np.full(robot.layout.nq, np.nan), np.zeros(robot.layout.nv))

@@ -1,6 +1,6 @@
 """The env's compiled step arithmetic (``wip_gym.envs.measures``) without contacts: the same
-step as the reference step (tests/env_step_reference.py), from one compiled version of the
-kernel for states with and without contacts."""
+step as the readable path (``wip_gym.envs.step_reference``), from one compiled version of the
+kernel for states with and without contacts; its table of addresses, copies, contacts."""
 
 from __future__ import annotations
 
@@ -13,20 +13,22 @@ import numpy as np
 import pytest
 
 import wip_gym  # noqa: F401
-from tests.env_step_reference import reference_step
-from tests.test_env_step_reference import _assert_same
-from wip_gym.envs.measures import (
-    T_CONTACT_GEOM,
-    action_effort,
-    contact_layout,
-    gather_contacts,
-    step_measures,
-)
+from tests.test_env_step_reference import _assert_same, readable_env
+from wip_gym import mujoco_c
+from wip_gym.envs.measures import ENV, action_effort, gather_contacts, step_measures
+from wip_gym.mujoco_c import contact_layout
+
+
+def _mujoco_entries(env: object) -> tuple[int, ...]:
+    """The env's table's ``mujoco`` row: the addresses of its model and data, then its
+    contacts' layout."""
+    table = env._measure_table  # type: ignore[attr-defined]
+    return tuple(table.arrays[ENV.index.mujoco].tolist())
 
 
 @pytest.mark.parametrize("env_id", ["wip_gym/Planar-v0", "wip_gym/KrangTray-v0"])
 def test_step_in_the_air_matches_the_reference_step(env_id: str) -> None:
-    env, ref = gym.make(env_id), gym.make(env_id)
+    env, ref = gym.make(env_id), readable_env(env_id)
     env.reset(seed=1)
     ref.reset(seed=1)
     base, ref_base = env.unwrapped, ref.unwrapped
@@ -38,7 +40,7 @@ def test_step_in_the_air_matches_the_reference_step(env_id: str) -> None:
     action = 0.1 * env.action_space.high
     for step in range(20):
         new = base.step(action)
-        old = reference_step(ref_base, action)
+        old = ref_base.step(action)
         assert base.data.ncon == 0
         for what, n, o in zip(
             ("obs", "reward", "terminated", "truncated", "info"), new, old, strict=True
@@ -72,8 +74,10 @@ def test_a_copied_env_measures_its_own_data() -> None:
     for _ in range(5):
         env.step(action)
     for copied in (copy.deepcopy(env), pickle.loads(pickle.dumps(env))):
-        assert copied._measure_table[1] == copied.data._address != env.data._address
-        assert tuple(copied._measure_table[T_CONTACT_GEOM:]) == contact_layout(copied.data)
+        addresses = mujoco_c.addresses(copied.model, copied.data)
+        assert _mujoco_entries(copied)[:2] == addresses
+        assert addresses[1] != mujoco_c.addresses(env.model, env.data)[1]
+        assert _mujoco_entries(copied)[2:] == contact_layout(copied.data)
         assert contact_layout(copied.data)[0] != contact_layout(env.data)[0]
         copied.set_state(env.data.qpos.copy(), env.data.qvel.copy())  # the same state
         copied.data.time = env.data.time
@@ -99,7 +103,7 @@ def test_the_contacts_stay_where_their_layout_was_taken() -> None:
         env.step(action if step % 50 < 25 else -action)
         counts.add(env.data.ncon)
         assert contact_layout(env.data) == layout
-        assert tuple(env._measure_table[T_CONTACT_GEOM:]) == layout
+        assert _mujoco_entries(env)[2:] == layout
     env.reset(seed=1)
     assert contact_layout(env.data) == layout
     assert len(counts) > 1  # the count changed along the way
@@ -125,7 +129,7 @@ def test_gather_contacts_refuses_more_contacts_than_the_arena_holds() -> None:
     env.reset(seed=0)
     for _ in range(5):  # forces of a step taken
         env.step(np.zeros(env.action_space.shape))
-    table = env._measure_table
+    table = env._measure_table.rows
     n = env.data.ncon
     geom, frame, force = gather_contacts(table, n, True)
     np.testing.assert_array_equal(geom, env.data.contact.geom)

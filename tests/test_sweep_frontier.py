@@ -371,11 +371,14 @@ def test_calibration_measures_each_controller_on_the_specs_first_cell() -> None:
     )
     calls: list[tuple[Any, ...]] = []
 
-    def episode(env, controller, parameters, seed, duration, preset=None):
+    def episode(env, controller, parameters, seed, duration, preset=None, run_controllers=None):
         calls.append((controller, parameters, seed, duration))
+        assert run_controllers == spec.controllers  # the overrides resolved for the whole run
         from benchmarks.rollout import run_configured_episode
 
-        return run_configured_episode(env, controller, parameters, seed, duration, preset)
+        return run_configured_episode(
+            env, controller, parameters, seed, duration, preset, run_controllers
+        )
 
     (calibration,) = estimate.calibrate(spec, episode)
     first = spec.episodes()[0]

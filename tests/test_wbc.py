@@ -300,7 +300,7 @@ def test_reduced_qp_equals_full_dynamics_qp(robot: RobotModel, fraction: float) 
         J = np.vstack([task.jacobian(robot) for task in tasks])
         w = np.concatenate([task.weights() for task in tasks])
         np.testing.assert_allclose(T, w[:, None] * (J @ iso.E), rtol=1e-12, atol=1e-12)
-        np.testing.assert_allclose(qp._jdot_nu(robot, tasks), _jdot_nu(robot, tasks), atol=1e-9)
+        np.testing.assert_allclose(qp.jdot_nu(robot, tasks), _jdot_nu(robot, tasks), atol=1e-9)
     if fraction < 1.0:
         assert max(active_counts) > 0, "the tight case should have an active torque limit"
     print(f"fraction {fraction}: qdd {worst_qdd:.1e}, tau {worst_tau:.1e}, active {active_counts}")
@@ -411,6 +411,57 @@ def test_a_task_of_a_new_kind_gets_the_pd_law_and_its_reference(
     # a task that leaves out what it measures is told so by name
     with pytest.raises(NotImplementedError, match="PDTask must give error"):
         PDTask().reference_acceleration(robot)
+
+
+def test_the_documented_compiled_rows_of_the_new_kind_equal_its_object(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """docs/extending.md §1's ``site_height_rows``, run on a step's table (a stock frame task on
+    the same site gives it its site slot), fills the rows ``SiteHeightTask`` gives: the same
+    Jacobian, reference, weight and ``Jdot nu``, to 1e-12 of their scale."""
+    from numba import njit
+
+    from controllers.low_level import compiled_tasks as ct
+    from controllers.low_level.motion_probe import MotionProbe
+    from wip_gym.array_table import float_cube, float_matrix, float_vector, int_vector
+
+    SiteHeightTask = _documented_task_class(monkeypatch)
+    text = (Path(__file__).parents[1] / "docs" / "extending.md").read_text()
+    snippet = next(b for b in text.split("```python")[1:] if "def site_height_rows" in b)
+    namespace = {
+        "njit": njit, "ITEM": ct.ITEM, "S": ct.S, "_pd": ct._pd, "_point_motion": ct._point_motion,
+        "_relative_drift": ct._relative_drift, "float_cube": float_cube,
+        "float_matrix": float_matrix, "float_vector": float_vector, "int_vector": int_vector,
+    }  # fmt: skip
+    # the package's functions are cached on disk; the docs' copy is compiled in memory
+    exec(snippet.split("```")[0].replace("cache=True", "cache=False"), namespace)  # noqa: S102
+    robot = RobotModel(_load("krang"))
+    _set_state(robot, 23)
+    low, high = _limits(robot)
+    qp = TaskQP(robot, low, high, QPSettings())
+    tasks = _realistic_tasks(robot)
+    qp.assemble(robot, None, tasks)
+    stack = qp._stack
+    assert stack is not None
+    k = next(k for k, task in enumerate(tasks) if isinstance(task, FramePositionTask))
+    task = SiteHeightTask(
+        tasks[k].site, float(site_in_axle_frame(robot, tasks[k].site)[0][2]) - 0.02
+    )
+    rows = np.zeros((1, robot.layout.n_min)), np.zeros(1), np.zeros(1), np.zeros(1)
+    parameters = np.array([task.kp, task.kv, task.height, task.weight])
+    namespace["site_height_rows"](stack.table.rows, stack.items[k], parameters, *rows)
+    probe = MotionProbe(robot)
+    probe.update(robot)
+    expected = (
+        task.jacobian(robot),
+        task.reference_acceleration(robot),
+        task.jdot_nu(probe),
+        task.weights(),
+    )
+    for ours, theirs in zip(rows, expected, strict=True):
+        scale = max(1.0, float(np.abs(theirs).max()))
+        np.testing.assert_allclose(ours, theirs, rtol=0.0, atol=1e-12 * scale)
+    assert abs(expected[1][0]) > 0.1 and abs(expected[2][0]) > 1e-6  # something to compare
 
 
 def test_tight_torque_limits_hold(robot: RobotModel) -> None:

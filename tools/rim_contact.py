@@ -71,7 +71,15 @@ PHASES = 8
 GAP = 0.001  # m short of the wall at the launch
 MUJOCO_SOLREF = (0.02, 1.0)
 MUJOCO_SOLIMP = (0.9, 0.95, 0.001, 0.5, 2.0)
-OPTION_FIELDS = ("timestep", "integrator", "cone", "impratio", "enableflags", "disableflags")
+OPTION_FIELDS = (
+    "timestep",
+    "integrator",
+    "cone",
+    "impratio",
+    "enableflags",
+    "disableflags",
+    "ccd_tolerance",
+)
 
 
 def _pairs(spec: mujoco.MjSpec, geoms: list[str], solref: tuple, solimp: tuple) -> None:

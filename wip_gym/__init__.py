@@ -9,6 +9,11 @@
 | ``wip_gym/PlanarTray-v0`` | 7-DOF planar humanoid | drive to x carrying a cup on a tray |
 | ``wip_gym/Krang-v0`` | Golem Krang, 19 DOF | drive to a goal (X, Y) |
 | ``wip_gym/KrangTray-v0`` | Golem Krang, 19 DOF | drive to (X, Y) carrying a cup on a tray |
+
+On every MuJoCo release from 3.10 to 3.17: the per-step computation calls MuJoCo's C functions
+from compiled code where their declarations were verified (``wip_gym.mujoco_c``), and MuJoCo's
+Python bindings elsewhere, or everywhere with ``WIP_GYM_FAST_PATH=0`` or
+``wip_gym.set_fast_path(False)`` (docs/robot_model.md §3).
 """
 
 from __future__ import annotations
@@ -19,13 +24,14 @@ import os
 if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
     os.environ.setdefault("MUJOCO_GL", "egl")
 
-# numba's caches of wip_gym and controllers keyed on all their compiled sources, not each on
-# its own file (a caller compiled with an edited callee of another file would load the old
-# code): before any of their compiled functions is defined
-from wip_gym.compiled_cache import install as _install_compiled_cache  # noqa: E402
+# numba's cache in a directory keyed on the packages' compiled sources and the modules they
+# import (a caller compiled with an edited callee of another file would load the old code):
+# before any of their compiled functions is defined
+from wip_gym.compiled_cache import configure as _configure_compiled_cache  # noqa: E402
 
-_install_compiled_cache()
+_configure_compiled_cache()
 
+from wip_gym.mujoco_c import set_fast_path  # noqa: E402
 from wip_gym.registration import ENV_IDS, register_envs  # noqa: E402
 from wip_gym.robot_model import RobotModel, WIPMParameters  # noqa: E402
 from wip_gym.scene import SceneOptions, build_model  # noqa: E402
@@ -39,4 +45,5 @@ __all__ = [
     "WIPMParameters",
     "build_model",
     "register_envs",
+    "set_fast_path",
 ]

@@ -1,9 +1,11 @@
 """The arithmetic of ``RobotModel.update`` after its MuJoCo calls, compiled by numba.
 
-Four functions that write into the caller's buffers, :func:`all_finite` (the update's input
-check), and :func:`robot_update`, which makes ``RobotModel.update``'s MuJoCo
-calls (``wip_gym.mujoco_c``) and runs them in one compiled call (called from Python as
-:func:`robot_update_at`, its arrays in one ``wip_gym.array_table.ArrayTable``):
+Four functions that write into the caller's buffers and :func:`all_finite` (the update's input
+check); :func:`update_kinematics` and :func:`update_dynamics` run them on the update's arrays,
+declared once as :data:`UPDATE` (``wip_gym.array_table``), after MuJoCo's calls: on the fast
+path :func:`robot_update_at` makes those calls from compiled code (``wip_gym.mujoco_c``) and
+the whole update is one compiled call; on the readable path ``RobotModel`` makes them through
+MuJoCo's Python bindings, with the same results to the bit:
 
 * :func:`idealised_state`: the inverse, MuJoCo's ``qpos``, ``qvel`` of a minimal state with the
   wheels on the floor (``RobotModel.full_state``);
@@ -16,8 +18,8 @@ calls (``wip_gym.mujoco_c``) and runs them in one compiled call (called from Pyt
 
 and, outside the update, :func:`wipm_values`: the WIPM's parameters ``lambda(q)`` (paper section
 "Simplified Model") at the updated state, in one compiled call
-(``RobotModel.wipm_values``, once per MPC step), with :func:`inertia_about_point` and
-MuJoCo's ``mju_quat2Mat``.
+(``RobotModel.wipm_values``, once per MPC step), with :func:`inertia_about_point`, on the
+arrays of :data:`WIPM` (no MuJoCo call: the same on both paths).
 
 The NumPy expressions they replace are kept in ``tests/test_robot_model.py`` and compared on
 random states of every robot (the minimal coordinates also against ``RobotModel.full_state``,
@@ -28,12 +30,26 @@ the path it replaces in the controllers, in ``tests/test_wipm.py``.
 from __future__ import annotations
 
 import math
+from collections import namedtuple
+from typing import Any
 
 import numpy as np
 from numba import njit
 
 from wip_gym import mujoco_c as mjc
-from wip_gym.array_table import float_cube, float_matrix, float_vector, int_matrix, int_vector
+from wip_gym.array_table import (
+    FLOAT_CUBE,
+    FLOAT_MATRIX,
+    FLOAT_VECTOR,
+    INT_MATRIX,
+    INT_VECTOR,
+    TableSpec,
+    float_cube,
+    float_matrix,
+    float_vector,
+    int_matrix,
+    int_vector,
+)
 from wip_gym.small_linalg import small_matmul
 
 
@@ -345,20 +361,25 @@ def inertia_about_point(
     return out
 
 
-WIPM_ENTRIES = (
-    "ints",  # the base body, the left wheel body, its dof
-    "ximat",
-    "xipos",
-    "xpos",
-    "body_inertia",
-    "body_iquat",
-    "body_mass",
-    "dof_damping",
-    "gravity",
-    "body_ids",  # the body's bodies: the robot's but the wheels
+WIPM = TableSpec(
+    "wipm",
+    (
+        ("ids", INT_VECTOR),  # the base body, the left wheel body, its dof
+        ("ximat", FLOAT_MATRIX),
+        ("xipos", FLOAT_MATRIX),
+        ("xpos", FLOAT_MATRIX),
+        ("body_inertia", FLOAT_MATRIX),
+        ("wheel_frame", FLOAT_VECTOR),  # the wheel's inertial frame, row-major (mju_quat2Mat)
+        ("body_mass", FLOAT_VECTOR),
+        ("dof_damping", FLOAT_VECTOR),
+        ("gravity", FLOAT_VECTOR),
+        ("body_ids", INT_VECTOR),  # the body's bodies: the robot's but the wheels
+    ),
 )
-"""The rows of :func:`wipm_values`' table (``wip_gym.array_table``; ``RobotModel`` makes it
-once per MjModel/MjData): MuJoCo's arrays and the ids it reads."""
+"""The arrays of :func:`wipm_values` (``RobotModel`` makes its table once per MjModel/MjData):
+MuJoCo's arrays, the ids it reads and the wheel's inertial frame, which the caller writes before
+each call (``mju_quat2Mat`` of the wheel's ``body_iquat``)."""
+_W = WIPM.index
 
 
 @njit(cache=True)
@@ -373,7 +394,7 @@ def wipm_values(
 ) -> tuple[tuple[float, ...], np.ndarray]:
     """``lambda(q)`` as the WIPM takes it (paper section "Simplified Model";
     ``controllers.simplified.wipm.params_from_lambda`` of ``RobotModel.wipm_parameters``) in one
-    compiled call, from MuJoCo's arrays in ``table`` (:data:`WIPM_ENTRIES`; read at this call: a
+    compiled call, from MuJoCo's arrays in ``table`` (:data:`WIPM`; read at this call: a
     mass or inertia changed in the model since the last update is seen, as by
     ``wipm_parameters``) and the body's ``com`` (axle frame), ``body_mass`` and ``theta`` of the
     last update.
@@ -382,16 +403,17 @@ def wipm_values(
     g)`` (``wip_gym.robot_model.WIPM_SCALARS``; a tuple of floats: boxing it costs less than
     an array and the scalars taken out of it), with ``L = hypot(X_com, Z_com)``, one wheel's
     mass, axial and transverse inertia ``(Rw diag(I_w) Rw^T)[1, 1]`` and ``[0, 0]`` (``Rw`` the
-    wheel's inertial frame, MuJoCo's ``mju_quat2Mat`` of ``body_iquat``), its joint's damping
+    wheel's inertial frame, ``table``'s ``wheel_frame``), its joint's damping
     and ``g = -gravity_z``; ``inertia_body`` = ``I_B = Ry(theta)^T I_axle Ry(theta)``,
     symmetrised, with ``I_axle`` the body's inertia about the axle midpoint in the axle frame
     (:func:`inertia_about_point`)."""
-    ints = int_vector(table[0])
-    base, wheel, wheel_dof = ints[0], ints[1], ints[2]
-    ximat, xipos, xpos = float_matrix(table[1]), float_matrix(table[2]), float_matrix(table[3])
-    inertia, iquat = float_matrix(table[4]), float_matrix(table[5])
-    mass, damping, gravity = float_vector(table[6]), float_vector(table[7]), float_vector(table[8])
-    bodies = int_vector(table[9])
+    ids = int_vector(table[_W.ids])
+    base, wheel, wheel_dof = ids[0], ids[1], ids[2]
+    ximat, xipos = float_matrix(table[_W.ximat]), float_matrix(table[_W.xipos])
+    xpos, inertia = float_matrix(table[_W.xpos]), float_matrix(table[_W.body_inertia])
+    mass, damping = float_vector(table[_W.body_mass]), float_vector(table[_W.dof_damping])
+    gravity, bodies = float_vector(table[_W.gravity]), int_vector(table[_W.body_ids])
+    frame = float_vector(table[_W.wheel_frame])
     axle = inertia_about_point(ximat, xipos, inertia, mass, bodies, xpos[base], heading)
     # Ry(theta)^T I_axle Ry(theta) (small_matmul: every product, zeros too)
     c, s = math.cos(theta), math.sin(theta)
@@ -403,8 +425,6 @@ def wipm_values(
         for b in range(3):
             inertia_body[a, b] = 0.5 * (rotated[a, b] + rotated[b, a])
     # one wheel: its principal inertia turned into its body frame (hinge about y)
-    frame = np.empty(9)  # row-major 3x3
-    mjc.mju_quat2Mat(frame.ctypes.data, iquat[wheel].ctypes.data)
     axial, transverse = 0.0, 0.0
     for k in range(3):
         axial += frame[3 + k] * inertia[wheel, k] * frame[3 + k]
@@ -468,151 +488,50 @@ def wipm_inputs_into(
         out[n + 9 + k] = values[k]
 
 
-@njit(cache=True)
-def robot_update(
-    model: int,
-    data: int,
-    qpos: np.ndarray,
-    qvel: np.ndarray,
-    data_qpos: np.ndarray,
-    data_qvel: np.ndarray,
-    xmat: np.ndarray,
-    xpos: np.ndarray,
-    xipos: np.ndarray,
-    qfrc_passive: np.ndarray,
-    body_mass: np.ndarray,
-    subtree_mass: np.ndarray,
-    bodies: np.ndarray,
-    body_ids: np.ndarray,
-    layout: np.ndarray,
-    body_qpos: np.ndarray,
-    body_dof: np.ndarray,
-    wheel_radius: float,
-    q: np.ndarray,
-    nu: np.ndarray,
-    J: np.ndarray,
-    J_pattern: np.ndarray,
-    Jdot_nu: np.ndarray,
-    jac_subtree: np.ndarray,
-    jac_wheels: np.ndarray,
-    jac_origin: np.ndarray,
-    M: np.ndarray,
-    bias: np.ndarray,
-    S: np.ndarray,
-    scalars: np.ndarray,
-    com_out: np.ndarray,
-    J_com_out: np.ndarray,
-    J_theta_out: np.ndarray,
-    A_out: np.ndarray,
-    h_out: np.ndarray,
-    B_out: np.ndarray,
-    dynamics: bool,
-) -> None:
-    """``RobotModel.update`` for the state ``(qpos, qvel)`` (the robot's own entries) on the
-    MuJoCo ``model``, ``data`` (addresses; ``data_*``, ``xmat``, ... are views on its arrays):
-    kinematics and ``mj_comPos``, :func:`minimal_state`, the Jacobians of the base subtree's
-    CoM, of the wheels' CoMs and of the base origin, :func:`body_com_into`; with ``dynamics`` also
-    ``mj_crb``, the full mass matrix, ``mj_comVel``, ``mj_passive``, ``mj_rne`` and
-    :func:`minimal_dynamics_into` (else ``A_out``, ``h_out``, ``B_out`` are left as they are).
-    ``bodies``: ``(base, wheel_left, wheel_right)``; ``J_pattern``: where ``J`` (``J_tf``) may
-    be nonzero. Written into the ``*_out`` buffers, and ``(psi, psid, cos psi, sin psi, mass,
-    theta, thetad, x, xd, axle_x, axle_y)`` into ``scalars`` (:data:`UPDATE_SCALARS`):
-    returning new arrays would cost their boxing at every call."""
-    data_qpos[: len(qpos)] = qpos
-    data_qvel[: len(qvel)] = qvel
-    mjc.mj_kinematics(model, data)
-    mjc.mj_comPos(model, data)
-    base = bodies[0]
-    psi, psid, c, s = minimal_state(
-        data_qpos,
-        data_qvel,
-        xmat[base],
-        layout,
-        body_qpos,
-        body_dof,
-        wheel_radius,
-        q,
-        nu,
-        J,
-        Jdot_nu,
-    )
-    mjc.mj_jacSubtreeCom(model, data, jac_subtree.ctypes.data, base)
-    for k in range(2):
-        wheel = bodies[1 + k]
-        mjc.mj_jac(model, data, jac_wheels[k].ctypes.data, 0, xipos[wheel].ctypes.data, wheel)
-    mjc.mj_jac(model, data, jac_origin.ctypes.data, 0, xpos[base].ctypes.data, base)
-    mass, theta, thetad = body_com_into(
-        body_mass,
-        xipos,
-        body_ids,
-        xpos[base],
-        jac_subtree,
-        subtree_mass[base],
-        bodies[1:],
-        jac_wheels,
-        jac_origin,
-        J,
-        J_pattern,
-        nu,
-        c,
-        s,
-        layout[0] != 0,
-        com_out,
-        J_com_out,
-        J_theta_out,
-    )
-    scalars[0], scalars[1], scalars[2], scalars[3] = psi, psid, c, s
-    scalars[4], scalars[5], scalars[6] = mass, theta, thetad
-    scalars[7], scalars[8] = q[0], nu[0]
-    scalars[9], scalars[10] = xpos[base, 0], xpos[base, 1]
-    if dynamics:
-        mjc.mj_crb(model, data)
-        mjc.mj_fullM(model, data, M.ctypes.data)
-        mjc.mj_comVel(model, data)
-        mjc.mj_passive(model, data)
-        mjc.mj_rne(model, data, 0, bias.ctypes.data)
-        minimal_dynamics_into(M, J, J_pattern, Jdot_nu, bias, qfrc_passive, S, A_out, h_out, B_out)
-
-
-UPDATE_ENTRIES = (
-    "ints",  # the model's and data's addresses
-    "floats",  # the wheel radius
-    "qpos",
-    "qvel",
-    "data_qpos",
-    "data_qvel",
-    "xmat",
-    "xpos",
-    "xipos",
-    "qfrc_passive",
-    "body_mass",
-    "subtree_mass",
-    "bodies",
-    "body_ids",
-    "layout",
-    "body_qpos",
-    "body_dof",
-    "q",
-    "nu",
-    "J",
-    "J_pattern",
-    "Jdot_nu",
-    "jac_subtree",
-    "jac_wheels",
-    "jac_origin",
-    "M",
-    "bias",
-    "S",
-    "scalars",
-    "com",
-    "J_com",
-    "J_theta",
-    "A",
-    "h",
-    "B",
+UPDATE = TableSpec(
+    "robot_update",
+    (
+        ("mujoco", INT_VECTOR),  # the model's and data's addresses (the fast path's)
+        ("constants", FLOAT_VECTOR),  # the wheel radius
+        ("qpos", FLOAT_VECTOR),  # the state, the robot's own entries
+        ("qvel", FLOAT_VECTOR),
+        ("data_qpos", FLOAT_VECTOR),  # MuJoCo's arrays
+        ("data_qvel", FLOAT_VECTOR),
+        ("xmat", FLOAT_MATRIX),
+        ("xpos", FLOAT_MATRIX),
+        ("xipos", FLOAT_MATRIX),
+        ("qfrc_passive", FLOAT_VECTOR),
+        ("body_mass", FLOAT_VECTOR),
+        ("subtree_mass", FLOAT_VECTOR),
+        ("bodies", INT_VECTOR),  # base, left wheel, right wheel
+        ("body_ids", INT_VECTOR),  # the body's bodies: the robot's but the wheels
+        ("layout", INT_VECTOR),  # as minimal_state takes them
+        ("body_qpos", INT_VECTOR),
+        ("body_dof", INT_VECTOR),
+        ("q", FLOAT_VECTOR),  # the update's outputs and scratch
+        ("nu", FLOAT_VECTOR),
+        ("J", FLOAT_MATRIX),
+        ("J_pattern", INT_MATRIX),
+        ("Jdot_nu", FLOAT_VECTOR),
+        ("jac_subtree", FLOAT_MATRIX),
+        ("jac_wheels", FLOAT_CUBE),
+        ("jac_origin", FLOAT_MATRIX),
+        ("M", FLOAT_MATRIX),
+        ("bias", FLOAT_VECTOR),
+        ("S", FLOAT_MATRIX),
+        ("scalars", FLOAT_VECTOR),
+        ("com", FLOAT_VECTOR),
+        ("J_com", FLOAT_MATRIX),
+        ("J_theta", FLOAT_VECTOR),
+        ("A", FLOAT_MATRIX),
+        ("h", FLOAT_VECTOR),
+        ("B", FLOAT_MATRIX),
+    ),
 )
-"""The rows of :func:`robot_update_at`'s table, by name: :func:`robot_update`'s arguments in
-their order, its scalars in the first two (``RobotModel`` builds it once per MuJoCo data)."""
+"""The arrays of ``RobotModel.update`` (``RobotModel`` builds the table once per MuJoCo data):
+its MuJoCo calls are :func:`robot_update_at`'s on the fast path, the bindings' on the readable
+one, and both run :func:`update_kinematics` and :func:`update_dynamics` on this table."""
+_U = UPDATE.index
 
 UPDATE_SCALARS = (
     "psi",
@@ -627,10 +546,15 @@ UPDATE_SCALARS = (
     "axle_x",
     "axle_y",
 )
-"""The entries of :func:`robot_update`'s ``scalars``, in order (``x``, ``xd``: the first
-minimal coordinate and its rate; ``axle_x``, ``axle_y``: the base origin's world position)."""
+"""The entries of the update's ``scalars``, in order (``x``, ``xd``: the first minimal
+coordinate and its rate; ``axle_x``, ``axle_y``: the base origin's world position)."""
+SCALAR: Any = namedtuple("UpdateScalar", UPDATE_SCALARS)(*range(len(UPDATE_SCALARS)))
+"""Each scalar's index in ``scalars`` (compiled code reads ``scalars[SCALAR.theta]``)."""
 _COS_PSI, _SIN_PSI, _BODY_MASS, _THETA = (
-    UPDATE_SCALARS.index(name) for name in ("cos_psi", "sin_psi", "body_mass", "theta")
+    SCALAR.cos_psi,
+    SCALAR.sin_psi,
+    SCALAR.body_mass,
+    SCALAR.theta,
 )
 #: the WIPM state (``RobotModel.wipm_state``) as indices into :data:`UPDATE_SCALARS`: planar
 #: ``[theta, thetad, x, xd]``, 3-D ``[x, psi, theta, xd, psid, thetad, X0, Y0]``
@@ -641,52 +565,112 @@ SPATIAL_STATE_SCALARS = tuple(
 )
 
 
+@njit(cache=True)
+def update_kinematics(table: np.ndarray) -> None:
+    """``RobotModel.update``'s arithmetic after MuJoCo's kinematics, ``mj_comPos``, the base
+    subtree's CoM Jacobian and the Jacobians of the wheels' CoMs and of the base origin (the
+    arrays of ``table``, :data:`UPDATE`): :func:`minimal_state`, :func:`body_com_into` and
+    ``(psi, psid, cos psi, sin psi, mass, theta, thetad, x, xd, axle_x, axle_y)`` into
+    ``scalars`` (:data:`UPDATE_SCALARS`)."""
+    bodies, xpos = int_vector(table[_U.bodies]), float_matrix(table[_U.xpos])
+    layout, nu = int_vector(table[_U.layout]), float_vector(table[_U.nu])
+    q, J = float_vector(table[_U.q]), float_matrix(table[_U.J])
+    base = bodies[0]
+    psi, psid, c, s = minimal_state(
+        float_vector(table[_U.data_qpos]),
+        float_vector(table[_U.data_qvel]),
+        float_matrix(table[_U.xmat])[base],
+        layout,
+        int_vector(table[_U.body_qpos]),
+        int_vector(table[_U.body_dof]),
+        float_vector(table[_U.constants])[0],
+        q,
+        nu,
+        J,
+        float_vector(table[_U.Jdot_nu]),
+    )
+    mass, theta, thetad = body_com_into(
+        float_vector(table[_U.body_mass]),
+        float_matrix(table[_U.xipos]),
+        int_vector(table[_U.body_ids]),
+        xpos[base],
+        float_matrix(table[_U.jac_subtree]),
+        float_vector(table[_U.subtree_mass])[base],
+        bodies[1:],
+        float_cube(table[_U.jac_wheels]),
+        float_matrix(table[_U.jac_origin]),
+        J,
+        int_matrix(table[_U.J_pattern]),
+        nu,
+        c,
+        s,
+        layout[0] != 0,
+        float_vector(table[_U.com]),
+        float_matrix(table[_U.J_com]),
+        float_vector(table[_U.J_theta]),
+    )
+    scalars = float_vector(table[_U.scalars])
+    scalars[SCALAR.psi], scalars[SCALAR.psid] = psi, psid
+    scalars[SCALAR.cos_psi], scalars[SCALAR.sin_psi] = c, s
+    scalars[SCALAR.body_mass], scalars[SCALAR.theta], scalars[SCALAR.thetad] = mass, theta, thetad
+    scalars[SCALAR.x], scalars[SCALAR.xd] = q[0], nu[0]
+    scalars[SCALAR.axle_x], scalars[SCALAR.axle_y] = xpos[base, 0], xpos[base, 1]
+
+
+@njit(cache=True)
+def update_dynamics(table: np.ndarray) -> None:
+    """``RobotModel.update``'s arithmetic after MuJoCo's ``mj_crb``, full mass matrix (into
+    ``M``), ``mj_comVel``, ``mj_passive`` and ``mj_rne`` (into ``bias``): paper eq. ``dyn``,
+    :func:`minimal_dynamics_into`, on the arrays of ``table`` (:data:`UPDATE`)."""
+    minimal_dynamics_into(
+        float_matrix(table[_U.M]),
+        float_matrix(table[_U.J]),
+        int_matrix(table[_U.J_pattern]),
+        float_vector(table[_U.Jdot_nu]),
+        float_vector(table[_U.bias]),
+        float_vector(table[_U.qfrc_passive]),
+        float_matrix(table[_U.S]),
+        float_matrix(table[_U.A]),
+        float_vector(table[_U.h]),
+        float_matrix(table[_U.B]),
+    )
+
+
 @njit(cache=True, nogil=True)
 def robot_update_at(table: np.ndarray, dynamics: bool) -> bool:
-    """:func:`robot_update` on the arrays of ``table`` (:data:`UPDATE_ENTRIES`): one array to
-    unbox instead of :func:`robot_update`'s 33 array arguments (``wip_gym.array_table``).
-    First :func:`all_finite` on the state (``qpos``, ``qvel``): False, with nothing computed or
-    written, if it is not."""
-    ints = int_vector(table[0])
-    if not all_finite(float_vector(table[2]), float_vector(table[3])):
+    """``RobotModel.update`` on the fast path, in one compiled call on the arrays of ``table``
+    (:data:`UPDATE`): first :func:`all_finite` on the state (``qpos``, ``qvel``; False, with
+    nothing computed or written, if it is not), then the state into MuJoCo's data, its
+    kinematics and ``mj_comPos``, the Jacobians of the base subtree's CoM, of the wheels' CoMs
+    and of the base origin, :func:`update_kinematics`; with ``dynamics`` also ``mj_crb``, the
+    full mass matrix, ``mj_comVel``, ``mj_passive``, ``mj_rne`` and :func:`update_dynamics`
+    (else ``A``, ``h``, ``B`` are left as they are). MuJoCo's functions are called through
+    ``wip_gym.mujoco_c``."""
+    qpos, qvel = float_vector(table[_U.qpos]), float_vector(table[_U.qvel])
+    if not all_finite(qpos, qvel):
         return False
-    robot_update(
-        ints[0],
-        ints[1],
-        float_vector(table[2]),
-        float_vector(table[3]),
-        float_vector(table[4]),
-        float_vector(table[5]),
-        float_matrix(table[6]),
-        float_matrix(table[7]),
-        float_matrix(table[8]),
-        float_vector(table[9]),
-        float_vector(table[10]),
-        float_vector(table[11]),
-        int_vector(table[12]),
-        int_vector(table[13]),
-        int_vector(table[14]),
-        int_vector(table[15]),
-        int_vector(table[16]),
-        float_vector(table[1])[0],
-        float_vector(table[17]),
-        float_vector(table[18]),
-        float_matrix(table[19]),
-        int_matrix(table[20]),
-        float_vector(table[21]),
-        float_matrix(table[22]),
-        float_cube(table[23]),
-        float_matrix(table[24]),
-        float_matrix(table[25]),
-        float_vector(table[26]),
-        float_matrix(table[27]),
-        float_vector(table[28]),
-        float_vector(table[29]),
-        float_matrix(table[30]),
-        float_vector(table[31]),
-        float_matrix(table[32]),
-        float_vector(table[33]),
-        float_matrix(table[34]),
-        dynamics,
-    )
+    addresses = int_vector(table[_U.mujoco])
+    model, data = addresses[0], addresses[1]
+    float_vector(table[_U.data_qpos])[: len(qpos)] = qpos
+    float_vector(table[_U.data_qvel])[: len(qvel)] = qvel
+    mjc.mj_kinematics(model, data)
+    mjc.mj_comPos(model, data)
+    bodies = int_vector(table[_U.bodies])
+    xpos, xipos = float_matrix(table[_U.xpos]), float_matrix(table[_U.xipos])
+    jac_wheels = float_cube(table[_U.jac_wheels])
+    base = bodies[0]
+    mjc.mj_jacSubtreeCom(model, data, float_matrix(table[_U.jac_subtree]).ctypes.data, base)
+    for k in range(2):
+        wheel = bodies[1 + k]
+        mjc.mj_jac(model, data, jac_wheels[k].ctypes.data, 0, xipos[wheel].ctypes.data, wheel)
+    jac_origin = float_matrix(table[_U.jac_origin])
+    mjc.mj_jac(model, data, jac_origin.ctypes.data, 0, xpos[base].ctypes.data, base)
+    update_kinematics(table)
+    if dynamics:
+        mjc.mj_crb(model, data)
+        mjc.mj_fullM(model, data, float_matrix(table[_U.M]).ctypes.data)
+        mjc.mj_comVel(model, data)
+        mjc.mj_passive(model, data)
+        mjc.mj_rne(model, data, 0, float_vector(table[_U.bias]).ctypes.data)
+        update_dynamics(table)
     return True

@@ -34,11 +34,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from wip_gym import minimal_kernels as kernels
-from wip_gym.array_table import ArrayTable
+from wip_gym import mujoco_c
 from wip_gym.minimal_kernels import (
+    all_finite,
     idealised_state,
     inertia_about_point,
     robot_update_at,
+    update_dynamics,
+    update_kinematics,
 )
 
 Array = NDArray[np.float64]
@@ -328,6 +331,8 @@ class RobotModel:
         self._h_buffer = np.zeros(n)
         self._B_buffer = np.zeros((n, model.nu))
         self._forget_copies()
+        self._wheel_frame = np.zeros(9)  # wipm_values' (mju_quat2Mat of the wheel's iquat)
+        self._fast = mujoco_c.fast_path()
         self._bind_tables()
         self._updated = False
         self._has_dynamics = False
@@ -358,66 +363,76 @@ class RobotModel:
         self._mj_qfrc_passive = d.qfrc_passive
 
     def _bind_tables(self) -> None:
-        """The tables of addresses (``wip_gym.array_table``) of the compiled update
-        (``minimal_kernels.robot_update_at``) and of :meth:`wipm_values`: their buffers and
-        MuJoCo's, made once, so that a call unboxes one array. Made again with the views after
-        a copy or an unpickling (their addresses would be the old model's)."""
+        """The tables of addresses (``wip_gym.array_table``) of the update
+        (``minimal_kernels.UPDATE``) and of :meth:`wipm_values` (``minimal_kernels.WIPM``):
+        their buffers and MuJoCo's, made once, so that a compiled call unboxes one array. Made
+        again with the views after a copy or an unpickling (their addresses would be the old
+        model's). On the fast path the update's table holds the model's and data's addresses
+        too (``wip_gym.mujoco_c.addresses``)."""
         m, d, lay = self.model, self.data, self.layout
-        wipm = {
-            "ints": np.array([lay.base_body, lay.wheel_bodies[0], lay.wheel_dof[0]], np.int64),
-            "ximat": d.ximat,
-            "xipos": self._mj_xipos,
-            "xpos": self._mj_xpos,
-            "body_inertia": m.body_inertia,
-            "body_iquat": m.body_iquat,
-            "body_mass": self._mj_body_mass,
-            "dof_damping": m.dof_damping,
-            "gravity": m.opt.gravity,
-            "body_ids": self._body_ids,
-        }
-        self._wipm_table = ArrayTable(
-            [wipm[name] for name in kernels.WIPM_ENTRIES], kernels.WIPM_ENTRIES
+        self._wheel_iquat = m.body_iquat[lay.wheel_bodies[0]]
+        self._wipm_table = kernels.WIPM.table(
+            {
+                "ids": np.array([lay.base_body, lay.wheel_bodies[0], lay.wheel_dof[0]], np.int64),
+                "ximat": d.ximat,
+                "xipos": self._mj_xipos,
+                "xpos": self._mj_xpos,
+                "body_inertia": m.body_inertia,
+                "wheel_frame": self._wheel_frame,
+                "body_mass": self._mj_body_mass,
+                "dof_damping": m.dof_damping,
+                "gravity": m.opt.gravity,
+                "body_ids": self._body_ids,
+            }
         )
-        arrays = {
-            "ints": np.array([m._address, d._address], dtype=np.int64),
-            "floats": np.array([self.layout.wheel_radius]),
-            "qpos": self._qpos_in,
-            "qvel": self._qvel_in,
-            "data_qpos": self._mj_qpos,
-            "data_qvel": self._mj_qvel,
-            "xmat": self._mj_xmat,
-            "xpos": self._mj_xpos,
-            "xipos": self._mj_xipos,
-            "qfrc_passive": self._mj_qfrc_passive,
-            "body_mass": self._mj_body_mass,
-            "subtree_mass": self._mj_subtree_mass,
-            "bodies": self._bodies,
-            "body_ids": self._body_ids,
-            "layout": self._layout_ints,
-            "body_qpos": self._body_qpos,
-            "body_dof": self._body_dof,
-            "q": self._q,
-            "nu": self._nu,
-            "J": self._J,
-            "J_pattern": self._J_pattern,
-            "Jdot_nu": self._Jdot_nu,
-            "jac_subtree": self._jacp,
-            "jac_wheels": self._jac_wheels,
-            "jac_origin": self._jac_origin,
-            "M": self._M,
-            "bias": self._bias,
-            "S": self._S,
-            "scalars": self._scalars,
-            "com": self._com_buffer,
-            "J_com": self._J_com_buffer,
-            "J_theta": self._J_theta_buffer,
-            "A": self._A_buffer,
-            "h": self._h_buffer,
-            "B": self._B_buffer,
-        }
-        self._update_table = ArrayTable(
-            [arrays[name] for name in kernels.UPDATE_ENTRIES], kernels.UPDATE_ENTRIES
+        addresses = mujoco_c.addresses(m, d) if self._fast else (0, 0)
+        self._update_table = kernels.UPDATE.table(
+            {
+                "mujoco": np.array(addresses, dtype=np.int64),
+                "constants": np.array([lay.wheel_radius]),
+                "qpos": self._qpos_in,
+                "qvel": self._qvel_in,
+                "data_qpos": self._mj_qpos,
+                "data_qvel": self._mj_qvel,
+                "xmat": self._mj_xmat,
+                "xpos": self._mj_xpos,
+                "xipos": self._mj_xipos,
+                "qfrc_passive": self._mj_qfrc_passive,
+                "body_mass": self._mj_body_mass,
+                "subtree_mass": self._mj_subtree_mass,
+                "bodies": self._bodies,
+                "body_ids": self._body_ids,
+                "layout": self._layout_ints,
+                "body_qpos": self._body_qpos,
+                "body_dof": self._body_dof,
+                "q": self._q,
+                "nu": self._nu,
+                "J": self._J,
+                "J_pattern": self._J_pattern,
+                "Jdot_nu": self._Jdot_nu,
+                "jac_subtree": self._jacp,
+                "jac_wheels": self._jac_wheels,
+                "jac_origin": self._jac_origin,
+                "M": self._M,
+                "bias": self._bias,
+                "S": self._S,
+                "scalars": self._scalars,
+                "com": self._com_buffer,
+                "J_com": self._J_com_buffer,
+                "J_theta": self._J_theta_buffer,
+                "A": self._A_buffer,
+                "h": self._h_buffer,
+                "B": self._B_buffer,
+            }
         )
+
+    @property
+    def fast_path(self) -> bool:
+        """Whether this model's update takes the compiled fast path (MuJoCo's C functions from
+        compiled code, ``wip_gym.mujoco_c``) or the readable one (MuJoCo's Python bindings,
+        then the same compiled arithmetic: the same results to the bit). Chosen when it is
+        made (``wip_gym.mujoco_c.fast_path``); a task QP on this robot follows it."""
+        return self._fast
 
     def __getstate__(self) -> dict[str, object]:
         state = self.__dict__.copy()
@@ -427,6 +442,8 @@ class RobotModel:
 
     def __setstate__(self, state: dict[str, object]) -> None:
         self.__dict__.update(state)
+        # a process where the fast path cannot run (or is switched off) takes the readable one
+        self._fast = self._fast and mujoco_c.fast_path()
         self._bind_views()
         self._bind_tables()
         # NumPy's pickling and deepcopy do not keep the read-only flag (and a writable array is
@@ -455,8 +472,11 @@ class RobotModel:
         # only by it), and checks them before it computes anything
         self._qpos_in[:] = qpos
         self._qvel_in[:] = qvel
-        if not robot_update_at(self._update_table.rows, dynamics):
-            raise ValueError("qpos/qvel contain NaN or inf")
+        if self._fast:
+            if not robot_update_at(self._update_table.rows, dynamics):
+                raise ValueError("qpos/qvel contain NaN or inf")
+        else:
+            self._update_through_bindings(dynamics)
         self.cache.clear()
         (
             self._psi,
@@ -476,6 +496,32 @@ class RobotModel:
         self.cache["origin_jacobian"] = self._jac_origin
         self._updated = True
         self._has_dynamics = dynamics
+
+    def _update_through_bindings(self, dynamics: bool) -> None:
+        """:meth:`update`'s readable path: :func:`minimal_kernels.robot_update_at`'s MuJoCo
+        calls through the Python bindings, in its order, around the same compiled arithmetic
+        (``update_kinematics``, ``update_dynamics``)."""
+        if not all_finite(self._qpos_in, self._qvel_in):
+            raise ValueError("qpos/qvel contain NaN or inf")
+        m, d, lay = self.model, self.data, self.layout
+        self._mj_qpos[: lay.nq] = self._qpos_in
+        self._mj_qvel[: lay.nv] = self._qvel_in
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)
+        base, (left, right) = lay.base_body, lay.wheel_bodies
+        mujoco.mj_jacSubtreeCom(m, d, self._jacp, base)
+        for k, wheel in enumerate((left, right)):
+            mujoco.mj_jac(m, d, self._jac_wheels[k], None, self._mj_xipos[wheel], wheel)
+        mujoco.mj_jac(m, d, self._jac_origin, None, self._mj_xpos[base], base)
+        table = self._update_table.rows
+        update_kinematics(table)
+        if dynamics:
+            mujoco.mj_crb(m, d)
+            mujoco.mj_fullM(m, d, self._M)
+            mujoco.mj_comVel(m, d)
+            mujoco.mj_passive(m, d)
+            mujoco.mj_rne(m, d, 0, self._bias)
+            update_dynamics(table)
 
     def _forget_copies(self) -> None:
         """The properties' copies of the update's outputs, made again at their next read
@@ -739,6 +785,7 @@ class RobotModel:
         """
         self._require()
         lay = self.layout
+        mujoco.mju_quat2Mat(self._wheel_frame, self._wheel_iquat)
         return kernels.wipm_values(
             self._wipm_table.rows,
             self.heading_rotation,
@@ -774,6 +821,7 @@ class RobotModel:
                 f"wipm_inputs: out must be a writable, C-contiguous float64 vector of shape "
                 f"({size},), got {getattr(out, 'dtype', type(out))} of shape {np.shape(out)}"
             )
+        mujoco.mju_quat2Mat(self._wheel_frame, self._wheel_iquat)
         kernels.wipm_inputs_into(
             out,
             lay.planar,

@@ -61,6 +61,17 @@ FINGER_CENTRES = {
 #: of 12 to 16 mm per second, a net creep of 1 to 1.5 mm/s, measured with the robot held
 #: still). At 1e-12 that is gone (under 0.001 mm/s) at the same iteration count and step cost.
 CUP_SOLVER_TOLERANCE = 1e-12
+#: the general convex collider's tolerance (``ccd_tolerance``, m) in models with a rim, whose
+#: cup-wall pairs (cylinder-box) are the scene's only pairs MuJoCo's GJK/EPA computes. A cup
+#: leaning on a wall presses into it by about 0.1 um (at 1 m/s^2; less under less load), below
+#: MuJoCo's default 1e-6: EPA may then stop on a face of the wrong normal, and multiccd build the
+#: contact on the wall's far face (5 mm deep, facing away), which threw a cup resting on the rim
+#: over it at 14 rad/s. Among 10000 poses of the cup 1 um either side of touching a wall
+#: (tests/test_rim.py, ``test_cup_contact_with_a_wall_faces_the_wall``) the default gives 3
+#: such poses on each robot, 1e-7 gives 8 whose contact faces away at the right depth, 1e-8 and
+#: 1e-9 none; the collision's time is the same within the machine's noise (8.6 to 9.9 us for
+#: the whole model with the cup on the wall).
+RIM_CCD_TOLERANCE = 1e-9
 #: time the free tray is let settle on its supports (robot held still) when the model is built
 TRAY_SETTLE_TIME = 0.5
 #: damping of the tray's free joint while it settles (N s/m and N m s/rad): its rocking
@@ -102,6 +113,10 @@ class SceneOptions:
             on the hand's supports, see the module docstring).
         tray_rim: rim height (m) on the plate's edge, 0 for none; the authors' tray has 5 mm.
         tray_friction: friction of the tray-support contact pairs (free tray only).
+        tray_weld: a welded tray's pose on the body of the ``tray_mount`` site, ``(x, y, z,
+            qw, qx, qy, qz)`` (body frame); None: at the mount, level at the reset pose. A
+            controller's nominal model of a free tray welds it where it rests on the hand (the
+            free tray's ``tray_rest`` site, ``controllers.policy.controller_model``).
         payload_mass: mass (kg) of a payload body welded to the hand (``ee`` site).
         wheel_torque_limit: each wheel motor's torque limit (N m); 150 as in the authors'
             simulation, 63.6 for Krang's hardware (docs/AUTHORS_CONFIG.md §1.5).
@@ -116,6 +131,7 @@ class SceneOptions:
     tray_attachment: str = "welded"
     tray_rim: float = 0.0
     tray_friction: float = 0.3
+    tray_weld: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
         spec = robot_spec(self.robot)
@@ -127,6 +143,15 @@ class SceneOptions:
             raise ValueError(
                 f"tray_attachment must be one of {list(TRAY_ATTACHMENTS)}, "
                 f"got {self.tray_attachment!r}"
+            )
+        if self.tray_weld is not None and (
+            self.tray_attachment != "welded"
+            or len(self.tray_weld) != 7
+            or not np.all(np.isfinite(self.tray_weld))
+        ):
+            raise ValueError(
+                "tray_weld must be a welded tray's finite (x, y, z, qw, qx, qy, qz), got "
+                f"{self.tray_weld!r} with tray_attachment {self.tray_attachment!r}"
             )
         if not (np.isfinite(self.tray_rim) and 0.0 <= self.tray_rim <= 2 * CUP_HALF_HEIGHT):
             raise ValueError(
@@ -165,11 +190,16 @@ def _tray_geom_names(rim: float) -> list[str]:
 
 
 def _add_tray(
-    spec: mujoco.MjSpec, options: SceneOptions, quat: np.ndarray, world_pos: np.ndarray | None
+    spec: mujoco.MjSpec,
+    options: SceneOptions,
+    quat: np.ndarray,
+    world_pos: np.ndarray | None,
+    body_pos: np.ndarray | None = None,
 ) -> None:
     """The plate (geom ``tray``), the rim walls and the ``tray_top`` site. Welded: a child of the
-    mount site's body at the mount with orientation ``quat``. Free (``world_pos`` given): a free
-    body at ``world_pos`` with world orientation ``quat``."""
+    mount site's body with orientation ``quat``, at the mount or at ``body_pos`` (that body's
+    frame). Free (``world_pos`` given): a free body at ``world_pos`` with world orientation
+    ``quat``."""
     hx, hy, hz = TRAY_HALF_SIZE
     rim, t = options.tray_rim, TRAY_RIM_THICKNESS
     walls = (
@@ -190,7 +220,8 @@ def _add_tray(
         tray.add_freejoint(name="tray")
     else:
         mount = spec.site("tray_mount")
-        tray = mount.parent.add_body(name="tray", pos=mount.pos, quat=quat)
+        place = mount.pos if body_pos is None else body_pos
+        tray = mount.parent.add_body(name="tray", pos=place, quat=quat)
     # free: meets the floor like the cup (contype 4 never meets the robot's conaffinity 1 ...
     # nor the cup's); its supports and the cup only through explicit pairs
     contype, conaffinity = (4, 1) if free else (0, 0)
@@ -523,6 +554,12 @@ def build_spec(options: SceneOptions) -> mujoco.MjSpec:
     """The ``MjSpec`` of the task (see :class:`SceneOptions`)."""
     if options.tray and options.tray_attachment == "free":
         spec = _settled_free_tray(options)
+    elif options.tray and options.tray_weld is not None:
+        spec = _robot_spec(options)
+        pose = np.array(options.tray_weld, dtype=float)
+        quat = pose[3:] / np.linalg.norm(pose[3:])
+        _add_tray(spec, options, quat, None, body_pos=pose[:3])
+        _add_rest_site(spec, pose[:3], quat)
     else:
         tray_quat = np.array([1.0, 0.0, 0.0, 0.0])
         # the tray must be level at the reset pose, which its own mass shifts slightly: iterate
@@ -539,6 +576,8 @@ def build_spec(options: SceneOptions) -> mujoco.MjSpec:
     if options.cup:
         add_cup(spec, options.cup_friction, options.tray_rim)
         spec.option.tolerance = CUP_SOLVER_TOLERANCE
+        if options.tray_rim > 0:
+            spec.option.ccd_tolerance = RIM_CCD_TOLERANCE
     return spec
 
 

@@ -40,7 +40,11 @@ from numpy.typing import NDArray
 from scipy.optimize import minimize
 
 from benchmarks.speed.qp_recording import RecordedQP
-from controllers.low_level.task_qp import QPSettings, feasible_unconstrained_minimiser, start_proxqp
+from controllers.low_level.qp_solver import (
+    QPSettings,
+    feasible_unconstrained_minimiser,
+    start_proxqp,
+)
 
 FloatArray = NDArray[np.float64]
 SOLUTION_TOLERANCE = 1e-6

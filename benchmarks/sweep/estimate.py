@@ -41,9 +41,13 @@ class Calibration:
     setup_s: float  # env reset and the policy's reset (the offline plan)
     real_time_factor: float  # simulated seconds per wall second of the step loop
     sim_time_s: float  # simulated seconds it was measured over (less if the episode ended)
+    error: str | None = None  # what the calibration episode raised (its times are then 0)
 
     def episode_s(self, duration: float) -> float:
-        """The wall time of one episode of ``duration`` simulated seconds."""
+        """The wall time of one episode of ``duration`` simulated seconds (0 for a controller
+        whose calibration episode raised: its episodes fail at once)."""
+        if self.error is not None:
+            return 0.0
         return self.setup_s + duration / self.real_time_factor
 
 
@@ -61,10 +65,13 @@ def calibrate(spec: SweepSpec, episode_fn: EpisodeFn | None = None) -> list[Cali
     calibrations = []
     for controller in spec.controllers:
         e = first[controller]
-        for duration in (WARMUP_S, seconds):
-            row = episode_fn(
-                spec.env, controller, e.parameters, e.seed, duration, preset=spec.preset
+        try:
+            row = _measure(episode_fn, spec, controller, e, seconds)
+        except Exception as error:  # noqa: BLE001 - the sweep reports it per episode too
+            calibrations.append(
+                Calibration(controller, 0.0, 1.0, 0.0, f"{type(error).__name__}: {error}")
             )
+            continue
         calibrations.append(
             Calibration(
                 controller,
@@ -74,6 +81,24 @@ def calibrate(spec: SweepSpec, episode_fn: EpisodeFn | None = None) -> list[Cali
             )
         )
     return calibrations
+
+
+def _measure(
+    episode_fn: EpisodeFn, spec: SweepSpec, controller: str, e: Episode, seconds: float
+) -> dict[str, Any]:
+    """The calibration episode's row, after the warm-up episode."""
+    row: dict[str, Any] = {}
+    for duration in (WARMUP_S, seconds):
+        row = episode_fn(
+            spec.env,
+            controller,
+            e.parameters,
+            e.seed,
+            duration,
+            preset=spec.preset,
+            run_controllers=spec.controllers,  # a plan.* key may leave it as configured
+        )
+    return row
 
 
 def from_calibration(
@@ -90,6 +115,12 @@ def from_calibration(
     for c in calibrations:
         count = sum(1 for e in todo if e.controller == c.controller)
         seconds += count * c.episode_s(spec.duration)
+        if c.error is not None:
+            lines.append(
+                f"  {c.controller}: its calibration episode raised ({c.error}); its {count} "
+                f"episodes are counted as taking no time"
+            )
+            continue
         lines.append(
             f"  {c.controller}: setup {c.setup_s:.2f} s, {c.real_time_factor:.1f} x real time "
             f"over {c.sim_time_s:g} s -> {c.episode_s(spec.duration):.2f} s per "

@@ -1,28 +1,35 @@
-"""The task stack of the whole-body QP as one compiled function of a per-step snapshot.
+"""The task and constraint rows of the whole-body QP as compiled functions of a per-step snapshot.
 
 The tasks of ``controllers.low_level.tasks`` (and the disturbance observer of
-``controllers.low_level.disturbance_tasks``) written once more as pure numba functions of arrays,
+``controllers.low_level.disturbance_tasks``) written once more as numba functions of arrays,
 operation for operation: the Python objects stay the reference and the extension point (a task
-of a new kind runs the Python path of ``controllers.low_level.task_qp``), and
-``tests/test_compiled_tasks.py`` holds the two equal on random states of both robots. One call of
-:func:`task_rows` fills the stacked rows ``J`` (over ``nu``), ``xdd*``, ``Jdot nu`` for every
-task from
+without compiled rows runs the task QP's readable path), and ``tests/test_compiled_tasks.py``
+holds the two equal on random states of both robots.
 
-* the robot's minimal state and ``J_tf`` (``wip_gym.robot_model``),
-* each task site's world pose and ``[jacp; jacr]`` at the robot's state, and the axle origin's
-  position and ``jacp`` (``site_in_axle_frame``),
-* the motion probe's idealised state (``controllers.low_level.motion_probe``): ``qvel``,
-  ``qacc_0``, and for the origin and each site the world position, ``[jacp; jacr]`` and their
-  time derivative (``mj_jacDot``); for the body CoM the subtree rows behind ``com_motion``,
+Each compiled kind is one function, ``rows(table, item, p, M, first, drift, second)``, that
+fills one task's rows of the one-call step (``controllers.low_level.compiled_step``):
 
-and the tasks' parameters packed as arrays (:mod:`controllers.low_level.task_stack`). Paper
-section "Optimization Based Control": ``xdd* = xdd_d - Kp (x - x_d) - Kv (xd - xd_d)``, the one
-PD law of every task, :func:`pd_acceleration`, which both paths call.
+* ``table``: the step's arrays (:data:`STEP`): the robot model's state and ``J_tf``, each task
+  site's world pose and ``[jacp; jacr]`` at the robot's state and its frame in the axle frame
+  (``site_in_axle_frame``), the motion probe's idealised state (``controllers.low_level.
+  motion_probe``: ``qvel``, ``qacc_0``, and for the origin and each site the world position,
+  ``[jacp; jacr]`` and their time derivative; for the body CoM the subtree rows behind
+  ``com_motion``);
+* ``item``: its row of the stack's ``items`` (:data:`ITEM`: its site slot, its columns);
+* ``p``: its parameters, copied from the task object every step in the order of its
+  ``parameters()``;
+* ``M, first, drift, second``: its rows of the QP: for a task ``J`` (over ``nu``), ``xdd*``,
+  ``Jdot nu`` and the weights; for a constraint ``G``, the lower bound, ``Jdot nu`` and the
+  upper bound on ``G nu_dot + Jdot nu``. ``M`` comes zeroed.
+
+:func:`kind_rows` is the registry: a task class names its kind (``compiled_kind``), and the
+kind's function is called from there. Paper section "Optimization Based Control": ``xdd* =
+xdd_d - Kp (x - x_d) - Kv (xd - xd_d)``, the one PD law of every task, :func:`pd_acceleration`,
+which both paths call.
 
 Why numba: at this size (Krang: 18 variables, 31 task rows) a task is a few dozen operations on
 3-vectors; a NumPy call costs a microsecond before any arithmetic and a jitted JAX call tens of
-microseconds (measured by ``benchmarks/speed/low_level_kernel_bench.py`` at the git tag
-``lab-notebook``).
+microseconds (docs/performance.md).
 """
 
 from __future__ import annotations
@@ -33,12 +40,110 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-THETA, SPIN, POSITION, ORIENTATION, POSTURE = 0, 1, 2, 3, 4
-"""Task kinds (``kinds`` of :func:`task_rows`)."""
+from controllers.low_level.kernel import KERNEL
+from wip_gym.array_table import (
+    FLOAT_CUBE,
+    FLOAT_MATRIX,
+    FLOAT_VECTOR,
+    INT_MATRIX,
+    INT_VECTOR,
+    TableSpec,
+    field_offsets,
+    float_cube,
+    float_matrix,
+    float_vector,
+    int_vector,
+)
 
-PARAMETERS = 5
-"""Columns of ``params``: kp, kv, then theta: ``theta_d, thetad_d, thdd_d``; spin: ``psi_d,
-psid_d, psidd_d``."""
+THETA, SPIN, POSITION, ORIENTATION, POSTURE, ACCELERATION_BOUND = 0, 1, 2, 3, 4, 5
+"""The compiled kinds (a task class's ``compiled_kind``; :func:`kind_rows` calls each one's
+function)."""
+
+ITEM, ITEM_FIELDS = field_offsets(
+    "item",
+    (
+        ("kind", 1),
+        ("row", 1),  # its first row (of the tasks' rows, or of the constraints')
+        ("rows", 1),
+        ("parameter", 1),  # its first parameter
+        ("parameters", 1),
+        ("column", 1),  # its first column (posture-like items)
+        ("site", 1),  # its site slot (-1: none)
+        ("observer", 1),  # its observer slot (-1: none)
+    ),
+)
+"""The columns of the stack's ``items``: one row per task, then per constraint."""
+
+STEP = TableSpec(
+    "step",
+    (
+        # the model's, the robot data's and the motion probe's data's addresses
+        ("mujoco", INT_VECTOR),
+        # the robot model's update (wip_gym.robot_model), written in place by every update
+        ("robot_scalars", FLOAT_VECTOR),
+        ("J_theta", FLOAT_VECTOR),
+        ("J_tf", FLOAT_MATRIX),
+        ("J_pattern", INT_MATRIX),
+        ("Jdot_tf_nu", FLOAT_VECTOR),
+        ("origin_jac", FLOAT_MATRIX),
+        # MuJoCo's arrays at the robot's state, and the model's
+        ("xpos", FLOAT_MATRIX),
+        ("site_xpos", FLOAT_MATRIX),
+        ("site_xmat", FLOAT_MATRIX),
+        ("subtree_mass", FLOAT_VECTOR),
+        ("gravity", FLOAT_VECTOR),
+        # the motion probe: the layout it idealises with, its data's arrays
+        ("probe_layout", INT_VECTOR),
+        ("body_qpos", INT_VECTOR),
+        ("body_dof", INT_VECTOR),
+        ("probe_constants", FLOAT_VECTOR),  # the wheel radius and separation
+        ("probe_qpos", FLOAT_VECTOR),
+        ("probe_qvel", FLOAT_VECTOR),
+        ("probe_qacc", FLOAT_VECTOR),
+        ("probe_qacc0", FLOAT_VECTOR),
+        ("probe_xpos", FLOAT_MATRIX),
+        ("probe_site_xpos", FLOAT_MATRIX),
+        ("probe_subtree_com", FLOAT_MATRIX),
+        ("probe_xipos", FLOAT_MATRIX),
+        ("probe_subtree_linvel", FLOAT_MATRIX),
+        ("probe_cfrc_int", FLOAT_MATRIX),
+        # the stack: its counts, its items (ITEM), their parameters and columns
+        ("stack_ints", INT_VECTOR),  # the number of tasks, whether a theta task is there
+        ("items", INT_MATRIX),
+        ("parameters", FLOAT_VECTOR),
+        ("columns", INT_VECTOR),
+        # the sites: ids and bodies, Jacobians (robot, probe), frames in the axle frame
+        ("bodies", INT_VECTOR),  # base, left wheel, right wheel
+        ("site_ids", INT_VECTOR),
+        ("site_bodies", INT_VECTOR),
+        ("site_jac", FLOAT_CUBE),
+        ("probe_jac", FLOAT_CUBE),  # 0: the origin, 1 + i: site slot i
+        ("probe_jac_dot", FLOAT_CUBE),
+        ("site_rel", FLOAT_MATRIX),
+        ("site_R", FLOAT_CUBE),
+        ("site_Jp", FLOAT_CUBE),
+        ("site_Jr", FLOAT_CUBE),
+        # scratch: theta, thetad, cos psi, sin psi, psid, index_psi; the frames' products;
+        # the origin's and a point's velocity and drift; a task's work rows
+        ("scalars", FLOAT_VECTOR),
+        ("frame_jac", FLOAT_MATRIX),
+        ("frame_JJ", FLOAT_MATRIX),
+        ("origin_motion", FLOAT_MATRIX),
+        ("point_motion", FLOAT_MATRIX),
+        ("work", FLOAT_MATRIX),
+        ("drift", FLOAT_MATRIX),
+        # the disturbance observers: memory (slot x 4 x rows), settings, advance flags, work
+        ("observer_memory", FLOAT_CUBE),
+        ("observer_settings", FLOAT_MATRIX),
+        ("observer_advance", INT_VECTOR),
+        ("observer_work", FLOAT_MATRIX),
+    ),
+    base=KERNEL,
+)
+"""The arrays of the one-call step (``controllers.low_level.compiled_step.rows_and_kernel``):
+the kernel's (:data:`controllers.low_level.kernel.KERNEL`, its first rows), then the rows'
+(``controllers.low_level.task_stack.CompiledTaskStack`` builds the table)."""
+S = STEP.index
 
 _MIN_VALUE = 1e-15  # MuJoCo's mjMINVAL (mju_normalize3, mju_normalize4)
 
@@ -47,9 +152,8 @@ def pd_acceleration(feedforward: Any, error: Any, rate_error: Any, kp: float, kv
     """The PD law of every task (paper section "Optimization Based Control"), written once:
     ``xdd* = xdd_d - Kp (x - x_d) - Kv (xd - xd_d)`` with ``feedforward = xdd_d`` (0 for a
     task that holds a place), ``error = x - x_d`` and ``rate_error = xd - xd_d``, floats or
-    arrays. The Python tasks (``controllers.low_level.tasks``) call it, and :func:`task_rows`
-    its compiled form; it lives in this file because numba keys the cache of a compiled
-    function on its own file, so an edit here reaches both."""
+    arrays. The Python tasks (``controllers.low_level.tasks``) call it, and the compiled rows
+    its compiled form."""
     return feedforward - kp * error - kv * rate_error
 
 
@@ -300,7 +404,7 @@ def _point_motion(
     velocity: np.ndarray,
     drift: np.ndarray,
 ) -> None:
-    """``MotionProbe._point``: ``jac qvel`` and ``jac qacc_0 + jacDot qvel`` (6-vectors:
+    """``MotionProbe.point_motion``: ``jac qvel`` and ``jac qacc_0 + jacDot qvel`` (6-vectors:
     linear then angular) into ``velocity`` and ``drift``."""
     for i in range(6):
         v, a, b = 0.0, 0.0, 0.0
@@ -313,185 +417,246 @@ def _point_motion(
 
 
 @njit(cache=True)
-def task_rows(
-    kinds: np.ndarray,
-    sites: np.ndarray,
-    observers: np.ndarray,
-    row_start: np.ndarray,
-    params: np.ndarray,
-    targets: np.ndarray,
-    row_column: np.ndarray,
-    row_target: np.ndarray,
-    q: np.ndarray,
-    nu: np.ndarray,
-    J_tf: np.ndarray,
-    J_pattern: np.ndarray,
-    J_theta: np.ndarray,
-    scalars: np.ndarray,
-    bodies: np.ndarray,
-    site_ids: np.ndarray,
-    xpos: np.ndarray,
-    site_xpos: np.ndarray,
-    site_xmat: np.ndarray,
-    site_jac: np.ndarray,
-    origin_jac: np.ndarray,
-    probe_qvel: np.ndarray,
-    probe_qacc0: np.ndarray,
-    probe_xpos: np.ndarray,
-    probe_site_xpos: np.ndarray,
-    probe_jac: np.ndarray,
-    probe_jac_dot: np.ndarray,
-    probe_subtree_com: np.ndarray,
-    probe_xipos: np.ndarray,
-    probe_subtree_linvel: np.ndarray,
-    probe_cfrc_int: np.ndarray,
-    subtree_mass: np.ndarray,
-    gravity: np.ndarray,
-    observer_memory: np.ndarray,
-    observer_settings: np.ndarray,
-    observer_advance: np.ndarray,
+def theta_rows(
+    table: np.ndarray,
+    item: np.ndarray,
+    p: np.ndarray,
     J: np.ndarray,
     target: np.ndarray,
     jdot_nu: np.ndarray,
+    w: np.ndarray,
 ) -> None:
-    """Fill ``J``, ``target`` (``xdd*``) and ``jdot_nu`` of the stacked tasks.
-
-    ``q``, ``nu``, ``J_tf``, ``J_theta``: the robot's (``RobotModel``), ``J_pattern`` where
-    ``J_tf`` may be nonzero (``RobotModel.J_tf_pattern``: the products with ``J_tf`` visit only
-    those entries). ``scalars``: ``theta, thetad, cos psi, sin psi, psid, index_psi`` (-1
-    planar). ``bodies``: ``(base, wheel_left, wheel_right)``; ``site_ids[i]``: the MuJoCo id of site
-    slot ``i``. At the robot's state: ``xpos``, ``site_xpos``, ``site_xmat`` (MuJoCo's arrays),
-    ``site_jac[i]`` (``mj_jacSite``), ``origin_jac`` (the base origin's ``jacp``). At the probe's
-    idealised state: ``qvel``, ``qacc_0``, ``xpos``, ``site_xpos``, ``probe_jac[0]`` and its
-    derivative for the origin, ``probe_jac[1 + i]`` for site slot ``i``, and ``subtree_com``,
-    ``xipos``, ``subtree_linvel``, ``cfrc_int`` (read for a theta task only: the CoM drift of
-    ``MotionProbe.com_motion``); ``subtree_mass``, ``gravity`` the model's. A task
-    with ``observers[k] >= 0`` is wrapped by the disturbance observer of that slot, which
-    advances when ``observer_advance[slot]`` is 1 and else gives its last command (the one of
-    this state).
-    """
+    """``ThetaTask``: ``p = (kp, kv, theta_d, thetad_d, thdd_d, weight)``; ``Jdot nu`` from the
+    CoM's drift relative to the axle (``MotionProbe.com_motion``, ``relative_drift``)."""
+    scalars = float_vector(table[S.scalars])
     theta, thetad, c, s, psid = scalars[0], scalars[1], scalars[2], scalars[3], scalars[4]
-    index_psi = int(scalars[5])
+    J[0] = float_vector(table[S.J_theta])
+    target[0] = _pd(p[4], theta - p[2], thetad - p[3], p[0], p[1])
+    w[0] = p[5]
+    bodies = int_vector(table[S.bodies])
     base, left, right = bodies[0], bodies[1], bodies[2]
-    qvel, qacc0 = probe_qvel, probe_qacc0
-    n_sites = len(site_ids)
+    subtree_mass = float_vector(table[S.subtree_mass])
+    M, m_l, m_r = subtree_mass[base], subtree_mass[left], subtree_mass[right]
+    mass = M - m_l - m_r
+    com, xipos = float_matrix(table[S.probe_subtree_com]), float_matrix(table[S.probe_xipos])
+    linvel = float_matrix(table[S.probe_subtree_linvel])
+    force, gravity = float_matrix(table[S.probe_cfrc_int]), float_vector(table[S.gravity])
+    work, drift3 = float_matrix(table[S.work]), float_matrix(table[S.drift])
+    for j in range(3):
+        work[0, j] = (M * com[base, j] - m_l * xipos[left, j] - m_r * xipos[right, j]) / mass
+        work[1, j] = (M * linvel[base, j] - m_l * linvel[left, j] - m_r * linvel[right, j]) / mass
+        work[2, j] = (
+            force[base, 3 + j] - force[left, 3 + j] - force[right, 3 + j]
+        ) / mass + gravity[j]
+    origin = float_matrix(table[S.origin_motion])
+    p_o = float_matrix(table[S.probe_xpos])[base]
+    _relative_drift(work[0], work[1], work[2], p_o, origin[0], origin[1], c, s, psid, drift3)
+    cp, cd, cdd = drift3[0], drift3[1], drift3[2]
+    X, Z = cp[0], cp[2]
+    D = X * X + Z * Z
+    if D <= 1e-18:
+        jdot_nu[0] = 0.0
+    else:
+        rate = (Z * cd[0] - X * cd[2]) / D
+        jdot_nu[0] = (Z * cdd[0] - X * cdd[2]) / D - 2.0 * rate * (X * cd[0] + Z * cd[2]) / D
+
+
+@njit(cache=True)
+def spin_rows(
+    table: np.ndarray,
+    item: np.ndarray,
+    p: np.ndarray,
+    J: np.ndarray,
+    target: np.ndarray,
+    jdot_nu: np.ndarray,
+    w: np.ndarray,
+) -> None:
+    """``SpinTask``: ``p = (kp, kv, psi_d, psid_d, psidd_d, weight)``; ``J`` is constant."""
+    scalars = float_vector(table[S.scalars])
+    psid, index_psi = scalars[4], int(scalars[5])
+    q = float_vector(table[S.q])
+    J[0, index_psi] = 1.0
+    target[0] = _pd(p[4], q[index_psi] - p[2], psid - p[3], p[0], p[1])
+    jdot_nu[0] = 0.0
+    w[0] = p[5]
+
+
+@njit(cache=True)
+def _site_velocity(task_jacobian: np.ndarray, nu: np.ndarray, velocity: np.ndarray) -> None:
+    """``task_jacobian nu`` (3 rows) into ``velocity``."""
     n = len(nu)
-    # every intermediate in arrays made once per call (a small array made per operation cost
-    # about 30 ns and a reference count each: 111 of them per call before)
-    rel = np.empty((n_sites, 3))
-    R = np.empty((n_sites, 3, 3))
-    Jp = np.empty((n_sites, 3, n))
-    Jr = np.empty((n_sites, 3, n))
-    jac, JJ = np.empty((6, site_jac.shape[2])), np.empty((6, n))
-    v_o, a_o, v, a = np.empty(6), np.empty(6), np.empty(6), np.empty(6)
-    drift3 = np.empty((3, 3))  # relative_drift's position, velocity, drift acceleration
-    work = np.empty((3, 3))  # the CoM's position, velocity, drift (world); a task's velocity,
-    # reference and command
-    origin = xpos[base]
-    for i in range(n_sites):
-        site = site_ids[i]
-        site_in_axle_frame_into(
-            site_xpos[site],
-            site_xmat[site],
-            site_jac[i],
-            origin,
-            origin_jac,
-            J_tf,
-            J_pattern,
-            c,
-            s,
-            index_psi,
-            jac,
-            JJ,
-            rel[i],
-            R[i],
-            Jp[i],
-            Jr[i],
-        )
-    _point_motion(probe_jac[0], probe_jac_dot[0], qvel, qacc0, v_o, a_o)
-    p_o = probe_xpos[base]
-    for k in range(len(kinds)):
-        kind, start, stop = kinds[k], row_start[k], row_start[k + 1]
-        kp, kv = params[k, 0], params[k, 1]
-        J[start:stop] = 0.0
-        if kind == THETA:
-            J[start] = J_theta
-            target[start] = _pd(params[k, 4], theta - params[k, 2], thetad - params[k, 3], kp, kv)
-            M, m_l, m_r = subtree_mass[base], subtree_mass[left], subtree_mass[right]
-            mass = M - m_l - m_r
-            com, xipos, linvel = probe_subtree_com, probe_xipos, probe_subtree_linvel
-            force = probe_cfrc_int
-            for j in range(3):
-                work[0, j] = (
-                    M * com[base, j] - m_l * xipos[left, j] - m_r * xipos[right, j]
-                ) / mass
-                work[1, j] = (
-                    M * linvel[base, j] - m_l * linvel[left, j] - m_r * linvel[right, j]
-                ) / mass
-                work[2, j] = (
-                    force[base, 3 + j] - force[left, 3 + j] - force[right, 3 + j]
-                ) / mass + gravity[j]
-            _relative_drift(work[0], work[1], work[2], p_o, v_o, a_o, c, s, psid, drift3)
-            cp, cd, cdd = drift3[0], drift3[1], drift3[2]
-            X, Z = cp[0], cp[2]
-            D = X * X + Z * Z
-            if D <= 1e-18:
-                jdot_nu[start] = 0.0
-            else:
-                rate = (Z * cd[0] - X * cd[2]) / D
-                jdot_nu[start] = (Z * cdd[0] - X * cdd[2]) / D - 2.0 * rate * (
-                    X * cd[0] + Z * cd[2]
-                ) / D
-        elif kind == SPIN:
-            J[start, index_psi] = 1.0
-            target[start] = _pd(
-                params[k, 4], q[index_psi] - params[k, 2], psid - params[k, 3], kp, kv
-            )
-            jdot_nu[start] = 0.0
-        elif kind in (POSITION, ORIENTATION):
-            i = sites[k]
-            _point_motion(probe_jac[1 + i], probe_jac_dot[1 + i], qvel, qacc0, v, a)
-            task_jacobian = Jp[i] if kind == POSITION else Jr[i]
-            J[start:stop] = task_jacobian
-            velocity, reference = work[0], work[1]
-            for row in range(3):
-                total = 0.0
-                for j in range(n):
-                    total += task_jacobian[row, j] * nu[j]
-                velocity[row] = total
-            if kind == POSITION:
-                for row in range(3):
-                    reference[row] = _pd(0.0, rel[i, row] - targets[k, row], velocity[row], kp, kv)
-                _relative_drift(
-                    probe_site_xpos[site_ids[i]], v, a, p_o, v_o, a_o, c, s, psid, drift3
-                )
-                for row in range(3):
-                    jdot_nu[start + row] = drift3[2, row]
-            else:
-                e0, e1, e2 = _rotation_error(R[i], targets[k].reshape(3, 3))
-                reference[0] = _pd(0.0, e0, velocity[0], kp, kv)
-                reference[1] = _pd(0.0, e1, velocity[1], kp, kv)
-                reference[2] = _pd(0.0, e2, velocity[2], kp, kv)
-                u0, u1 = c * v[3] + s * v[4], -s * v[3] + c * v[4]
-                acc0, acc1 = c * a[3] + s * a[4], -s * a[3] + c * a[4]
-                jdot_nu[start] = acc0 + psid * u1
-                jdot_nu[start + 1] = acc1 - psid * u0
-                jdot_nu[start + 2] = a[5]
-            slot = observers[k]
-            if slot >= 0:
-                command = work[2]
-                if observer_advance[slot]:
-                    _observe(
-                        observer_memory[slot], observer_settings[slot], velocity, reference, command
-                    )
-                else:
-                    command[:] = observer_memory[slot, 2]
-                target[start:stop] = command
-            else:
-                target[start:stop] = reference
-        else:  # POSTURE
-            for row in range(start, stop):
-                column = row_column[row]
-                J[row, column] = 1.0
-                target[row] = _pd(0.0, q[column] - row_target[row], nu[column], kp, kv)
-                jdot_nu[row] = 0.0
+    for row in range(3):
+        total = 0.0
+        for j in range(n):
+            total += task_jacobian[row, j] * nu[j]
+        velocity[row] = total
+
+
+@njit(cache=True)
+def position_rows(
+    table: np.ndarray,
+    item: np.ndarray,
+    p: np.ndarray,
+    J: np.ndarray,
+    target: np.ndarray,
+    jdot_nu: np.ndarray,
+    w: np.ndarray,
+) -> None:
+    """``FramePositionTask``: ``p = (kp, kv, target (3), weights (3))``; the site's position,
+    ``Jp`` and drift relative to the axle in the axle frame (its site slot's)."""
+    i = item[ITEM.site]
+    scalars = float_vector(table[S.scalars])
+    c, s, psid = scalars[2], scalars[3], scalars[4]
+    kp, kv = p[0], p[1]
+    task_jacobian = float_cube(table[S.site_Jp])[i]
+    J[:] = task_jacobian
+    work = float_matrix(table[S.work])
+    velocity = work[0]
+    _site_velocity(task_jacobian, float_vector(table[S.nu]), velocity)
+    rel = float_matrix(table[S.site_rel])[i]
+    for row in range(3):
+        target[row] = _pd(0.0, rel[row] - p[2 + row], velocity[row], kp, kv)
+        w[row] = p[5 + row]
+    motion, origin = float_matrix(table[S.point_motion]), float_matrix(table[S.origin_motion])
+    _point_motion(
+        float_cube(table[S.probe_jac])[1 + i],
+        float_cube(table[S.probe_jac_dot])[1 + i],
+        float_vector(table[S.probe_qvel]),
+        float_vector(table[S.probe_qacc0]),
+        motion[0],
+        motion[1],
+    )
+    base = int_vector(table[S.bodies])[0]
+    site = int_vector(table[S.site_ids])[i]
+    drift3 = float_matrix(table[S.drift])
+    _relative_drift(
+        float_matrix(table[S.probe_site_xpos])[site],
+        motion[0],
+        motion[1],
+        float_matrix(table[S.probe_xpos])[base],
+        origin[0],
+        origin[1],
+        c,
+        s,
+        psid,
+        drift3,
+    )
+    for row in range(3):
+        jdot_nu[row] = drift3[2, row]
+
+
+@njit(cache=True)
+def orientation_rows(
+    table: np.ndarray,
+    item: np.ndarray,
+    p: np.ndarray,
+    J: np.ndarray,
+    target: np.ndarray,
+    jdot_nu: np.ndarray,
+    w: np.ndarray,
+) -> None:
+    """``FrameOrientationTask``: ``p = (kp, kv, target (3 x 3, row-major), weights (3))``; the
+    site's rotation error ``log(R R_target^T)``, ``Jr`` and angular drift in the axle frame."""
+    i = item[ITEM.site]
+    scalars = float_vector(table[S.scalars])
+    c, s, psid = scalars[2], scalars[3], scalars[4]
+    kp, kv = p[0], p[1]
+    task_jacobian = float_cube(table[S.site_Jr])[i]
+    J[:] = task_jacobian
+    work = float_matrix(table[S.work])
+    velocity = work[0]
+    _site_velocity(task_jacobian, float_vector(table[S.nu]), velocity)
+    e0, e1, e2 = _rotation_error(float_cube(table[S.site_R])[i], p[2:11].reshape(3, 3))
+    target[0] = _pd(0.0, e0, velocity[0], kp, kv)
+    target[1] = _pd(0.0, e1, velocity[1], kp, kv)
+    target[2] = _pd(0.0, e2, velocity[2], kp, kv)
+    w[0], w[1], w[2] = p[11], p[12], p[13]
+    motion = float_matrix(table[S.point_motion])
+    v, a = motion[0], motion[1]
+    _point_motion(
+        float_cube(table[S.probe_jac])[1 + i],
+        float_cube(table[S.probe_jac_dot])[1 + i],
+        float_vector(table[S.probe_qvel]),
+        float_vector(table[S.probe_qacc0]),
+        v,
+        a,
+    )
+    u0, u1 = c * v[3] + s * v[4], -s * v[3] + c * v[4]
+    acc0, acc1 = c * a[3] + s * a[4], -s * a[3] + c * a[4]
+    jdot_nu[0] = acc0 + psid * u1
+    jdot_nu[1] = acc1 - psid * u0
+    jdot_nu[2] = a[5]
+
+
+@njit(cache=True)
+def posture_rows(
+    table: np.ndarray,
+    item: np.ndarray,
+    p: np.ndarray,
+    J: np.ndarray,
+    target: np.ndarray,
+    jdot_nu: np.ndarray,
+    w: np.ndarray,
+) -> None:
+    """``PostureTask``: ``p = (kp, kv, targets (one per column), weights (one per column))``;
+    one row per column, ``J`` constant."""
+    q, nu = float_vector(table[S.q]), float_vector(table[S.nu])
+    columns = int_vector(table[S.columns])
+    first, count = item[ITEM.column], item[ITEM.rows]
+    kp, kv = p[0], p[1]
+    for row in range(count):
+        column = columns[first + row]
+        J[row, column] = 1.0
+        target[row] = _pd(0.0, q[column] - p[2 + row], nu[column], kp, kv)
+        jdot_nu[row] = 0.0
+        w[row] = p[2 + count + row]
+
+
+@njit(cache=True)
+def acceleration_bound_rows(
+    table: np.ndarray,
+    item: np.ndarray,
+    p: np.ndarray,
+    G: np.ndarray,
+    lower: np.ndarray,
+    bias: np.ndarray,
+    upper: np.ndarray,
+) -> None:
+    """``AccelerationBound`` (a constraint): ``p = (lower, upper)`` per column, on each
+    column's minimal acceleration (``G`` a unit row, no drift)."""
+    columns = int_vector(table[S.columns])
+    first, count = item[ITEM.column], item[ITEM.rows]
+    for row in range(count):
+        G[row, columns[first + row]] = 1.0
+        lower[row] = p[row]
+        bias[row] = 0.0
+        upper[row] = p[count + row]
+
+
+@njit(cache=True)
+def kind_rows(
+    kind: int,
+    table: np.ndarray,
+    item: np.ndarray,
+    p: np.ndarray,
+    M: np.ndarray,
+    first: np.ndarray,
+    drift: np.ndarray,
+    second: np.ndarray,
+) -> None:
+    """The registry of compiled kinds: ``kind``'s rows function on one item's rows (module
+    docstring). A new compiled kind adds its constant, its function and its line here."""
+    if kind == THETA:
+        theta_rows(table, item, p, M, first, drift, second)
+    elif kind == SPIN:
+        spin_rows(table, item, p, M, first, drift, second)
+    elif kind == POSITION:
+        position_rows(table, item, p, M, first, drift, second)
+    elif kind == ORIENTATION:
+        orientation_rows(table, item, p, M, first, drift, second)
+    elif kind == POSTURE:
+        posture_rows(table, item, p, M, first, drift, second)
+    elif kind == ACCELERATION_BOUND:
+        acceleration_bound_rows(table, item, p, M, first, drift, second)
+    else:
+        raise ValueError("a compiled item of an unknown kind")

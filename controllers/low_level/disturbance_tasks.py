@@ -37,13 +37,12 @@ copied at its first read here).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 from controllers.low_level.motion_probe import MotionProbe
-from controllers.low_level.tasks import StoredParameters
 from wip_gym.robot_model import RobotModel
 
 Array = NDArray[np.float64]
@@ -122,14 +121,6 @@ class DisturbanceRejectingTask:
         self._bound = settings.bound
         # the wrapped task's own J nu when it has one (shared with its PD law), else J @ nu
         self._velocity = getattr(task, "velocity", None)
-
-    if not TYPE_CHECKING:  # mypy would accept any attribute name with __setattr__ defined
-
-        def __setattr__(self, name: str, value: Any) -> None:
-            # the wrapped task is a compiled stack's structure: an assignment is a store
-            # event, after which a stack looks at its tasks again (StoredParameters)
-            StoredParameters.store_events += 1
-            object.__setattr__(self, name, value)
 
     @property
     def estimate(self) -> Array:

@@ -21,6 +21,8 @@ ignores; the finite difference never saw them, and neither does this.
 
 from __future__ import annotations
 
+from typing import Any
+
 import mujoco
 import numpy as np
 from numba import njit
@@ -70,7 +72,8 @@ def idealise(
     the axle's position into the probe's ``qpos``, ``qvel`` (the robot's own entries), its
     kinematics, ``mj_comPos`` and ``mj_comVel`` (``wip_gym.mujoco_c``), and ``qacc_0 = Jdot_tf
     nu`` (``qacc = J_tf nu_dot + Jdot_tf nu`` at ``nu_dot = 0``; over every dof of the model, a
-    cup's too: zero). Shared by :meth:`MotionProbe.update` and the compiled task snapshot."""
+    cup's too: zero). The one-call step's (the fast path); :meth:`MotionProbe.idealise` makes
+    the same calls through MuJoCo's bindings."""
     idealised_state(
         q,
         nu,
@@ -94,7 +97,8 @@ class MotionProbe:
     """World velocities and drift accelerations (``nu_dot = 0``) at ``full_state(q, nu)``.
 
     Call :meth:`update` once per control step after ``robot.update``; then
-    :meth:`site_motion`, :meth:`origin_motion`, :meth:`com_motion` and :meth:`relative_drift`
+    :meth:`site_motion`, :meth:`body_point_motion`, :meth:`point_motion`, :meth:`origin_motion`,
+    :meth:`com_motion` and :meth:`relative_drift`
     read it (memoised). Three-vectors are tuples of Python floats: at this size scalar
     arithmetic costs a tenth of a NumPy call.
     """
@@ -149,11 +153,10 @@ class MotionProbe:
         self._memo.clear()
 
     def idealise(self, robot: RobotModel) -> None:
-        """:func:`idealise` for ``robot``'s current state (the MuJoCo part of :meth:`update`)."""
+        """:func:`idealise` for ``robot``'s current state, through MuJoCo's Python bindings
+        (the same calls in the same order: the same results to the bit)."""
         x, y = robot.data.xpos[self._base, :2].tolist()
-        idealise(
-            self.model._address,
-            self.data._address,
+        idealised_state(
             robot.q,
             robot.nu,
             x,
@@ -165,13 +168,17 @@ class MotionProbe:
             self._wheel_separation,
             self._qpos[: self._nq],
             self._qvel[: self._nv],
-            self.qacc0,
-            robot.Jdot_tf_nu,
         )
+        m, d = self.model, self.data
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)
+        mujoco.mj_comVel(m, d)
+        self.qacc0[:] = robot.Jdot_tf_nu
 
-    def _point(self, position: Array, body: int) -> tuple[Vec, Vec, Vec, Vec]:
-        """Linear velocity, drift acceleration, angular velocity, angular drift (world) of a
-        point attached to ``body``: ``jac qvel`` and ``jac qacc_0 + jacDot qvel``."""
+    def point_motion(self, position: Array, body: int) -> tuple[Vec, Vec, Vec, Vec]:
+        """Linear velocity, drift acceleration, angular velocity, angular drift (world) of the
+        point at world ``position`` (at the probe's state) attached to ``body``: ``jac qvel``
+        and ``jac qacc_0 + jacDot qvel``."""
         m, d, jac, jac_dot = self.model, self.data, self._jac, self._jac_dot
         mujoco.mj_jac(m, d, jac[:3], jac[3:], position, body)
         mujoco.mj_jacDot(m, d, jac_dot[:3], jac_dot[3:], position, body)
@@ -185,7 +192,22 @@ class MotionProbe:
         key = ("site", site)
         if key not in self._memo:
             position = self._site_xpos[site]
-            v, a, w, w_dot = self._point(position, int(self._site_body[site]))
+            v, a, w, w_dot = self.point_motion(position, int(self._site_body[site]))
+            p = position.tolist()
+            self._memo[key] = ((p[0], p[1], p[2]), v, a, w, w_dot)
+        return self._memo[key]  # type: ignore[return-value]
+
+    def body_point_motion(
+        self, body: int, offset: Any = (0.0, 0.0, 0.0)
+    ) -> tuple[Vec, Vec, Vec, Vec, Vec]:
+        """:meth:`site_motion` for a point fixed on a body, ``offset`` in the body's frame (as
+        ``controllers.low_level.tasks.body_point_in_axle_frame`` takes it)."""
+        offset = np.asarray(offset, dtype=float)
+        key = ("body", body, *offset.tolist())
+        if key not in self._memo:
+            d = self.data
+            position = d.xpos[body] + d.xmat[body].reshape(3, 3) @ offset
+            v, a, w, w_dot = self.point_motion(position, body)
             p = position.tolist()
             self._memo[key] = ((p[0], p[1], p[2]), v, a, w, w_dot)
         return self._memo[key]  # type: ignore[return-value]
@@ -195,7 +217,7 @@ class MotionProbe:
         key = "origin"
         if key not in self._memo:
             origin = self._xpos[self._base]
-            v, a, _, _ = self._point(origin, self._base)
+            v, a, _, _ = self.point_motion(origin, self._base)
             p = origin.tolist()
             self._memo[key] = ((p[0], p[1], p[2]), v, a)
         return self._memo[key]  # type: ignore[return-value]

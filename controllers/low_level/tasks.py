@@ -27,6 +27,7 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from controllers.low_level import compiled_tasks as ct
 from controllers.low_level.compiled_tasks import pd_acceleration
 from controllers.low_level.motion_probe import MotionProbe
 from wip_gym.robot_model import RobotModel
@@ -34,125 +35,7 @@ from wip_gym.robot_model import RobotModel
 Array = NDArray[np.float64]
 
 
-def _scalar_slot(index: Any, value: Any) -> bool:
-    """Whether ``value`` is stored as a scalar at ``array[index]`` (the attribute keeps the
-    value) rather than as an array whose attribute becomes the stack's view: an int index,
-    or a scalar spread over a slice of rows (a frame task's one weight)."""
-    return isinstance(index, int) or (index is not None and np.ndim(value) == 0)
-
-
-class StoredParameters:
-    """Where a task's gains, targets and weights live once a compiled task stack holds them.
-
-    ``controllers.low_level.task_stack.CompiledTaskStack`` keeps every task's parameters in
-    its own arrays, which its compiled call reads in place: it *stores* a task's parameters
-    there once (:meth:`store_parameters`), instead of copying them from the object every
-    step. From then on the stack's arrays are the parameters' one source, and the object
-    stays the way to change them:
-
-    * an assigned scalar (``task.kp = 3.0``, ``task.theta_d = ...``, ``task.weight = ...``)
-      is written into the stack's array too;
-    * an array parameter (a ``target``, ``joint_weights``, a frame task's per-row
-      ``weight``) *is* a view on the stack's array: an assignment of the same shape copies
-      the new values into it (``task.target = R``), and a change in place
-      (``task.target[0] += 0.1``) is seen as well. So an array read from the task before
-      an assignment (``old = task.target``) shows the new values too: copy it to keep it.
-      An assignment of another shape leaves the stack's arrays: the stack stores the task
-      again before its next call (a value that does not broadcast to the parameter's shape
-      is refused there, naming the task and the parameter), or a new stack is built when
-      the task's structure changed with it (a posture task's columns).
-
-    Any other assignment (a frame task's ``site``, a posture task's ``columns``, a ``name``)
-    counts as a store event, so that a stack looks at its tasks' structure again before its
-    next call (a posture task's columns changed in place, which is no assignment, are compared
-    by their bytes every step).
-
-    A task owns its arrays: an array given to its constructor (or by
-    ``dataclasses.replace``) is copied, and a copy or a pickle of a task holds copies of its
-    arrays and no stack's. A task taken by a second stack is stored there (the first stack
-    takes it back before its next call).
-    """
-
-    _stored_slots: dict[str, tuple[Array, Any]] | None = None  # set by store_parameters
-    _stored_by: object | None = None
-    #: how many times any task was stored, left its stack's arrays or had an attribute the
-    #: stack does not hold assigned (class-wide; ``DisturbanceRejectingTask`` counts its
-    #: assignments here too): a stack that saw this count unchanged since it last checked its
-    #: tasks owns them all still, and their structure is the one it checked
-    store_events: ClassVar[int] = 0
-
-    def __post_init__(self) -> None:
-        state = self.__dict__
-        for name, value in state.items():
-            if isinstance(value, np.ndarray):
-                state[name] = value.copy()
-
-    if not TYPE_CHECKING:  # mypy would accept any attribute name with __setattr__ defined
-
-        def __setattr__(self, name: str, value: Any) -> None:
-            slots = self._stored_slots
-            slot = None if slots is None else slots.get(name)
-            if slot is None:
-                # not held by a stack's arrays: maybe the task's structure (a site, ...)
-                StoredParameters.store_events += 1
-            else:
-                array, index = slot
-                if _scalar_slot(index, value):
-                    array[index] = value  # a scalar: the attribute stays the value
-                else:
-                    view = array if index is None else array[index]
-                    if np.shape(value) == view.shape:
-                        view[...] = value
-                        return  # the attribute is the view already
-                    # another shape: the task leaves the stack's arrays; the stack
-                    # stores it again before its next call (and refuses a shape it
-                    # cannot hold), or is built anew if the task's structure changed
-                    state = self.__dict__
-                    state["_stored_slots"] = state["_stored_by"] = None
-                    StoredParameters.store_events += 1
-            object.__setattr__(self, name, value)
-
-    def store_parameters(self, owner: object, slots: dict[str, tuple[Array, Any]]) -> None:
-        """Keep the parameters named in ``slots`` in ``owner``'s arrays: ``(array, index)``
-        for a scalar (``array[index]``; a slice for a weight spread over several rows),
-        ``(view, None)`` for an array parameter. An array-valued parameter then becomes the
-        view (``array[index]`` or ``view``); its current values are written there first.
-        ``ValueError`` naming the task and the parameter if one does not fit."""
-        state = self.__dict__
-        for name, (array, index) in slots.items():
-            value = state[name]
-            scalar = _scalar_slot(index, value)
-            view = array if index is None or scalar else array[index]
-            try:
-                if scalar:
-                    array[index] = value
-                else:
-                    view[...] = value  # broadcast as the Python path's arithmetic would
-            except (ValueError, TypeError) as error:
-                raise ValueError(
-                    f"task {getattr(self, 'name', type(self).__name__)!r}: its {name} of "
-                    f"shape {np.shape(value)} does not fit the compiled task stack's "
-                    f"{np.shape(array[index] if index is not None else array)}"
-                ) from error
-            if not scalar:
-                state[name] = view
-        state["_stored_slots"] = slots
-        state["_stored_by"] = owner
-        StoredParameters.store_events += 1
-
-    def stored_by(self) -> object | None:
-        """The owner of the arrays that hold this task's parameters (None: the object)."""
-        return self._stored_by
-
-    def __getstate__(self) -> dict[str, Any]:
-        return {
-            name: value.copy() if isinstance(value, np.ndarray) else value
-            for name, value in self.__dict__.items()
-            if name not in ("_stored_slots", "_stored_by")
-        }
-
-
-class PDTask(StoredParameters):
+class PDTask:
     """The base of every task: a subclass says what the task measures, the base how it is
     driven there.
 
@@ -168,12 +51,25 @@ class PDTask(StoredParameters):
     The base gives ``reference_acceleration(robot)``, the paper's PD law
     ``xdd* = xdd_d - Kp (x - x_d) - Kv (xd - xd_d)``, once, through :func:`pd_acceleration`,
     the function the compiled task rows call too. A task of a new kind runs on the task QP's
-    Python path (docs/extending.md §1 has an example and how to make it compiled)."""
+    readable path; to run it compiled, its class names its kind's compiled rows function
+    (``compiled_kind``, ``controllers.low_level.compiled_tasks``) and gives ``parameters()``,
+    the numbers that function reads, in its order (docs/extending.md §1). The task QP copies
+    them from the object at every step: assign to a task's attributes as to any object's."""
+
+    #: the compiled kind of this class's tasks (``controllers.low_level.compiled_tasks``), or
+    #: None: the task QP's readable path. Only a class that sets it itself runs compiled (a
+    #: subclass may change the arithmetic)
+    compiled_kind: ClassVar[int | None] = None
 
     if TYPE_CHECKING:  # the subclass's dataclass fields
         kp: float
         kv: float
         name: str
+
+    def parameters(self) -> list[float]:
+        """The numbers this task's compiled rows read (``compiled_kind``), in their order:
+        copied into the one-call step's table at every step."""
+        raise NotImplementedError(f"{type(self).__name__} has no compiled rows")
 
     def error(self, robot: RobotModel) -> Array:
         """``x - x_d`` at the robot's state."""
@@ -205,26 +101,49 @@ class DesiredMotion(PDTask):
     desired_names: ClassVar[tuple[str, str, str]]
 
     def set_desired(self, value: float, rate: float, acceleration: float) -> None:
-        """Set the desired value, rate and acceleration (floats): the same as assigning the
-        three attributes, written straight into a compiled stack's arrays when one holds
-        them (``StoredParameters``), without three passes through ``__setattr__``."""
+        """Set the desired value, rate and acceleration (floats) together."""
         state = self.__dict__
-        slots = state.get("_stored_slots")
         first, second, third = self.desired_names
-        if slots is None:
-            state[first], state[second], state[third] = value, rate, acceleration
-            return
-        # per entry the stack's array first, then the attribute, as an assignment does (a
-        # value the array refuses leaves both as they were); written out, not looped
-        array, index = slots[first]
-        array[index] = value
-        state[first] = value
-        array, index = slots[second]
-        array[index] = rate
-        state[second] = rate
-        array, index = slots[third]
-        array[index] = acceleration
-        state[third] = acceleration
+        state[first], state[second], state[third] = value, rate, acceleration
+
+    def parameters(self) -> list[float]:
+        """``(kp, kv, desired value, rate, acceleration, weight)``."""
+        state = self.__dict__
+        first, second, third = self.desired_names
+        return [
+            state["kp"],
+            state["kv"],
+            state[first],
+            state[second],
+            state[third],
+            state["weight"],
+        ]
+
+
+def _three(task: Any) -> list[float] | tuple[float, float, float]:
+    """A three-row task's weights: one number for all (the common case, first), or three."""
+    weight = task.weight
+    if type(weight) is float:
+        return weight, weight, weight
+    return floats(weight, 3, task, "weight")
+
+
+def floats(values: Any, count: int, task: Any, what: str) -> list[float]:
+    """``values`` as ``count`` floats (row-major): an array of that many numbers, or one
+    number for all (``ValueError`` naming the task and ``what`` otherwise). A task's
+    ``parameters()`` give theirs so, at every step: an array's ``tolist`` first, the cheap
+    case."""
+    if type(values) is np.ndarray and values.size == count:
+        return (values if values.ndim == 1 else values.ravel()).tolist()  # type: ignore[no-any-return]
+    if type(values) is float:
+        return [values] * count
+    array = np.asarray(values, dtype=float)
+    if array.size == count or array.size == 1:
+        return array.ravel().tolist() * (count if array.size == 1 and count != 1 else 1)  # type: ignore[no-any-return]
+    raise ValueError(
+        f"task {getattr(task, 'name', type(task).__name__)!r}: {what} of shape "
+        f"{np.shape(values)} for {count} rows (one per row, or one for all)"
+    )
 
 
 def _skew(v: Array) -> Array:
@@ -259,12 +178,42 @@ def site_in_axle_frame(robot: RobotModel, site: int) -> tuple[Array, Array, Arra
     frame (which turns with ``psi`` and does not pitch). Memoised per robot state."""
     key = ("site_in_axle_frame", site)
     cached = robot.cache.get(key)
-    if cached is not None:
-        return cached  # type: ignore[return-value]
+    if cached is None:
+        m, d = robot.model, robot.data
+        # [jacp; jacr] in one buffer: one product with J_tf for both
+        jac = np.empty((6, m.nv))
+        mujoco.mj_jacSite(m, d, jac[:3], jac[3:], site)
+        cached = robot.cache[key] = _in_axle_frame(robot, jac, d.site_xpos[site], d.site_xmat[site])
+    return cached  # type: ignore[return-value]
+
+
+def body_point_in_axle_frame(
+    robot: RobotModel, body: int, offset: Any = (0.0, 0.0, 0.0)
+) -> tuple[Array, Array, Array, Array]:
+    """:func:`site_in_axle_frame` for a point fixed on a body, ``offset`` in the body's frame
+    (its origin by default): its position, the body's rotation, and the point's Jacobians
+    (linear, angular) over ``nu``, in the axle frame. Memoised per robot state."""
+    offset = np.asarray(offset, dtype=float)
+    if offset.shape != (3,) or not 0 <= body < robot.model.nbody:
+        raise ValueError(f"a body id and a 3-vector offset, got {body!r} and {offset.tolist()}")
+    key = ("body_point_in_axle_frame", body, *offset.tolist())
+    cached = robot.cache.get(key)
+    if cached is None:
+        m, d = robot.model, robot.data
+        point = d.xpos[body] + d.xmat[body].reshape(3, 3) @ offset
+        jac = np.empty((6, m.nv))
+        mujoco.mj_jac(m, d, jac[:3], jac[3:], point, body)
+        cached = robot.cache[key] = _in_axle_frame(robot, jac, point, d.xmat[body])
+    return cached  # type: ignore[return-value]
+
+
+def _in_axle_frame(
+    robot: RobotModel, jac: Array, position: Array, rotation: Array
+) -> tuple[Array, Array, Array, Array]:
+    """A world point's (``position``, its world ``[jacp; jacr]`` over MuJoCo's dofs in
+    ``jac``, overwritten) and a frame's (``rotation``, 9 entries row-major) position, rotation
+    and Jacobians over ``nu`` in the axle frame."""
     m, d, lay = robot.model, robot.data, robot.layout
-    # [jacp; jacr] in one buffer: one product with J_tf for both
-    jac = np.empty((6, m.nv))
-    mujoco.mj_jacSite(m, d, jac[:3], jac[3:], site)
     origin = d.xpos[lay.base_body]
     origin_jac = robot.cache.get("origin_jacobian")
     if origin_jac is None:
@@ -274,12 +223,12 @@ def site_in_axle_frame(robot: RobotModel, site: int) -> tuple[Array, Array, Arra
     jac[:3] -= origin_jac
     JJ = jac @ robot.J_tf
     if lay.index_psi is None:  # planar: the axle frame is the world's (Rh = I)
-        rel = d.site_xpos[site] - origin
+        rel = position - origin
         Jp, Jr = JJ[:3], JJ[3:]
-        R = d.site_xmat[site].reshape(3, 3).copy()
+        R = rotation.reshape(3, 3).copy()
     else:
         Rt = robot.heading_rotation.T
-        rel = Rt @ (d.site_xpos[site] - origin)
+        rel = Rt @ (position - origin)
         Jp = Rt @ JJ[:3]
         Jr = Rt @ JJ[3:]
         ipsi = lay.index_psi
@@ -287,8 +236,7 @@ def site_in_axle_frame(robot: RobotModel, site: int) -> tuple[Array, Array, Arra
         Jp[0, ipsi] += y
         Jp[1, ipsi] -= x
         Jr[2, ipsi] -= 1.0
-        R = Rt @ d.site_xmat[site].reshape(3, 3)
-    robot.cache[key] = (rel, R, Jp, Jr)
+        R = Rt @ rotation.reshape(3, 3)
     return rel, R, Jp, Jr
 
 
@@ -306,6 +254,7 @@ class ThetaTask(DesiredMotion):
     name: str = "theta"
 
     desired_names: ClassVar[tuple[str, str, str]] = ("theta_d", "thetad_d", "thdd_d")
+    compiled_kind: ClassVar[int | None] = ct.THETA
 
     def jacobian(self, robot: RobotModel) -> Array:
         return robot.J_theta[None, :]
@@ -349,6 +298,7 @@ class SpinTask(DesiredMotion):
     name: str = "spin"
 
     desired_names: ClassVar[tuple[str, str, str]] = ("psi_d", "psid_d", "psidd_d")
+    compiled_kind: ClassVar[int | None] = ct.SPIN
 
     def jacobian(self, robot: RobotModel) -> Array:
         row = np.zeros((1, robot.layout.n_min))
@@ -381,6 +331,12 @@ class FramePositionTask(PDTask):
     kp: float = 750.0
     kv: float = 250.0
     name: str = "ee_position"
+
+    compiled_kind: ClassVar[int | None] = ct.POSITION
+
+    def parameters(self) -> list[float]:
+        """``(kp, kv, target (3), weights (3))``."""
+        return [self.kp, self.kv, *floats(self.target, 3, self, "target"), *_three(self)]
 
     def jacobian(self, robot: RobotModel) -> Array:
         return site_in_axle_frame(robot, self.site)[2]
@@ -415,6 +371,12 @@ class FrameOrientationTask(PDTask):
     kp: float = 150.0
     kv: float = 50.0
     name: str = "ee_orientation"
+
+    compiled_kind: ClassVar[int | None] = ct.ORIENTATION
+
+    def parameters(self) -> list[float]:
+        """``(kp, kv, target (3 x 3, row-major), weights (3))``."""
+        return [self.kp, self.kv, *floats(self.target, 9, self, "target"), *_three(self)]
 
     def jacobian(self, robot: RobotModel) -> Array:
         return site_in_axle_frame(robot, self.site)[3]
@@ -453,6 +415,18 @@ class PostureTask(PDTask):
     name: str = "posture"
     columns: NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, dtype=int))
 
+    compiled_kind: ClassVar[int | None] = ct.POSTURE
+
+    def parameters(self) -> list[float]:
+        """``(kp, kv, targets, weights)``, one target and one weight per column."""
+        count = len(self.columns)
+        return [
+            self.kp,
+            self.kv,
+            *floats(self.target, count, self, "targets"),
+            *floats(self.joint_weights, count, self, "joint weights"),
+        ]
+
     def jacobian(self, robot: RobotModel) -> Array:
         rows = np.zeros((len(self.columns), robot.layout.n_min))
         rows[np.arange(len(self.columns)), self.columns] = 1.0
@@ -465,7 +439,7 @@ class PostureTask(PDTask):
         return robot.nu[self.columns]  # the posture is held still
 
     def weights(self) -> Array:
-        return self.joint_weights
+        return np.array(floats(self.joint_weights, len(self.columns), self, "joint weights"))
 
     def jdot_nu(self, probe: MotionProbe) -> Array:
         return np.zeros(len(self.columns))  # J is constant

@@ -7,7 +7,6 @@ class docstrings there hold the tables of spaces, rewards and arguments.
 from __future__ import annotations
 
 import math
-from collections.abc import Collection
 from typing import Any
 
 import gymnasium as gym
@@ -21,14 +20,15 @@ from wip_gym.assets import mjcf_path
 from wip_gym.camera import COMPUTED_CAMERAS
 from wip_gym.display import require_display
 from wip_gym.envs import measures as ms
+from wip_gym.envs import step_reference
 from wip_gym.envs.measures import (  # noqa: F401  (the cup's and tray's thresholds, here too)
     CUP_PLATE_GAP,
     CUP_UPRIGHT_DEG,
     TRAY_HAND_GAP,
-    action_effort,
     env_measures,
 )
 from wip_gym.envs.perturbations import Perturbations, Perturber, build_task_model
+from wip_gym.envs.step_reference import friction_use  # noqa: F401  (its home was here)
 from wip_gym.floor import FloorOptions
 from wip_gym.overlay import OverlayValues, draw_overlay
 from wip_gym.renderer import FrameRenderer
@@ -68,53 +68,6 @@ def _check_frame_skip(frame_skip: Any) -> None:
     integer = isinstance(frame_skip, int | np.integer) and not isinstance(frame_skip, bool)
     if not integer or frame_skip < 1:
         raise ValueError(f"frame_skip must be a positive integer, got {frame_skip!r}")
-
-
-def friction_use(
-    model: mujoco.MjModel,
-    data: mujoco.MjData,
-    geoms: Collection[int],
-    plate: int,
-    mu: float,
-) -> float:
-    """Friction use of a body on a plate: the norm of the net tangential force over ``mu`` times
-    the net normal force, summed over the contacts between the geom ``plate`` and the geoms
-    ``geoms`` (ids; 1: the body slides); 0 without contact.
-
-    The forces are summed as vectors before the ratio: the ratio is how much of the friction
-    the net push along the plate uses (a resting cup on a still plate tilted by alpha uses
-    ``tan(alpha) / mu``). Contacts of other geoms (a rim) do not count: a rim's push on the
-    cup is a normal force of the rim, not friction of the plate.
-    """
-    n = data.ncon
-    if n == 0:
-        return 0.0
-    contact = data.contact
-    pairs = contact.geom[:n].tolist()
-    rows = [
-        i
-        for i, (g1, g2) in enumerate(pairs)
-        if (g1 == plate and g2 in geoms) or (g2 == plate and g1 in geoms)
-    ]
-    if not rows:
-        return 0.0
-    frames = contact.frame[:n].tolist()
-    wrench = np.zeros(6)
-    normal = tx = ty = tz = 0.0
-    for i in rows:
-        # the contact-frame force (normal, tangent 1, tangent 2), either cone; zeros for a
-        # contact excluded from the constraints
-        mujoco.mj_contactForce(model, data, i, wrench)
-        f_n, f_1, f_2 = wrench[:3].tolist()
-        # rows of the contact frame: normal, tangent 1, tangent 2
-        _, _, _, a0, a1, a2, b0, b1, b2 = frames[i]
-        normal += f_n
-        tx += f_1 * a0 + f_2 * b0
-        ty += f_1 * a1 + f_2 * b1
-        tz += f_1 * a2 + f_2 * b2
-    if normal <= 0.0:
-        return 0.0
-    return math.sqrt(tx * tx + ty * ty + tz * tz) / (mu * normal)
 
 
 class WIPEnv(MujocoEnv, utils.EzPickle):
@@ -389,36 +342,41 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         self._goal_xy = (float(self._goal[0]), float(self._goal[1]))
         # the accepted band and the reward's scale, rows of one table (action_effort)
         self._action_table = np.array([*self._action_band, self._action_scale])
-        # the parameters of step_measures (wip_gym.envs.measures) and its results
+        # the parameters of the step's measures (wip_gym.envs.measures) and its results
+        INT, FLOAT = ms.INT, ms.FLOAT
         ints = np.zeros(ms.N_INTS + m.ngeom, dtype=np.int64)
-        ints[ms.I_BASE] = lay.base_body
-        ints[ms.I_WHEEL_L], ints[ms.I_WHEEL_R] = lay.wheel_bodies
-        ints[ms.I_PLANAR] = lay.planar
-        ints[ms.I_ROOT_QPOS], ints[ms.I_ROOT_DOF] = lay.root_qpos, lay.root_dof
-        ints[ms.I_QPOS_L], ints[ms.I_QPOS_R] = lay.wheel_qpos
-        ints[ms.I_DOF_L], ints[ms.I_DOF_R] = lay.wheel_dof
-        ints[ms.I_EE_SITE] = self._ee_site
-        ints[ms.I_FLOOR] = self._floor
+        ints[INT.base] = lay.base_body
+        ints[INT.wheel_left], ints[INT.wheel_right] = lay.wheel_bodies
+        ints[INT.planar] = lay.planar
+        ints[INT.root_qpos], ints[INT.root_dof] = lay.root_qpos, lay.root_dof
+        ints[INT.qpos_left], ints[INT.qpos_right] = lay.wheel_qpos
+        ints[INT.dof_left], ints[INT.dof_right] = lay.wheel_dof
+        ints[INT.ee_site] = self._ee_site
+        ints[INT.floor] = self._floor
         ints[ms.N_INTS + self._body_geoms] |= ms.GEOM_FALL
         floats = np.zeros(ms.N_FLOATS)
-        floats[ms.F_WHEEL_RADIUS] = lay.wheel_radius
-        floats[ms.F_GOAL_X], floats[ms.F_GOAL_Y] = self._goal_xy
-        floats[ms.F_FALL_ANGLE] = fall_angle
+        floats[FLOAT.wheel_radius] = lay.wheel_radius
+        floats[FLOAT.goal : FLOAT.goal + 2] = self._goal_xy
+        floats[FLOAT.fall_angle] = fall_angle
         if tray:
-            ints[ms.I_TRAY], ints[ms.I_FREE_TRAY] = 1, self._free_tray
-            ints[ms.I_TRAY_BODY], ints[ms.I_CUP_BODY] = self._tray_body, self._cup_body
-            ints[ms.I_REST_SITE], ints[ms.I_TRAY_GEOM] = self._tray_rest_site, self._tray_geom
+            ints[INT.tray], ints[INT.free_tray] = 1, self._free_tray
+            ints[INT.tray_body], ints[INT.cup_body] = self._tray_body, self._cup_body
+            ints[INT.rest_site], ints[INT.tray_geom] = self._tray_rest_site, self._tray_geom
             ints[ms.N_INTS + np.array(sorted(self._cup_geoms))] |= ms.GEOM_CUP
-            floats[ms.F_CUP_FRICTION] = self._cup_friction
+            floats[FLOAT.cup_friction] = self._cup_friction
         self._measure_ints, self._measure_floats = ints, floats
         self._measures = np.zeros(ms.N_OUT)
-        self._measures[ms.COS_PSI] = 1.0  # heading 0 until the first measure
+        self._measures[ms.OUT.cos_psi] = 1.0  # heading 0 until the first measure
         self._block = self._measures.copy()
         self._values = self._measures.tolist()
         self._action_shape = self.action_space.shape
         # step() applies a push or a payload only while one can still come (reset_model)
         self._events_due = push_force != 0.0
-        ms.compile_once()
+        # the fast path (compiled, wip_gym.envs.measures) or the readable one
+        # (wip_gym.envs.step_reference), as the robot model took
+        self._fast = self.robot.fast_path
+        self._action_effort = ms.action_effort if self._fast else step_reference.action_effort
+        ms.compile_once(self._fast)
         self._bind_views()
 
     def _bind_views(self) -> None:
@@ -432,7 +390,11 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         # do_simulation checks frame_skip and makes _step_dt for it at the next step (-1: none
         # checked yet; frame_skip may have been assigned since the env was made)
         self._frames_bound = -1
-        self._measure_table = ms.address_table(m, d)
+        self._measure_table = (
+            ms.env_table(m, d, self._measure_ints, self._measure_floats, self._measures)
+            if self._fast
+            else None
+        )
 
     # ----------------------------------------------------------------- model
     def _initialize_simulation(self) -> tuple[mujoco.MjModel, mujoco.MjData]:
@@ -566,10 +528,11 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         m.site_pos[self._goal_site, :2] = self._goal
         d.xfrc_applied[:] = 0.0
         values = self._measure()
-        self._prev_distance = values[ms.GOAL_DISTANCE]
+        self._prev_distance = values[ms.OUT.goal_distance]
         self._set_ee_reference(self._ee_in_axle_frame())
         # _measure found ee_error from the previous reference: from this one it is 0
-        self._measures[ms.EE_ERROR] = self._block[ms.EE_ERROR] = values[ms.EE_ERROR] = 0.0
+        error = ms.OUT.ee_error
+        self._measures[error] = self._block[error] = values[error] = 0.0
         self._cup_lost = False
         if self._perturb_observation:
             return self._perturber.observe(self._get_obs(), first=True)
@@ -630,7 +593,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         a = np.asarray(action, dtype=np.float64)
         if a.shape != self._action_shape:
             a = self._check_action(a)
-        effort = action_effort(a, self._action_table)
+        effort = self._action_effort(a, self._action_table)
         if effort != effort:  # NaN: a torque beyond the band, or NaN
             a = self._check_action(a)
             effort = float(np.sum(np.square(a / self._action_scale)))
@@ -640,7 +603,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             a = self._perturber.actuate(a)
         self.do_simulation(a, self.frame_skip)
         values = self._measure()
-        fallen = values[ms.FALLEN] != 0.0
+        fallen = values[ms.OUT.fallen] != 0.0
         info = self._info(values, fallen)
         newly_lost = False
         if self._tray:
@@ -649,7 +612,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             self._cup_lost = self._cup_lost or not kept
             if newly_lost:
                 self._solve_by_islands(True)
-        distance = values[ms.GOAL_DISTANCE]
+        distance = values[ms.OUT.goal_distance]
         progress_w, ctrl_w, fall_pen, cup_pen = self._weights
         info["reward_progress"] = progress = progress_w * (self._prev_distance - distance)
         info["reward_ctrl"] = ctrl = -ctrl_w * effort * self._step_dt
@@ -695,7 +658,11 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             push = self._view_push
             push[:] = 0.0
             if start <= t < start + duration:
-                push[:3] = (force * self._values[ms.COS_PSI], force * self._values[ms.SIN_PSI], 0)
+                push[:3] = (
+                    force * self._values[ms.OUT.cos_psi],
+                    force * self._values[ms.OUT.sin_psi],
+                    0,
+                )
         if not self._payload_attached and t >= self._payload_time:
             m.body_mass[self._payload_body] = self._payload_mass
             m.body_inertia[self._payload_body] = self._nominal_inertia[self._payload_body]
@@ -742,38 +709,42 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
     def _measure(self) -> list[float]:
         """The step's numbers for the current ``qpos``/``qvel``, from MuJoCo's own kinematics
         and subtree quantities on the env's data (``mj_step`` leaves its kinematics at the state
-        before the step) and its contacts: one compiled call, ``env_measures``, which runs those
-        MuJoCo passes and ``step_measures`` (``wip_gym.envs.measures``: heading ``psi``,
-        ``psid``, ``x``, ``xd`` (the minimal coordinates of ``RobotModel``), the axle position,
-        ``theta``, ``thetad`` of the body CoM (wheels excluded) about the axle in the heading
-        frame (``RobotModel.theta``), the goal distance, the fall, the end effector's drift, a
-        tray task's cup and tray) into ``_measures``. Returned as floats and kept as
-        ``_values``; ``_block`` is a fresh copy of ``_measures`` whose slices are the step's
-        array-valued info and observation entries (one allocation for all of them)."""
+        before the step) and its contacts, into ``_measures`` (``wip_gym.envs.measures.OUT``:
+        heading ``psi``, ``psid``, ``x``, ``xd`` (the minimal coordinates of ``RobotModel``),
+        the axle position, ``theta``, ``thetad`` of the body CoM (wheels excluded) about the
+        axle in the heading frame (``RobotModel.theta``), the goal distance, the fall, the end
+        effector's drift, a tray task's cup and tray): on the fast path one compiled call,
+        ``env_measures``; on the readable one ``step_reference.measures``, their definition.
+        Returned as floats and kept as ``_values``; ``_block`` is a fresh copy of
+        ``_measures`` whose slices are the step's array-valued info and observation entries
+        (one allocation for all of them)."""
         if self._views_of[1] is not self.data or self._views_of[0] is not self.model:
             self._bind_views()
         out = self._measures
-        env_measures(
-            self._measure_table, self.data.ncon, self._measure_ints, self._measure_floats, out
-        )
+        if self._measure_table is not None:
+            env_measures(self._measure_table.rows, self.data.ncon)
+        else:
+            step_reference.measures(
+                self.model, self.data, self._measure_ints, self._measure_floats, out
+            )
         self._block = block = out.copy()
         self._values = values = block.tolist()
         return values
 
     def _goal_distance(self) -> float:
         """The axle's distance to the goal at the last ``_measure`` (planar: along x)."""
-        return self._values[ms.GOAL_DISTANCE]
+        return self._values[ms.OUT.goal_distance]
 
     def _ee_in_axle_frame(self) -> NDArray[np.float64]:
         """The end effector in the axle frame at the last ``_measure`` (zeros without one)."""
         if self._ee_site < 0:
             return np.zeros(3)
-        return self._measures[ms.EE : ms.EE + 3].copy()
+        return self._measures[ms.OUT.ee : ms.OUT.ee + 3].copy()
 
     def _set_ee_reference(self, reference: NDArray[np.float64]) -> None:
         """The end effector's place (axle frame) that ``ee_error`` is measured from."""
         self._ee_reference = reference
-        self._measure_floats[ms.F_EE_REFERENCE : ms.F_EE_REFERENCE + 3] = reference
+        self._measure_floats[ms.FLOAT.ee_reference : ms.FLOAT.ee_reference + 3] = reference
 
     def _cup_friction_use(self) -> float:
         """The cup's friction use on the plate now (see :func:`friction_use`)."""
@@ -793,39 +764,40 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
         if values is None:
             values = self._values
         if fallen is None:
-            fallen = values[ms.FALLEN] != 0.0
+            fallen = values[ms.OUT.fallen] != 0.0
         info: dict[str, Any] = {
-            "x": values[ms.X],
-            "xd": values[ms.XD],
-            "theta": values[ms.THETA],
-            "thetad": values[ms.THETAD],
-            "axle_position": self._block[ms.AXLE : ms.AXLE + 3],
-            "goal_distance": values[ms.GOAL_DISTANCE],
+            "x": values[ms.OUT.x],
+            "xd": values[ms.OUT.xd],
+            "theta": values[ms.OUT.theta],
+            "thetad": values[ms.OUT.thetad],
+            "axle_position": self._block[ms.OUT.axle : ms.OUT.axle + 3],
+            "goal_distance": values[ms.OUT.goal_distance],
             "fallen": fallen,
         }
         if not self._planar:
-            info["psi"] = values[ms.PSI]
-            info["psid"] = values[ms.PSID]
+            info["psi"] = values[ms.OUT.psi]
+            info["psid"] = values[ms.OUT.psid]
         if self._ee_site >= 0:
-            info["ee_error"] = values[ms.EE_ERROR]
+            info["ee_error"] = values[ms.OUT.ee_error]
         return info
 
     def _tray_entries(self, info: dict[str, Any], values: list[float]) -> bool:
         """Add the tray task's info entries from ``_measure``'s ``values``; return whether the
         cup is kept (on the tray, and the tray on the hand)."""
-        tilt, upright, on_plate, tray_tilt, _, _, _, on_hand, use = values[ms.CUP_TILT_DEG :]
-        block = self._block
-        upright, on_plate, on_hand = upright != 0.0, on_plate != 0.0, on_hand != 0.0
+        OUT, block = ms.OUT, self._block
+        tilt, tray_tilt = values[OUT.cup_tilt_deg], values[OUT.tray_tilt_deg]
+        upright, on_plate = values[OUT.cup_upright] != 0.0, values[OUT.cup_on_plate] != 0.0
+        on_hand, use = values[OUT.tray_on_hand] != 0.0, values[OUT.cup_friction_use]
         on_tray = on_plate and upright
         info.update(
             tray_tilt_deg=tray_tilt,
-            cup_offset=block[ms.CUP_POSE : ms.CUP_POSE + 3],
+            cup_offset=block[ms.OUT.cup_pose : ms.OUT.cup_pose + 3],
             cup_tilt_deg=tilt,
             cup_upright=upright,
             cup_on_plate=on_plate,
             cup_on_tray=on_tray,
             cup_friction_use=use,
-            tray_offset=block[ms.TRAY_OFFSET : ms.TRAY_OFFSET + 3],
+            tray_offset=block[ms.OUT.tray_offset : ms.OUT.tray_offset + 3],
             tray_on_hand=on_hand,
         )
         return on_tray and on_hand
@@ -838,7 +810,7 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             "goal": self._goal.copy(),
         }
         if self._tray:
-            obs["cup_pose"] = self._block[ms.CUP_POSE : ms.CUP_POSE + 7].copy()
+            obs["cup_pose"] = self._block[ms.OUT.cup_pose : ms.OUT.cup_pose + 7].copy()
         return obs
 
     # ------------------------------------------------------------- rendering

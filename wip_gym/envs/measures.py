@@ -1,19 +1,22 @@
-"""The arithmetic of ``WIPEnv.step`` around its MuJoCo calls, compiled by numba.
+"""The arithmetic of ``WIPEnv.step`` around its MuJoCo calls, compiled by numba: the env's
+fast path.
 
 ``WIPEnv._measure`` makes one call of :func:`env_measures`, which runs MuJoCo's kinematics and
 subtree passes on the env's data, reads its contacts through addresses taken once per MjData
-(:func:`contact_layout`; the count is ``data.ncon``, passed in) and then :func:`step_measures`,
-which computes, from the data's arrays, every number of the step's observation, reward and
-info into a preallocated float buffer (indices below): the robot's measures (``psi``, ``x``,
-``theta`` ... of ``RobotModel``), the goal distance, the fall, the end effector's drift, and on
-a tray task the cup's pose in the tray frame and its state, the tray's place on the hand and
-the cup's friction use on the plate. The same arithmetic in plain Python floats is kept in
-``tests/env_step_reference.py`` and compared step by step with the env
-(``tests/test_env_step_reference.py``).
+(``mujoco_c.contact_layout``; the count is ``data.ncon``, passed in) and then
+:func:`step_measures`, which computes, from the data's arrays, every number of the step's
+observation, reward and info into a preallocated float vector (:data:`OUT`): the robot's
+measures (``psi``, ``x``, ``theta`` ... of ``RobotModel``), the goal distance, the fall, the
+end effector's drift, and on a tray task the cup's pose in the tray frame and its state, the
+tray's place on the hand and the cup's friction use on the plate. Its readable definition, in
+plain Python floats through MuJoCo's bindings, is ``wip_gym.envs.step_reference.measures``:
+the env's readable path, which ``tests/test_env_step_reference.py`` holds this one to, step by
+step.
 
-The integer parameters (``ints``) are the model's ids and addresses (``I_*`` below) followed by
+The integer parameters (``ints``, :data:`INT`) are the model's ids and addresses followed by
 one entry per geom (``GEOM_*`` bits: a robot body geom whose floor contact is a fall, a cup
-geom); the float parameters (``floats``) are the task's constants (``F_*``).
+geom); the float parameters (``floats``, :data:`FLOAT`) are the task's constants. Each
+vector's layout is declared once (``wip_gym.array_table.field_offsets``).
 """
 
 from __future__ import annotations
@@ -21,10 +24,25 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import mujoco
 import numpy as np
 from numba import carray, njit, types
 
 from wip_gym import mujoco_c as mjc
+from wip_gym.array_table import (
+    FLOAT_MATRIX,
+    FLOAT_VECTOR,
+    INT_VECTOR,
+    ArrayTable,
+    TableSpec,
+    field_offsets,
+    float64_view,
+    float_matrix,
+    float_vector,
+    int32_pointer,
+    int_vector,
+)
+from wip_gym.mujoco_c import contact_layout
 from wip_gym.scene import CUP_HALF_HEIGHT, CUP_RADIUS, TRAY_HALF_SIZE
 
 #: a cup counts as upright while its axis is within this angle of the tray's normal (deg)
@@ -37,30 +55,67 @@ TRAY_HAND_GAP = 0.01
 
 _HALF_X, _HALF_Y, _HALF_Z = (float(v) for v in TRAY_HALF_SIZE)
 
-# the integer parameters
-I_BASE, I_WHEEL_L, I_WHEEL_R, I_PLANAR = 0, 1, 2, 3
-I_ROOT_QPOS, I_ROOT_DOF, I_QPOS_L, I_QPOS_R, I_DOF_L, I_DOF_R = 4, 5, 6, 7, 8, 9
-I_EE_SITE, I_TRAY, I_FREE_TRAY, I_TRAY_BODY, I_CUP_BODY, I_REST_SITE = 10, 11, 12, 13, 14, 15
-I_FLOOR, I_TRAY_GEOM = 16, 17
-N_INTS = 18  # the geoms' bits follow
+INT, N_INTS = field_offsets(
+    "int_parameter",
+    (
+        ("base", 1),
+        ("wheel_left", 1),
+        ("wheel_right", 1),
+        ("planar", 1),
+        ("root_qpos", 1),
+        ("root_dof", 1),
+        ("qpos_left", 1),
+        ("qpos_right", 1),
+        ("dof_left", 1),
+        ("dof_right", 1),
+        ("ee_site", 1),  # -1: none
+        ("tray", 1),
+        ("free_tray", 1),
+        ("tray_body", 1),
+        ("cup_body", 1),
+        ("rest_site", 1),
+        ("floor", 1),
+        ("tray_geom", 1),
+    ),
+)
+"""The integer parameters: the model's ids and addresses; one entry per geom follows
+(``GEOM_*`` bits)."""
 GEOM_FALL, GEOM_CUP = 1, 2
+"""A geom's bits: a robot body geom whose floor contact is a fall; a cup geom."""
 
-# the float parameters
-F_WHEEL_RADIUS, F_GOAL_X, F_GOAL_Y, F_FALL_ANGLE = 0, 1, 2, 3
-F_EE_REFERENCE = 4  # 3 entries
-F_CUP_FRICTION = 7
-N_FLOATS = 8
+FLOAT, N_FLOATS = field_offsets(
+    "float_parameter",
+    (("wheel_radius", 1), ("goal", 2), ("fall_angle", 1), ("ee_reference", 3), ("cup_friction", 1)),
+)
+"""The float parameters: the task's constants."""
 
-# the results (flags as 0.0 / 1.0)
-X, XD, THETA, THETAD, PSI, PSID, COS_PSI, SIN_PSI = 0, 1, 2, 3, 4, 5, 6, 7
-AXLE = 8  # 3 entries
-GOAL_DISTANCE, FALLEN, EE_ERROR = 11, 12, 13
-EE = 14  # 3 entries: the end effector in the axle frame
-CUP_POSE = 17  # 7 entries: position in the tray frame, quaternion (w >= 0)
-CUP_TILT_DEG, CUP_UPRIGHT, CUP_ON_PLATE, TRAY_TILT_DEG = 24, 25, 26, 27
-TRAY_OFFSET = 28  # 3 entries
-TRAY_ON_HAND, CUP_FRICTION_USE = 31, 32
-N_OUT = 33
+OUT, N_OUT = field_offsets(
+    "measure",
+    (
+        ("x", 1),
+        ("xd", 1),
+        ("theta", 1),
+        ("thetad", 1),
+        ("psi", 1),
+        ("psid", 1),
+        ("cos_psi", 1),
+        ("sin_psi", 1),
+        ("axle", 3),
+        ("goal_distance", 1),
+        ("fallen", 1),
+        ("ee_error", 1),
+        ("ee", 3),  # the end effector in the axle frame
+        ("cup_pose", 7),  # position in the tray frame, quaternion (w >= 0)
+        ("cup_tilt_deg", 1),
+        ("cup_upright", 1),
+        ("cup_on_plate", 1),
+        ("tray_tilt_deg", 1),
+        ("tray_offset", 3),
+        ("tray_on_hand", 1),
+        ("cup_friction_use", 1),
+    ),
+)
+"""The results (flags as 0.0 / 1.0)."""
 
 
 @njit(cache=True)
@@ -95,7 +150,7 @@ def step_measures(
     ``thetad`` of the body CoM (the robot's subtree less the wheels, whose CoMs sit on the axle)
     about the axle in the heading frame. Goal distance: of the axle in the plane (planar: along
     x). Fallen: ``|theta| > fall_angle`` or a robot body geom touching the floor. End effector:
-    its site in the axle frame and its distance to ``floats[F_EE_REFERENCE:]``.
+    its site in the axle frame and its distance to the float parameters' ``ee_reference``.
 
     Tray task: the cup's pose in the tray frame (``R_tray^T (p_cup - p_tray)`` and the conjugate
     of the tray's quaternion times the cup's, ``w >= 0``); its tilt (the angle between its axis
@@ -107,13 +162,13 @@ def step_measures(
     (``wip_gym.envs.base.friction_use``: the norm of the net tangential force over ``mu`` times
     the net normal force, 0 without contact; either friction cone).
     """
-    base, wl, wr = ints[I_BASE], ints[I_WHEEL_L], ints[I_WHEEL_R]
-    r = floats[F_WHEEL_RADIUS]
+    base, wl, wr = ints[INT.base], ints[INT.wheel_left], ints[INT.wheel_right]
+    r = floats[FLOAT.wheel_radius]
     ax, ay, az = xpos[base, 0], xpos[base, 1], xpos[base, 2]
-    if ints[I_PLANAR]:
+    if ints[INT.planar]:
         c, s, psi, psid = 1.0, 0.0, 0.0, 0.0
-        v = ints[I_ROOT_DOF]
-        x = qpos[ints[I_ROOT_QPOS]]
+        v = ints[INT.root_dof]
+        x = qpos[ints[INT.root_qpos]]
         xd, voz, wy_ = qvel[v], qvel[v + 1], qvel[v + 2]
         vox, voy = xd, 0.0
         wx_ = wz_ = 0.0
@@ -122,15 +177,15 @@ def step_measures(
         psi = math.atan2(-R[1], R[4])
         c, s = math.cos(psi), math.sin(psi)
         q1 = math.atan2(c * R[2] + s * R[5], R[8])
-        v = ints[I_ROOT_DOF]
+        v = ints[INT.root_dof]
         vox, voy, voz = qvel[v], qvel[v + 1], qvel[v + 2]
         w0, w1, w2 = qvel[v + 3], qvel[v + 4], qvel[v + 5]
         wx_ = R[0] * w0 + R[1] * w1 + R[2] * w2
         wy_ = R[3] * w0 + R[4] * w1 + R[5] * w2
         wz_ = psid = R[6] * w0 + R[7] * w1 + R[8] * w2
         q1d = -s * wx_ + c * wy_
-        x = r * 0.5 * (qpos[ints[I_QPOS_L]] + qpos[ints[I_QPOS_R]]) + r * q1
-        xd = r * 0.5 * (qvel[ints[I_DOF_L]] + qvel[ints[I_DOF_R]]) + r * q1d
+        x = r * 0.5 * (qpos[ints[INT.qpos_left]] + qpos[ints[INT.qpos_right]]) + r * q1
+        xd = r * 0.5 * (qvel[ints[INT.dof_left]] + qvel[ints[INT.dof_right]]) + r * q1d
     mass = subtree_mass[base]
     ml, mr = body_mass[wl], body_mass[wr]
     body = mass - ml - mr
@@ -154,21 +209,21 @@ def step_measures(
     Zd = dvz
     distance_sq = X_ * X_ + Z_ * Z_
     theta = math.atan2(X_, Z_)
-    out[X], out[XD], out[THETA] = x, xd, theta
-    out[THETAD] = (Z_ * Xd - X_ * Zd) / distance_sq if distance_sq > 1e-18 else 0.0
-    out[PSI], out[PSID], out[COS_PSI], out[SIN_PSI] = psi, psid, c, s
-    out[AXLE], out[AXLE + 1], out[AXLE + 2] = ax, ay, az
-    gx, gy = floats[F_GOAL_X], floats[F_GOAL_Y]
-    if ints[I_PLANAR]:
-        out[GOAL_DISTANCE] = abs(gx - ax)
+    out[OUT.x], out[OUT.xd], out[OUT.theta] = x, xd, theta
+    out[OUT.thetad] = (Z_ * Xd - X_ * Zd) / distance_sq if distance_sq > 1e-18 else 0.0
+    out[OUT.psi], out[OUT.psid], out[OUT.cos_psi], out[OUT.sin_psi] = psi, psid, c, s
+    out[OUT.axle], out[OUT.axle + 1], out[OUT.axle + 2] = ax, ay, az
+    gx, gy = floats[FLOAT.goal], floats[FLOAT.goal + 1]
+    if ints[INT.planar]:
+        out[OUT.goal_distance] = abs(gx - ax)
     else:
-        out[GOAL_DISTANCE] = math.hypot(gx - ax, gy - ay)
+        out[OUT.goal_distance] = math.hypot(gx - ax, gy - ay)
 
     # the fall: the pitch, or a body geom on the floor
     ncon = contact_geom.shape[0]
-    fallen = abs(theta) > floats[F_FALL_ANGLE]
+    fallen = abs(theta) > floats[FLOAT.fall_angle]
     if not fallen:
-        floor = ints[I_FLOOR]
+        floor = ints[INT.floor]
         for i in range(ncon):
             g1, g2 = contact_geom[i, 0], contact_geom[i, 1]
             if g1 < 0 or g2 < 0:  # a flex's contact, not a pair of geoms
@@ -178,22 +233,22 @@ def step_measures(
             ):
                 fallen = True
                 break
-    out[FALLEN] = 1.0 if fallen else 0.0
+    out[OUT.fallen] = 1.0 if fallen else 0.0
 
-    ee = ints[I_EE_SITE]
+    ee = ints[INT.ee_site]
     if ee >= 0:
         ex, ey, ez = site_xpos[ee, 0] - ax, site_xpos[ee, 1] - ay, site_xpos[ee, 2] - az
         ex, ey = c * ex + s * ey, -s * ex + c * ey
-        out[EE], out[EE + 1], out[EE + 2] = ex, ey, ez
-        ex -= floats[F_EE_REFERENCE]
-        ey -= floats[F_EE_REFERENCE + 1]
-        ez -= floats[F_EE_REFERENCE + 2]
-        out[EE_ERROR] = math.sqrt(ex * ex + ey * ey + ez * ez)
-    if not ints[I_TRAY]:
+        out[OUT.ee], out[OUT.ee + 1], out[OUT.ee + 2] = ex, ey, ez
+        ex -= floats[FLOAT.ee_reference]
+        ey -= floats[FLOAT.ee_reference + 1]
+        ez -= floats[FLOAT.ee_reference + 2]
+        out[OUT.ee_error] = math.sqrt(ex * ex + ey * ey + ez * ez)
+    if not ints[INT.tray]:
         return
 
     # the cup's pose in the tray frame
-    tray, cup = ints[I_TRAY_BODY], ints[I_CUP_BODY]
+    tray, cup = ints[INT.tray_body], ints[INT.cup_body]
     T = xmat[tray]
     dx, dy, dz = (
         xpos[cup, 0] - xpos[tray, 0],
@@ -212,8 +267,9 @@ def step_measures(
     qz = a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0
     if w < 0.0:  # the sign convention of mju_mat2Quat near identity: w >= 0
         w, qx, qy, qz = -w, -qx, -qy, -qz
-    out[CUP_POSE], out[CUP_POSE + 1], out[CUP_POSE + 2] = px, py, pz
-    out[CUP_POSE + 3], out[CUP_POSE + 4], out[CUP_POSE + 5], out[CUP_POSE + 6] = w, qx, qy, qz
+    pose = OUT.cup_pose
+    out[pose], out[pose + 1], out[pose + 2] = px, py, pz
+    out[pose + 3], out[pose + 4], out[pose + 5], out[pose + 6] = w, qx, qy, qz
 
     # its state: R[2, 2] of the quaternion is the cosine of the tilt
     cos_tilt = min(1.0, max(-1.0, 1.0 - 2.0 * (qx * qx + qy * qy)))
@@ -224,14 +280,14 @@ def step_measures(
     on_plate = (
         abs(px) <= _HALF_X and abs(py) <= _HALF_Y and pz > top and lowest - top <= CUP_PLATE_GAP
     )
-    out[CUP_TILT_DEG] = tilt
-    out[CUP_UPRIGHT] = 1.0 if tilt <= CUP_UPRIGHT_DEG else 0.0
-    out[CUP_ON_PLATE] = 1.0 if on_plate else 0.0
-    out[TRAY_TILT_DEG] = math.degrees(math.acos(min(1.0, max(-1.0, T[8]))))
+    out[OUT.cup_tilt_deg] = tilt
+    out[OUT.cup_upright] = 1.0 if tilt <= CUP_UPRIGHT_DEG else 0.0
+    out[OUT.cup_on_plate] = 1.0 if on_plate else 0.0
+    out[OUT.tray_tilt_deg] = math.degrees(math.acos(min(1.0, max(-1.0, T[8]))))
 
     # the free tray's place on the hand
-    if ints[I_FREE_TRAY]:
-        rest = ints[I_REST_SITE]
+    if ints[INT.free_tray]:
+        rest = ints[INT.rest_site]
         S = site_xmat[rest]
         dx = xpos[tray, 0] - site_xpos[rest, 0]
         dy = xpos[tray, 1] - site_xpos[rest, 1]
@@ -243,11 +299,11 @@ def step_measures(
     else:
         ox = oy = oz = 0.0
         on_hand = True
-    out[TRAY_OFFSET], out[TRAY_OFFSET + 1], out[TRAY_OFFSET + 2] = ox, oy, oz
-    out[TRAY_ON_HAND] = 1.0 if on_hand else 0.0
+    out[OUT.tray_offset], out[OUT.tray_offset + 1], out[OUT.tray_offset + 2] = ox, oy, oz
+    out[OUT.tray_on_hand] = 1.0 if on_hand else 0.0
 
     # the cup's friction use on the plate, from the contact-frame forces
-    plate = ints[I_TRAY_GEOM]
+    plate = ints[INT.tray_geom]
     normal = tx = ty = tz = 0.0
     for i in range(ncon):
         g1, g2 = contact_geom[i, 0], contact_geom[i, 1]
@@ -267,92 +323,96 @@ def step_measures(
         tx += f_1 * F[3] + f_2 * F[6]
         ty += f_1 * F[4] + f_2 * F[7]
         tz += f_1 * F[5] + f_2 * F[8]
-    out[CUP_FRICTION_USE] = 0.0
+    out[OUT.cup_friction_use] = 0.0
     if normal > 0.0:
-        out[CUP_FRICTION_USE] = math.sqrt(tx * tx + ty * ty + tz * tz) / (
-            floats[F_CUP_FRICTION] * normal
+        out[OUT.cup_friction_use] = math.sqrt(tx * tx + ty * ty + tz * tz) / (
+            floats[FLOAT.cup_friction] * normal
         )
 
 
-# the table of addresses of env_measures: the model, the data, the arrays step_measures reads
-# (in its order), their lengths, and where the data's contacts are
-T_MODEL, T_DATA = 0, 1
-T_ARRAYS = 2  # 12 addresses: qpos, qvel, xpos ... site_xmat, body_subtreemass, body_mass
-T_NQ, T_NV, T_NBODY, T_NSITE = 14, 15, 16, 17
-T_CONTACT_GEOM, T_CONTACT_FRAME, T_CONTACT_STRIDE, T_CONTACT_CAPACITY = 18, 19, 20, 21
-N_TABLE = 22
+ENV = TableSpec(
+    "env_measures",
+    (
+        # the model's and data's addresses, then where the data's contacts are
+        # (mujoco_c.contact_layout: geom, frame, stride, capacity)
+        ("mujoco", INT_VECTOR),
+        ("qpos", FLOAT_VECTOR),
+        ("qvel", FLOAT_VECTOR),
+        ("xpos", FLOAT_MATRIX),
+        ("xmat", FLOAT_MATRIX),
+        ("xquat", FLOAT_MATRIX),
+        ("xipos", FLOAT_MATRIX),
+        ("subtree_com", FLOAT_MATRIX),
+        ("subtree_linvel", FLOAT_MATRIX),
+        ("site_xpos", FLOAT_MATRIX),
+        ("site_xmat", FLOAT_MATRIX),
+        ("subtree_mass", FLOAT_VECTOR),
+        ("body_mass", FLOAT_VECTOR),
+        ("ints", INT_VECTOR),  # INT, then the geoms' bits
+        ("floats", FLOAT_VECTOR),  # FLOAT
+        ("out", FLOAT_VECTOR),  # OUT
+    ),
+)
+"""The arrays of :func:`env_measures` (the fast path's env step)."""
+_E = ENV.index
+_MODEL, _DATA, _GEOM, _FRAME, _STRIDE, _CAPACITY = range(6)  # the "mujoco" entries
 
 
-def contact_layout(data: Any) -> tuple[int, int, int, int]:
-    """Where ``data``'s contacts are: the addresses of the first contact's ``geom`` and ``frame``,
-    the size of MuJoCo's ``mjContact`` (bytes) and a bound on their count (the arena's size over
-    that: the arena also holds the constraints and the stack, so fewer fit). MuJoCo
-    keeps the contacts at the start of the arena, which is allocated once per MjData
-    (``mj_resetData`` and ``mj_step`` do not move it; ``tests/test_step_measures.py`` checks
-    this along episodes), so the layout is taken once and compiled code reads the first
-    ``data.ncon`` contacts through it instead of the bindings' per-step views (four Python
-    objects and four arrays to unbox, about 3 us)."""
-    contact = data.contact
-    geom, frame = contact.geom, contact.frame
-    if geom.strides[0] != frame.strides[0] or geom.dtype != np.int32:
-        raise RuntimeError(
-            f"unexpected mjContact layout: {geom.dtype}, {geom.strides}, {frame.strides}"
-        )
-    stride = int(geom.strides[0])
-    return int(geom.ctypes.data), int(frame.ctypes.data), stride, int(data.narena) // stride
-
-
-def address_table(model: Any, data: Any) -> np.ndarray:
-    """The table of :func:`env_measures`: the addresses of ``model``, ``data`` and the arrays
-    :func:`step_measures` reads (MuJoCo allocates them once per MjModel/MjData: the table is
-    valid while both live), their sizes, and the contacts' layout (:func:`contact_layout`)."""
-    arrays = (
-        data.qpos,
-        data.qvel,
-        data.xpos,
-        data.xmat,
-        data.xquat,
-        data.xipos,
-        data.subtree_com,
-        data.subtree_linvel,
-        data.site_xpos,
-        data.site_xmat,
-        model.body_subtreemass,
-        model.body_mass,
+def env_table(
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    ints: np.ndarray,
+    floats: np.ndarray,
+    out: np.ndarray,
+) -> ArrayTable:
+    """The table of :func:`env_measures` (:data:`ENV`): the addresses of ``model`` and
+    ``data`` and of the arrays :func:`step_measures` reads (MuJoCo allocates them once per
+    MjModel/MjData: the table is valid while both live), the contacts' layout
+    (``mujoco_c.contact_layout``), the parameters and the results."""
+    layout = (*mjc.addresses(model, data), *contact_layout(data))
+    return ENV.table(
+        {
+            "mujoco": np.array(layout, dtype=np.int64),
+            "qpos": data.qpos,
+            "qvel": data.qvel,
+            "xpos": data.xpos,
+            "xmat": data.xmat,
+            "xquat": data.xquat,
+            "xipos": data.xipos,
+            "subtree_com": data.subtree_com,
+            "subtree_linvel": data.subtree_linvel,
+            "site_xpos": data.site_xpos,
+            "site_xmat": data.site_xmat,
+            "subtree_mass": model.body_subtreemass,
+            "body_mass": model.body_mass,
+            "ints": ints,
+            "floats": floats,
+            "out": out,
+        }
     )
-    table = np.zeros(N_TABLE, np.int64)
-    table[T_MODEL], table[T_DATA] = model._address, data._address
-    table[T_ARRAYS : T_ARRAYS + len(arrays)] = mjc.float64_addresses(arrays)
-    table[T_NQ], table[T_NV], table[T_NBODY], table[T_NSITE] = (
-        model.nq,
-        model.nv,
-        model.nbody,
-        model.nsite,
-    )
-    table[T_CONTACT_GEOM : T_CONTACT_CAPACITY + 1] = contact_layout(data)
-    return table
 
 
 @njit(cache=True)
 def gather_contacts(
     table: np.ndarray, ncon: int, forces: bool
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The first ``ncon`` contacts of the data of ``table`` (:func:`address_table`), read
-    through :func:`contact_layout`: their geom pairs, frames and, if ``forces``, the first three
+    """The first ``ncon`` contacts of the data of ``table`` (:func:`env_table`), read through
+    ``mujoco_c.contact_layout``: their geom pairs, frames and, if ``forces``, the first three
     entries of ``mj_contactForce`` (normal, tangent 1, tangent 2 in the contact frame; zeros
     otherwise). Raises if ``ncon`` is more than the arena holds (it must be ``data.ncon``)."""
-    if ncon < 0 or ncon > table[T_CONTACT_CAPACITY]:
+    layout = int_vector(table[_E.mujoco])
+    if ncon < 0 or ncon > layout[_CAPACITY]:
         raise ValueError("ncon must be data.ncon: more contacts than the data's arena holds")
-    model, data = np.uint64(table[T_MODEL]), np.uint64(table[T_DATA])
+    model, data = np.uint64(layout[_MODEL]), np.uint64(layout[_DATA])
     geom = np.empty((ncon, 2), np.int32)
     frame = np.empty((ncon, 9))
     force = np.zeros((ncon, 3))
     result = np.empty(6)
-    stride = table[T_CONTACT_STRIDE]
+    stride = layout[_STRIDE]
     for i in range(ncon):
-        pair = carray(mjc.int32_pointer(np.uint64(table[T_CONTACT_GEOM] + i * stride)), 2)
+        pair = carray(int32_pointer(np.uint64(layout[_GEOM] + i * stride)), 2)
         geom[i, 0], geom[i, 1] = pair[0], pair[1]
-        frame[i] = mjc.float64_view(table[T_CONTACT_FRAME] + i * stride, (9,))
+        frame[i] = float64_view(layout[_FRAME] + i * stride, (9,))
         if forces:
             mjc.mj_contactForce(model, data, i, result.ctypes.data)
             force[i, 0], force[i, 1], force[i, 2] = result[0], result[1], result[2]
@@ -360,45 +420,39 @@ def gather_contacts(
 
 
 @njit(cache=True, nogil=True)
-def env_measures(
-    table: np.ndarray, ncon: int, ints: np.ndarray, floats: np.ndarray, out: np.ndarray
-) -> None:
-    """MuJoCo's kinematics, ``mj_comPos``, ``mj_comVel`` and ``mj_subtreeVel`` on the data of
-    ``table`` (:func:`address_table`), its first ``ncon`` (``data.ncon``) contacts
-    (:func:`gather_contacts`; their forces only on a tray task, for the cup's friction use),
-    then :func:`step_measures` on its arrays: the env's measures after a step in one compiled
-    call."""
-    model, data = np.uint64(table[T_MODEL]), np.uint64(table[T_DATA])
+def env_measures(table: np.ndarray, ncon: int) -> None:
+    """The env's measures after a step in one compiled call (the fast path): MuJoCo's
+    kinematics, ``mj_comPos``, ``mj_comVel`` and ``mj_subtreeVel`` on the data of ``table``
+    (:func:`env_table`), its first ``ncon`` (``data.ncon``) contacts (:func:`gather_contacts`;
+    their forces only on a tray task, for the cup's friction use), then :func:`step_measures`
+    on its arrays, into its ``out``."""
+    layout = int_vector(table[_E.mujoco])
+    model, data = np.uint64(layout[_MODEL]), np.uint64(layout[_DATA])
     mjc.mj_kinematics(model, data)
     mjc.mj_comPos(model, data)
     mjc.mj_comVel(model, data)  # mj_subtreeVel reads the bodies' velocities (cvel)
     mjc.mj_subtreeVel(model, data)
-    geom, frame, force = gather_contacts(table, ncon, ints[I_TRAY] != 0)
-    nbody, nsite = table[T_NBODY], table[T_NSITE]
-    a = T_ARRAYS
-
-    def view(i: int, shape: tuple[int, ...]) -> np.ndarray:
-        return mjc.float64_view(table[a + i], shape)
-
+    ints = int_vector(table[_E.ints])
+    geom, frame, force = gather_contacts(table, ncon, ints[INT.tray] != 0)
     step_measures(
-        view(0, (table[T_NQ],)),
-        view(1, (table[T_NV],)),
-        view(2, (nbody, 3)),
-        view(3, (nbody, 9)),
-        view(4, (nbody, 4)),
-        view(5, (nbody, 3)),
-        view(6, (nbody, 3)),
-        view(7, (nbody, 3)),
-        view(8, (nsite, 3)),
-        view(9, (nsite, 9)),
-        view(10, (nbody,)),
-        view(11, (nbody,)),
+        float_vector(table[_E.qpos]),
+        float_vector(table[_E.qvel]),
+        float_matrix(table[_E.xpos]),
+        float_matrix(table[_E.xmat]),
+        float_matrix(table[_E.xquat]),
+        float_matrix(table[_E.xipos]),
+        float_matrix(table[_E.subtree_com]),
+        float_matrix(table[_E.subtree_linvel]),
+        float_matrix(table[_E.site_xpos]),
+        float_matrix(table[_E.site_xmat]),
+        float_vector(table[_E.subtree_mass]),
+        float_vector(table[_E.body_mass]),
         geom,
         frame,
         force,
         ints,
-        floats,
-        out,
+        float_vector(table[_E.floats]),
+        float_vector(table[_E.out]),
     )
 
 
@@ -432,23 +486,23 @@ SIGNATURE = types.void(
 )
 
 
-#: the env's version: its table, ``data.ncon``, its parameters and results
-ENV_SIGNATURE = types.void(types.int64[::1], types.intp, types.int64[::1], _F1, _F1)
+#: the env's version: its table and ``data.ncon``
+ENV_SIGNATURE = types.void(types.int64[:, ::1], types.intp)
 
 #: an action of any layout, read-only too (``np.asarray`` of a JAX array)
 ACTION_SIGNATURE = types.float64(types.Array(types.float64, 1, "A", readonly=True), _F2)
 
 
-def compile_once() -> None:
-    """Compile :func:`step_measures` for :data:`SIGNATURE` and :func:`action_effort` for
-    :data:`ACTION_SIGNATURE` (or load them from numba's cache) and no other versions: a call
-    with arrays of another layout converts to them instead of compiling again (once per
-    process; the env calls it when made)."""
-    for kernel, signature in (
-        (step_measures, SIGNATURE),
-        (env_measures, ENV_SIGNATURE),
-        (action_effort, ACTION_SIGNATURE),
-    ):
+def compile_once(fast: bool) -> None:
+    """Compile :func:`action_effort` for :data:`ACTION_SIGNATURE` and, for the fast path
+    (``fast``), :func:`step_measures` for :data:`SIGNATURE` and :func:`env_measures` (or load
+    them from numba's cache) and no other versions: a call with arrays of another layout
+    converts to them instead of compiling again (once per process; the env calls it when
+    made)."""
+    kernels: list[tuple[Any, Any]] = [(action_effort, ACTION_SIGNATURE)]
+    if fast:
+        kernels += [(step_measures, SIGNATURE), (env_measures, ENV_SIGNATURE)]
+    for kernel, signature in kernels:
         if not kernel.signatures:
             kernel.compile(signature)
             kernel.disable_compile()

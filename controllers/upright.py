@@ -1,0 +1,200 @@
+"""``unified-upright``: the unified controller that keeps the carried cup's balance.
+
+The paper's controller (``controllers.hierarchical``) keeps the tray level, so the cup feels the
+whole horizontal acceleration. This one follows the same plan and MPC, and adds three things to
+the task QP (docs/upright.md):
+
+1. **the cup's balance as constraints** (Heins and Schoellig, "Keep It Upright", 2023): the
+   contact wrench the cup needs, from the tray's linear and angular acceleration and gravity,
+   inside the friction pyramid of the planning coefficient and with its zero-moment point inside
+   the cup's feet (``controllers.low_level.object_balance``). Weighted, they are soft with a
+   stiff slack (``controllers.low_level.priority_qp``); strict, a level of their own under the
+   balance;
+2. **a task on the cup's tangential specific force** at its place on the plate, toward zero
+   (the tray tilted so that the plate's normal carries the motion's force), and a drive row
+   that holds the axle's acceleration to the MPC's prediction (the base must not give up the
+   plan's acceleration to level the cup);
+3. **tray targets** that lead that tilt: each hand that holds the tray turns about the plate's
+   centre toward the plan's acceleration ``lead`` ahead, corrected by the tray's drift over the
+   axle (``controllers.high_level.tray_reference``).
+
+Its object parameters (:class:`controllers.low_level.object_balance.CarriedObject`) default to
+the scenario's declared cup: the env's ``cup_friction`` and the cup's nominal geometry; each can
+be set apart from the truth (``--set unified-upright.carried.friction=0.091``). Without a cup
+(no tray task) it is the unified controller with this config's weights.
+
+Counters: ``object_active_steps`` (steps whose unconstrained minimiser broke a balance row, or
+whose strict solution has one at its bound) and ``object_relaxed_steps`` (steps where a
+balance row had to give: the torque or joint limits, or a higher level, left no solution that
+meets it).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from controllers.hierarchical import HierarchicalConfig, HierarchicalController
+from controllers.high_level.planning import PlanConfig
+from controllers.high_level.receding_horizon import HighLevelConfig
+from controllers.high_level.tray_reference import TrayGains, TrayReference, plan_acceleration
+from controllers.low_level.object_balance import CarriedObject, ObjectBalance
+from controllers.low_level.priority_qp import ExtraRows, PriorityStep
+from controllers.low_level.task_stack import unwrap
+from controllers.low_level.tasks import FramePositionTask, site_in_axle_frame
+from wip_gym.robot_model import RobotModel
+
+Array = NDArray[np.float64]
+#: the site on the plate's top that the cup stands on (wip_gym/scene.py)
+TRAY_TOP_SITE = "tray_top"
+
+
+@dataclass(frozen=True)
+class UprightConfig(HierarchicalConfig):
+    """The hierarchical config with the cup-aware parts (module docstring). The low level's
+    values below differ from the unified controller's; each was chosen on PlanarTray-v0's
+    aggressive drive (docs/upright.md §3 gives the runs).
+
+    Attributes:
+        carried: what the controller is told about the cup (its friction None: the env's).
+        tray: the tray targets' lead and outer-loop gains.
+        tangential_weight: weight of the cup's tangential specific force (in g) toward zero.
+        drive_weight: weight of the axle's acceleration toward the MPC's prediction (m/s^2).
+        slack_weight: weight of a balance row's slack in the weighted QP (the rows are in units
+            of the cup's weight: 1e6 makes a slack of 1e-3 cost as much as a 1 m/s^2 error of a
+            weight-1 task).
+        ee_position_weight: (forward, lateral, up) 0.1, 10, 10: the hand may move along the
+            axle's forward axis, which the tray's tilt about the plate's centre needs.
+        orientation_kp, orientation_kv: 400, 40: the tray follows its tilt target within
+            about 0.1 s (the lead).
+        hand_observer_bandwidth: None: the tilt targets move the hands on purpose; an
+            observer of their unmodelled acceleration read that as a disturbance.
+    """
+
+    carried: CarriedObject = field(default_factory=CarriedObject)
+    tray: TrayGains = field(default_factory=TrayGains)
+    tangential_weight: float = 3000.0
+    drive_weight: float = 10.0
+    slack_weight: float = 1e6
+    ee_position_weight: float | tuple[float, float, float] = (0.1, 10.0, 10.0)
+    orientation_kp: float = 400.0
+    orientation_kv: float = 40.0
+    hand_observer_bandwidth: float | None = None
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        for name in ("tangential_weight", "drive_weight", "slack_weight"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be finite and >= 0, got {value!r}")
+        if self.slack_weight == 0:
+            raise ValueError("slack_weight must be positive")
+
+    @classmethod
+    def paper(cls, tray_mode: Any = "level") -> UprightConfig:  # noqa: ARG003 - the signature
+        """The paper's plan (``PlanConfig.paper()``) under this controller's own low level:
+        the authors' low-level weights keep the tray level, which is what this controller
+        does not do (docs/upright.md §5)."""
+        return cls(high_level=HighLevelConfig(plan=PlanConfig.paper()))
+
+
+class UprightController(HierarchicalController):
+    """``unified-upright`` (module docstring)."""
+
+    config_class = UprightConfig
+    config: UprightConfig
+
+    @property
+    def name(self) -> str:
+        return "unified-upright"
+
+    def reset(self, observation: dict[str, Array], info: dict[str, Any]) -> None:
+        super().reset(observation, info)
+        robot, cfg, m = self.robot, self.config, self.robot.model
+        self._active = self._relaxed = 0
+        self.priority_qp.slack_weight = cfg.slack_weight
+        self.balance: ObjectBalance | None = None
+        self.tray_reference: TrayReference | None = None
+        site = m.site(TRAY_TOP_SITE).id if TRAY_TOP_SITE in _site_names(m) else -1
+        if self.task.cup_friction is None or site < 0 or not self.orientation_tasks:
+            return  # no cup on a tray: the unified controller with this config
+        friction = cfg.carried.friction or self.task.cup_friction
+        self.balance = ObjectBalance(robot, site, cfg.carried, friction)
+        self._tray_site = site
+        plate, plate_rotation, _, _ = site_in_axle_frame(robot, site)
+        self._plate_reset = plate.copy()
+        self._hands = [
+            inner for inner, _ in map(unwrap, self.tasks) if isinstance(inner, FramePositionTask)
+        ]
+        self.tray_reference = TrayReference(
+            plate,
+            [task.target.copy() for task in self._hands],
+            [rotation.copy() for rotation in self._orientation_reset],
+            cfg.tray,
+            normal=plate_rotation[:, 2],
+        )
+        # the tray's targets at the MPC's rate (its acceleration changes no faster; the drift
+        # loop's bandwidth, 2 rad/s, is far below 100 Hz)
+        self._tray_every = max(1, round(self.high_level.config.mpc.dt / self.task.control_dt))
+        self._set_tray_targets(robot)
+
+    def _set_tray_targets(self, robot: RobotModel) -> None:
+        """Each hand's target from the plan's acceleration ``lead`` ahead and the plate's
+        drift over the axle (``TrayReference.targets``)."""
+        reference = self.tray_reference
+        assert reference is not None
+        plate, _, J_p, _ = site_in_axle_frame(robot, self._tray_site)
+        t = self._step * self.task.control_dt + reference.gains.lead
+        assert self.plan is not None
+        targets = reference.targets(
+            plan_acceleration(self.plan, t), plate - self._plate_reset, J_p @ robot.nu
+        )
+        for (position, rotation), hand, orientation in zip(
+            targets, self._hands, self.orientation_tasks, strict=True
+        ):
+            hand.target = position
+            orientation.target = rotation
+
+    def _set_references(self, robot: RobotModel) -> None:
+        super()._set_references(robot)
+        if self.tray_reference is not None and self._step % self._tray_every == 0:
+            self._set_tray_targets(robot)
+
+    def _solve(self, robot: RobotModel) -> PriorityStep:
+        if self.balance is None:
+            return super()._solve(robot)
+        cfg, probe = self.config, self.qp.motion
+        probe.update(robot)
+        motion = self.balance.tray_motion(robot, probe)
+        T, t = self.balance.tangential(robot, probe, motion)
+        A = np.zeros((len(T) + 1, len(robot.nu)))
+        a = np.zeros(len(T) + 1)
+        A[:-1], a[:-1] = cfg.tangential_weight * T, cfg.tangential_weight * t
+        states = self.high_level.last_solution.predicted_states
+        xdd = (states[1, 3] - states[0, 3]) / self.high_level.config.mpc.dt
+        A[-1, 0], a[-1] = cfg.drive_weight, -cfg.drive_weight * xdd  # nu_dot[0] is xdd
+        step = self.priority_qp.solve(
+            robot,
+            self.tasks,
+            self.constraints,
+            cfg.priority,
+            ExtraRows((A, a), self.balance.rows(robot, probe, motion)),
+        )
+        self._active += step.active
+        self._relaxed += step.relaxed
+        return step
+
+    def controller_counters(self) -> dict[str, float]:
+        """The unified controller's counters, ``object_active_steps`` and
+        ``object_relaxed_steps`` (module docstring)."""
+        counters = super().controller_counters()
+        counters["object_active_steps"] = float(getattr(self, "_active", 0))
+        counters["object_relaxed_steps"] = float(getattr(self, "_relaxed", 0))
+        return counters
+
+
+def _site_names(model: Any) -> set[str]:
+    return {model.site(i).name for i in range(model.nsite)}

@@ -1,0 +1,110 @@
+"""``unified-upright`` (controllers/upright.py): registered, told the scenario's cup (or another
+friction), and in closed loop on the map's aggressive drive at friction 0.05 it carries the cup
+where the paper's controller loses it."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import wip_gym  # noqa: F401
+from benchmarks.overrides import resolve_run
+from controllers.high_level.planning import PlanConfig
+from controllers.registry import controller_names, default_config, make_policy
+from controllers.upright import UprightConfig, UprightController
+
+#: the claim map's aggressive drive (benchmarks/sweeps/claim_map.toml), no rim
+AGGRESSIVE = {
+    "env.goal": 1.0,
+    "plan.horizon_s": 3.0,
+    "plan.a_max": "none",
+    "env.tray_rim": 0.0,
+    "env.cup_friction": 0.05,
+}
+
+
+def _episode(name: str, seconds: float, overrides: dict, seed: int = 0):
+    spec = resolve_run("wip_gym/PlanarTray-v0", [name], None, overrides=overrides)
+    env = gym.make("wip_gym/PlanarTray-v0", **spec.env_kwargs)
+    observation, info = env.reset(seed=seed)
+    policy = make_policy(name, env, spec.configs[name])
+    policy.reset(observation, info)
+    uses, kept = [], True
+    for _ in range(int(round(seconds / env.unwrapped.dt))):
+        observation, _, terminated, _, info = env.step(policy(observation))
+        uses.append(info["cup_friction_use"])
+        kept = kept and info["cup_on_tray"] and not info["fallen"]
+        if terminated:
+            break
+    return policy, kept, np.array(uses)
+
+
+def test_registered_with_its_own_low_level_and_the_papers_plan_in_the_paper_preset():
+    assert "unified-upright" in controller_names()
+    config = default_config("unified-upright")
+    assert isinstance(config, UprightConfig) and config.priority == "weighted"
+    assert config.hand_observer_bandwidth is None and config.ee_position_weight == (0.1, 10, 10)
+    paper = default_config("unified-upright", preset="paper")
+    assert paper.high_level.plan == PlanConfig.paper()
+    assert paper.theta_weight == config.theta_weight  # its own low level, not the authors'
+
+
+@pytest.mark.parametrize("told", [None, 0.091])
+def test_it_plans_with_the_scenarios_cup_or_the_friction_it_is_told(told):
+    overrides = {"env.cup_friction": 0.07}
+    if told is not None:
+        overrides["unified-upright.carried.friction"] = told
+    policy, _, _ = _episode("unified-upright", 0.01, overrides)
+    assert isinstance(policy, UprightController) and policy.name == "unified-upright"
+    assert policy.balance is not None
+    assert policy.balance.friction == (0.07 if told is None else told)
+    margin = policy.config.carried.margin
+    assert policy.balance.planning_friction == pytest.approx((1 - margin) * policy.balance.friction)
+    assert set(policy.controller_counters()) >= {"object_active_steps", "object_relaxed_steps"}
+
+
+def test_without_a_cup_it_is_the_unified_controller_with_its_weights():
+    env = gym.make("wip_gym/Planar-v0")
+    observation, info = env.reset(seed=0)
+    policy = make_policy("unified-upright", env)
+    policy.reset(observation, info)
+    assert policy.balance is None and policy.tray_reference is None
+    for _ in range(300):
+        observation, _, terminated, _, info = env.step(policy(observation))
+        assert not terminated
+    assert policy.controller_counters()["object_active_steps"] == 0
+
+
+def test_bad_settings_are_refused():
+    for field, value in (
+        ("tangential_weight", -1.0),
+        ("slack_weight", 0.0),
+        ("drive_weight", np.nan),
+    ):
+        with pytest.raises(ValueError, match=field):
+            UprightConfig(**{field: value})
+
+
+def test_it_carries_the_cup_on_the_aggressive_drive_where_unified_loses_it():
+    """PlanarTray-v0's aggressive drive at friction 0.05, seed 0, through its acceleration
+    phase (3 s): ``unified-upright`` keeps the cup on the tray, its friction use's 99th
+    percentile under 0.8; the paper's level tray (``unified``) does not keep it."""
+    policy, kept, uses = _episode("unified-upright", 3.0, AGGRESSIVE)
+    assert kept, "unified-upright lost the cup"
+    assert np.percentile(uses, 99) < 0.8, np.percentile(uses, 99)
+    assert policy.controller_counters()["qp_fallbacks"] == 0
+    _, kept_unified, uses_unified = _episode("unified", 3.0, AGGRESSIVE)
+    assert not kept_unified or uses_unified.max() >= 1.0
+
+
+def test_strict_priorities_run_the_cup_aware_stack():
+    """``priority="strict"``: the object's rows are a level under the balance (DAQP); the
+    first 0.5 s of the drive runs without a fallback and counts the object's activity."""
+    overrides = {**AGGRESSIVE, "unified-upright.priority": "strict"}
+    policy, _, _ = _episode("unified-upright", 0.5, overrides)
+    assert policy.config.priority == "strict"
+    assert policy.controller_counters()["qp_fallbacks"] == 0
+    assert dataclasses.replace(policy.config, priority="weighted").priority == "weighted"
