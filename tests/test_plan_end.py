@@ -235,14 +235,14 @@ class LeastContinuation:
         extra = int(swing)
         rows, limits = [], []
         for row, limit, first in [(r, lim, 0) for r, lim in self.envelope] + bounded:
-            along, offset = self.gamma[first:] @ row, self.free[first:] @ row
+            along, offset = row @ self.gamma[first:], self.free[first:] @ row
             rows += [along, -along]
             limits += [limit - offset, limit + offset]
         A_ub = np.hstack([np.vstack(rows), np.zeros((sum(len(r) for r in rows), extra))])
         b_ub = np.concatenate(limits)
         cost = np.zeros(self.window + extra)
         if swing:
-            along, offset = self.gamma @ self.x, self.free @ self.x
+            along, offset = self.x @ self.gamma, self.free @ self.x
             column = -np.ones((len(along), 1))
             A_ub = np.vstack([A_ub, np.hstack([along, column]), np.hstack([-along, column])])
             b_ub = np.concatenate([b_ub, -offset, offset])
