@@ -19,16 +19,19 @@ rolled out on the plan's own discrete dynamics (the nonlinear WIPM, explicit Eul
 * ``G`` (:func:`settling_gain`) is the infinite-horizon LQR of the plan's problem linearised at
   the goal at rest, its running weights on the state and the control (the shape of the plan's
   and the MPC's tracking cost) scaled by a stiffness against its weights on the control's rate.
-  As the stiffness grows the closed loop's slowest time constant falls to a floor that the
-  weights' shape sets: on PlanarTray-v0 1.43 s at stiffness 1 (the plan's own weights), 0.61 s
-  at 100, 0.546 s at 1000 (``PlanConfig.settle_stiffness``), 0.545 s at 1e4 and beyond; on
-  KrangTray-v0 with a given heading 1.21 s (the spin, ``psi`` and ``psid``; 1.66 s at 1), and
-  with a free heading 4.5 s at any stiffness (``psid`` and ``tau_0``: their weights' ratio sets
-  it, as the spin's inertia does).
-* ``w_max`` is the plan's own largest rate of each control (``PlanConfig.settle_rate_factor``
-  times it): the continuation bends ``thdd`` no faster than the plan did, so the reference's
-  second differences stay within the plan's, and the axle's jerk that the control's rate makes
-  (``(beta + R) / (alpha + 1)`` times it, planar) within the plan's.
+  As the stiffness grows the unbounded loop's slowest time constant
+  (:func:`slowest_time_constant`) falls to a floor that the weights' shape sets: on
+  PlanarTray-v0 1.43 s at stiffness 1 (the plan's own weights), 0.96 s at 10, 0.61 s at 100,
+  0.546 s at 1000 (``PlanConfig.settle_stiffness``), 0.545 s at 1e4 and 1e6; on KrangTray-v0
+  with a given heading 1.21 s at 1000 (the spin, ``psi`` and ``psid``; 1.66 s at 1) under
+  ``PlanConfig()``, 3.05 s (3.19 s at 1) under ``PlanConfig.paper()``, and with a free heading
+  4.5 s at any stiffness under either (``psid`` and ``tau_0``: their weights' ratio sets it, as
+  the spin's inertia does).
+* ``w_max`` is ``PlanConfig.settle_rate_factor`` (1.8) times the plan's own largest rate of
+  each control: the continuation bends ``thdd`` at most 1.8 times as fast as the plan did, so
+  on the aggressive drive the reference's second differences stay within 1.84 times the
+  plan's largest (``thetad`` 1.8, ``xd`` 1.84; a step, in ``tests/test_plan_end.py``, is a
+  second difference beyond twice the plan's).
 
 A stiff gain under a bounded rate is a saturated linear feedback of a chain of integrators
 (``w`` integrates to ``thdd``, to ``thetad``, to ``theta``, which drives ``xd`` and ``x``):
@@ -42,13 +45,15 @@ passes, the rung that settles going least beyond the peaks is kept (a state the 
 leaning and turning fast may need more lean than the plan's to stop), else the softest rung's
 rollout, and the failure is reported (``Plan.violations``).
 
-On the aggressive drive above, the first rung passes: the rate is held at the plan's peak
-(8.9 rad/s^3) for the first 0.12 s while ``thdd`` turns round, and the continuation swings
-back to 5.7 cm behind the goal and is within 1 cm and 1 cm/s of it 2.23 s after ``t_f``
-(docs/controllers.md §3.1 has the measured closed loop). The least swing back any rate-bounded
-continuation can have from that state is 4.1 cm (the plan's linearised model, a linear
-programme over the rate profile with the plan's peaks of acceleration and ``|theta|`` as
-bounds); to rest exactly it needs at least 1.75 s.
+On the aggressive drive above the first rung passes: the rate is held at its bound (16.1
+rad/s^3) for the first 0.05 s while ``thdd`` turns round, and the continuation swings back to
+3.6 cm behind the goal and is within 1 cm and 1 cm/s of it 1.99 s after ``t_f``. Bounded by
+the plan's own largest rate (``settle_rate_factor = 1``, 8.9 rad/s^3) it is held there 0.21
+s, swings back 5.7 cm and is within 1 cm and 1 cm/s 2.23 s after ``t_f``, where the least any
+continuation within that envelope can do is 4.1 cm and 1.24 s (the plan's model linearised at
+the goal, a linear programme over the rate profile with the plan's peaks of acceleration and
+``|theta|`` as bounds; to rest exactly it needs 1.73 s). ``tests/test_plan_end.py`` holds
+these; docs/controllers.md §3.1 has the closed loop's numbers.
 
 The coordinates the feedback steers (:func:`steered_coordinates`): planar, all of ``[s, u]``;
 3-D, all but ``x`` (the distance rolled: in neither the dynamics nor the cost), the sideways
@@ -182,6 +187,24 @@ def settling_gain(
             f"{radius:.6f})"
         )
     return np.asarray(gain @ steered)
+
+
+def slowest_time_constant(
+    problem: WIPMProblem,
+    goal: np.ndarray,
+    params: WIPMParams,
+    steered: np.ndarray,
+    stiffness: float,
+) -> float:
+    """The slowest time constant (s) of the linearised model at ``goal`` under the unbounded
+    feedback of :func:`settling_gain`, in the steered coordinates: ``-dt / ln rho`` of the
+    closed loop's spectral radius ``rho``."""
+    gain = settling_gain(problem, goal, params, steered, stiffness)
+    m = problem.n_control
+    f_z, f_w = problem.dynamics_derivatives()(jnp.asarray(goal), jnp.zeros(m), params)
+    closed = steered @ (np.asarray(f_z) - np.asarray(f_w) @ gain) @ steered.T
+    radius = float(np.abs(np.linalg.eigvals(closed)).max())
+    return -problem.dt / float(np.log(radius))
 
 
 @functools.lru_cache(maxsize=16)
