@@ -147,7 +147,7 @@ def test_a_sweep_runs_plugin_and_imported_controllers_and_exits_1_on_failed_epis
     spec.write_text(SPEC)
     out = tmp_path / "sweep"
     common = ("--import", "my_imported_controllers")
-    dry = _bench(plugin_path, "sweep", str(spec), "--dry-run", *common)
+    dry = _bench(plugin_path, "sweep", str(spec), "--dry-run", "--no-calibration", *common)
     assert dry.returncode == 0, dry.stderr[-3000:]
     assert "2 cells x 4 controllers x 1 seeds = 8 episodes" in dry.stdout
     assert "plan.a_max leaves balance, balance-imported, broken as configured" in dry.stdout

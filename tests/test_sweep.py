@@ -235,10 +235,20 @@ def test_ctrl_c_loses_only_the_episodes_in_flight(cluster, tmp_path):
     spec = parse_spec(SPEC.replace("seeds = 2", "seeds = 4"))  # 16 episodes
 
     def slow(job):
-        time.sleep(0.5)
+        time.sleep(1.0)
         return {"success": True, "max_cup_friction_use": 0.1}
 
-    timer = threading.Timer(2.5, lambda: os.kill(os.getpid(), signal.SIGINT))
+    def interrupt_after_the_first_rows() -> None:
+        # Ctrl-C once two episodes are stored, whatever the machine's load (a fixed delay
+        # could fall before the sweep started or after it ended)
+        deadline = time.monotonic() + 120.0
+        while time.monotonic() < deadline:
+            if tmp_path.exists() and len(read_rows(tmp_path)) >= 2:
+                break
+            time.sleep(0.05)
+        os.kill(os.getpid(), signal.SIGINT)
+
+    timer = threading.Thread(target=interrupt_after_the_first_rows)
     timer.start()
     summary = run_sweep(spec, tmp_path, workers=2, episode_fn=slow, progress=False)
     timer.join()
