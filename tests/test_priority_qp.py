@@ -17,6 +17,7 @@ from controllers.hierarchical import HierarchicalConfig, HierarchicalController
 from controllers.low_level.object_balance import CarriedObject, ObjectBalance
 from controllers.low_level.priority_qp import ExtraRows, PriorityQP, task_level
 from controllers.registry import make_policy
+from tests.test_priorities import _proxqp
 
 TOL = 1e-6
 
@@ -32,17 +33,6 @@ def _policy(env_id: str = "wip_gym/PlanarTray-v0", steps: int = 150, **config):
     policy.robot.update(observation["qpos"], observation["qvel"])
     policy._set_references(policy.robot)  # noqa: SLF001 - this state's task references
     return env, policy
-
-
-def _proxqp(H, g, A, b, C, lower, upper) -> np.ndarray:
-    qp = proxsuite.proxqp.dense.QP(len(g), len(A), len(C))
-    qp.settings.eps_abs = 1e-11
-    qp.settings.eps_rel = 0.0
-    qp.settings.max_iter = 50000
-    qp.init(H, g, A if len(A) else None, b if len(A) else None, C, lower, upper, False)
-    qp.solve()
-    assert qp.results.info.status == proxsuite.proxqp.QPSolverOutput.PROXQP_SOLVED
-    return np.array(qp.results.x)
 
 
 def _balance(policy: HierarchicalController, friction: float) -> ObjectBalance:
