@@ -34,6 +34,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
@@ -118,7 +119,7 @@ class UprightController(HierarchicalController):
         self.priority_qp.slack_weight = cfg.slack_weight
         self.balance: ObjectBalance | None = None
         self.tray_reference: TrayReference | None = None
-        site = m.site(TRAY_TOP_SITE).id if TRAY_TOP_SITE in _site_names(m) else -1
+        site = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, TRAY_TOP_SITE)
         if self.task.cup_friction is None or site < 0 or not self.orientation_tasks:
             return  # no cup on a tray: the unified controller with this config
         friction = cfg.carried.friction or self.task.cup_friction
@@ -197,7 +198,3 @@ class UprightController(HierarchicalController):
         counters["object_active_steps"] = float(getattr(self, "_active", 0))
         counters["object_relaxed_steps"] = float(getattr(self, "_relaxed", 0))
         return counters
-
-
-def _site_names(model: Any) -> set[str]:
-    return {model.site(i).name for i in range(model.nsite)}

@@ -105,10 +105,12 @@ class TrayGains:
             raise ValueError(f"max_tilt_deg must be in (0, 90), got {self.max_tilt_deg!r}")
 
 
-def leveling_rotation(normal: Array) -> Array:
-    """The smallest rotation taking the unit vector ``normal`` to ``e_z``."""
+def leveling_rotation(normal: Array, fraction: float = 1.0) -> Array:
+    """The smallest rotation taking the unit vector ``normal`` to ``e_z`` (``fraction`` 1), or
+    ``fraction`` (0 to 1) of the way: about the same axis, by the angle whose tangent is
+    ``fraction`` times the full turn's."""
     n = np.asarray(normal, dtype=float) / np.linalg.norm(normal)
-    return tilt_toward(np.array([-n[0], -n[1]]) * GRAVITY / n[2], 90.0)
+    return tilt_toward(np.array([-n[0], -n[1]]) * fraction * GRAVITY / n[2], 90.0)
 
 
 class TrayReference:
@@ -130,7 +132,7 @@ class TrayReference:
             raise ValueError("one reset position and rotation per hand, at least one hand")
         if not np.asarray(normal, dtype=float)[2] > 0:
             raise ValueError(f"the plate's normal must point up, got {normal!r}")
-        self._normal = np.asarray(normal, dtype=float) / np.linalg.norm(normal)
+        self._normal = np.asarray(normal, dtype=float)
         self.level = leveling_rotation(self._normal)
         self.pivot = np.array(pivot, dtype=float)
         self._arms = [np.array(p, dtype=float) - self.pivot for p in hand_positions]
@@ -156,8 +158,7 @@ class TrayReference:
         the angle whose tangent is ``fraction`` times the reset tilt's (1: :attr:`level`)."""
         if fraction >= 1.0:
             return self.level
-        n = self._normal
-        return tilt_toward(np.array([-n[0], -n[1]]) * fraction * GRAVITY / n[2], 90.0)
+        return leveling_rotation(self._normal, fraction)
 
     def targets(
         self,
