@@ -171,7 +171,7 @@ def test_what_the_controller_refuses(run: Path) -> None:
     assert ObservationNormalizer.for_env(gym.make("wip_gym/WIP-v0")).size == 13
 
 
-@pytest.mark.parametrize("env_id", ["wip_gym/Planar-v0"])
+@pytest.mark.parametrize("env_id", ["wip_gym/Planar-v0", "wip_gym/WIP-v0"])
 def test_the_shipped_policy_balances_and_ends_at_the_goal(env_id: str) -> None:
     """The checkpoint shipped for the env, as ``wip-bench compare`` runs it on the env's
     default task: it balances the 25 s and ends within 5 cm of the goal, slower than 5 cm/s
