@@ -28,7 +28,7 @@ Without cost and balance rows and with ``weighted``, :meth:`PriorityQP.solve` is
 ``TaskQP.solve`` itself. The rows may come as arrays (:class:`ExtraRows`) or as task and
 constraint objects of the QP (``controllers.low_level.object_tasks``: the cost rows as tasks,
 the balance rows as its last constraint rows, ``balance_rows``), which the one-call step
-computes with the rest (docs/upright.md §6): the weighted QP's unconstrained minimiser that
+computes with the rest (docs/upright.md §4): the weighted QP's unconstrained minimiser that
 meets every row is then the compiled call's, and the other paths split the balance rows off.
 """
 
