@@ -43,7 +43,12 @@ from controllers.high_level.planning import PlanConfig
 from controllers.high_level.receding_horizon import HighLevelConfig
 from controllers.high_level.tray_reference import TrayGains, TrayReference, plan_acceleration
 from controllers.low_level.object_balance import CarriedObject, ObjectBalance
-from controllers.low_level.priority_qp import ExtraRows, PriorityStep
+from controllers.low_level.object_tasks import (
+    AxleAccelerationTask,
+    ObjectBalanceConstraint,
+    TangentialForceTask,
+)
+from controllers.low_level.priority_qp import PriorityStep
 from controllers.low_level.task_stack import unwrap
 from controllers.low_level.tasks import FramePositionTask, site_in_axle_frame
 from wip_gym.robot_model import RobotModel
@@ -125,6 +130,15 @@ class UprightController(HierarchicalController):
         friction = cfg.carried.friction or self.task.cup_friction
         self.balance = ObjectBalance(robot, site, cfg.carried, friction)
         self._tray_site = site
+        # the cup's rows as objects of the task QP, computed in its one-call step: the
+        # tangential force and the drive as tasks, the balance rows as its last constraint
+        self._drive = AxleAccelerationTask(cfg.drive_weight)
+        self._qp_tasks = [
+            *self.tasks,
+            TangentialForceTask(self.balance, robot, cfg.tangential_weight),
+            self._drive,
+        ]
+        self._qp_constraints = [*self.constraints, ObjectBalanceConstraint(self.balance, robot)]
         plate, plate_rotation, _, _ = site_in_axle_frame(robot, site)
         self._plate_reset = plate.copy()
         self._hands = [
@@ -170,22 +184,14 @@ class UprightController(HierarchicalController):
     def _solve(self, robot: RobotModel) -> PriorityStep:
         if self.balance is None:
             return super()._solve(robot)
-        cfg, probe = self.config, self.qp.motion
-        probe.update(robot)
-        motion = self.balance.tray_motion(robot, probe)
-        T, t = self.balance.tangential(robot, probe, motion)
-        A = np.zeros((len(T) + 1, len(robot.nu)))
-        a = np.zeros(len(T) + 1)
-        A[:-1], a[:-1] = cfg.tangential_weight * T, cfg.tangential_weight * t
         states = self.high_level.last_solution.predicted_states
-        xdd = (states[1, 3] - states[0, 3]) / self.high_level.config.mpc.dt
-        A[-1, 0], a[-1] = cfg.drive_weight, -cfg.drive_weight * xdd  # nu_dot[0] is xdd
+        self._drive.target = (states[1, 3] - states[0, 3]) / self.high_level.config.mpc.dt
         step = self.priority_qp.solve(
             robot,
-            self.tasks,
-            self.constraints,
-            cfg.priority,
-            ExtraRows((A, a), self.balance.rows(robot, probe, motion)),
+            self._qp_tasks,
+            self._qp_constraints,
+            self.config.priority,
+            balance_rows=self.balance.rows_count,
         )
         self._active += step.active
         self._relaxed += step.relaxed

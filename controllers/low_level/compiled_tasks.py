@@ -56,6 +56,7 @@ from wip_gym.array_table import (
 )
 
 THETA, SPIN, POSITION, ORIENTATION, POSTURE, ACCELERATION_BOUND = 0, 1, 2, 3, 4, 5
+TANGENTIAL_FORCE, AXLE_ACCELERATION, OBJECT_BALANCE = 6, 7, 8
 """The compiled kinds (a task class's ``compiled_kind``; :func:`kind_rows` calls each one's
 function)."""
 
@@ -633,6 +634,156 @@ def acceleration_bound_rows(
         upper[row] = p[count + row]
 
 
+#: the standard gravity the object's rows are scaled by (``object_balance.GRAVITY``)
+_GRAVITY = 9.81
+
+
+@njit(cache=True)
+def _tray_point(
+    table: np.ndarray, i: int, x: float, y: float, z: float, JJ: np.ndarray, out: np.ndarray
+) -> None:
+    """``ObjectBalance._point`` of the point ``(x, y, z)`` (tray frame) from site slot ``i``
+    (world): its linear Jacobian over ``nu``, ``J_s - [r]x J_r``, into ``JJ[:3]`` and the
+    angular one ``J_r`` into ``JJ[3:]`` (MuJoCo's at the robot's state times ``J_tf``); into
+    the rows of ``out`` (4 x 3): its drift acceleration ``a_s + omega_drift x r + omega x
+    (omega x r)``, ``omega`` and ``omega_drift`` (the probe's) and ``r = R (x, y, z)``, ``R``
+    the site's rotation at the robot's state."""
+    site_jac, J_tf = float_cube(table[S.site_jac])[i], float_matrix(table[S.J_tf])
+    JJ[:] = 0.0
+    for row in range(6):
+        for k in range(J_tf.shape[0]):
+            a = site_jac[row, k]
+            if a != 0.0:
+                for j in range(J_tf.shape[1]):
+                    JJ[row, j] += a * J_tf[k, j]
+    R = float_matrix(table[S.site_xmat])[int_vector(table[S.site_ids])[i]]
+    r0 = R[0] * x + R[1] * y + R[2] * z
+    r1 = R[3] * x + R[4] * y + R[5] * z
+    r2 = R[6] * x + R[7] * y + R[8] * z
+    for j in range(JJ.shape[1]):
+        u, v, w = JJ[3, j], JJ[4, j], JJ[5, j]
+        JJ[0, j] -= -r2 * v + r1 * w
+        JJ[1, j] -= r2 * u - r0 * w
+        JJ[2, j] -= -r1 * u + r0 * v
+    motion = float_matrix(table[S.point_motion])
+    vel, acc = motion[0], motion[1]
+    _point_motion(
+        float_cube(table[S.probe_jac])[1 + i],
+        float_cube(table[S.probe_jac_dot])[1 + i],
+        float_vector(table[S.probe_qvel]),
+        float_vector(table[S.probe_qacc0]),
+        vel,
+        acc,
+    )
+    w0, w1, w2, d0, d1, d2 = vel[3], vel[4], vel[5], acc[3], acc[4], acc[5]
+    c0, c1, c2 = w1 * r2 - w2 * r1, w2 * r0 - w0 * r2, w0 * r1 - w1 * r0  # omega x r
+    out[0, 0] = acc[0] + (d1 * r2 - d2 * r1) + (w1 * c2 - w2 * c1)
+    out[0, 1] = acc[1] + (d2 * r0 - d0 * r2) + (w2 * c0 - w0 * c2)
+    out[0, 2] = acc[2] + (d0 * r1 - d1 * r0) + (w0 * c1 - w1 * c0)
+    out[1, 0], out[1, 1], out[1, 2] = w0, w1, w2
+    out[2, 0], out[2, 1], out[2, 2] = d0, d1, d2
+    out[3, 0], out[3, 1], out[3, 2] = r0, r1, r2
+
+
+@njit(cache=True)
+def tangential_force_rows(
+    table: np.ndarray,
+    item: np.ndarray,
+    p: np.ndarray,
+    J: np.ndarray,
+    target: np.ndarray,
+    jdot_nu: np.ndarray,
+    w: np.ndarray,
+) -> None:
+    """``TangentialForceTask`` (``controllers.low_level.object_tasks``): ``p = (place x,
+    place y, weight)``; the tangential specific force at the object's place on the plate,
+    ``(f_x, f_y) = J nu_dot + jdot_nu`` (tray frame, in g; ``ObjectBalance.tangential``),
+    toward 0."""
+    i = item[ITEM.site]
+    JJ, out = float_matrix(table[S.frame_JJ]), np.empty((4, 3))
+    _tray_point(table, i, p[0], p[1], 0.0, JJ, out)
+    R = float_matrix(table[S.site_xmat])[int_vector(table[S.site_ids])[i]]
+    d = out[0]
+    for row in range(2):  # R^T's rows 0 and 1: R's columns
+        a0, a1, a2 = R[row], R[3 + row], R[6 + row]
+        for j in range(J.shape[1]):
+            J[row, j] = (a0 * JJ[0, j] + a1 * JJ[1, j] + a2 * JJ[2, j]) / _GRAVITY
+        jdot_nu[row] = (a0 * d[0] + a1 * d[1] + a2 * (d[2] + _GRAVITY)) / _GRAVITY
+        target[row] = 0.0
+        w[row] = p[2]
+
+
+@njit(cache=True)
+def axle_acceleration_rows(
+    table: np.ndarray,
+    item: np.ndarray,
+    p: np.ndarray,
+    J: np.ndarray,
+    target: np.ndarray,
+    jdot_nu: np.ndarray,
+    w: np.ndarray,
+) -> None:
+    """``AxleAccelerationTask``: ``p = (target, weight)``; ``xdd`` (``nu_dot[0]``) toward the
+    target."""
+    J[0, 0] = 1.0
+    target[0] = p[0]
+    jdot_nu[0] = 0.0
+    w[0] = p[1]
+
+
+@njit(cache=True)
+def object_balance_rows(
+    table: np.ndarray,
+    item: np.ndarray,
+    p: np.ndarray,
+    G: np.ndarray,
+    lower: np.ndarray,
+    bias: np.ndarray,
+    upper: np.ndarray,
+) -> None:
+    """``ObjectBalanceConstraint`` (a constraint): ``p = (place x, place y, height, the three
+    moments of inertia per mass, the rows' map of the wrench (rows x 6, row-major), their
+    constants (rows))``; ``ObjectBalance.rows``: ``G nu_dot + bias <= 0`` with ``(f, tau) = W
+    nu_dot + w`` (``ObjectBalance.wrench``), ``G = rows W`` and ``bias = rows w + constants``."""
+    i = item[ITEM.site]
+    count = item[ITEM.rows]
+    JJ, out = float_matrix(table[S.frame_JJ]), np.empty((4, 3))
+    _tray_point(table, i, p[0], p[1], p[2], JJ, out)
+    R = float_matrix(table[S.site_xmat])[int_vector(table[S.site_ids])[i]]
+    inertia = p[3:6]
+    rows, constants = p[6 : 6 + 6 * count], p[6 + 6 * count : 6 + 7 * count]
+    W = np.empty(6)
+    for j in range(G.shape[1]):
+        for k in range(3):  # R^T J_c / g, I R^T J_r / g
+            W[k] = (R[k] * JJ[0, j] + R[3 + k] * JJ[1, j] + R[6 + k] * JJ[2, j]) / _GRAVITY
+            W[3 + k] = (
+                inertia[k] * (R[k] * JJ[3, j] + R[3 + k] * JJ[4, j] + R[6 + k] * JJ[5, j])
+            ) / _GRAVITY
+        for row in range(count):
+            total = 0.0
+            for k in range(6):
+                total += rows[6 * row + k] * W[k]
+            G[row, j] = total
+    d, omega, drift = out[0], out[1], out[2]
+    t = np.empty(3)  # omega in the tray's axes
+    for k in range(3):
+        t[k] = R[k] * omega[0] + R[3 + k] * omega[1] + R[6 + k] * omega[2]
+    It0, It1, It2 = inertia[0] * t[0], inertia[1] * t[1], inertia[2] * t[2]
+    gyro = (t[1] * It2 - t[2] * It1, t[2] * It0 - t[0] * It2, t[0] * It1 - t[1] * It0)
+    d2 = d[2] + _GRAVITY
+    for k in range(3):
+        W[k] = (R[k] * d[0] + R[3 + k] * d[1] + R[6 + k] * d2) / _GRAVITY
+        spin = R[k] * drift[0] + R[3 + k] * drift[1] + R[6 + k] * drift[2]
+        W[3 + k] = (inertia[k] * spin + gyro[k]) / _GRAVITY
+    for row in range(count):
+        total = 0.0
+        for k in range(6):
+            total += rows[6 * row + k] * W[k]
+        bias[row] = total + constants[row]
+        lower[row] = -np.inf
+        upper[row] = 0.0
+
+
 @njit(cache=True)
 def kind_rows(
     kind: int,
@@ -658,5 +809,11 @@ def kind_rows(
         posture_rows(table, item, p, M, first, drift, second)
     elif kind == ACCELERATION_BOUND:
         acceleration_bound_rows(table, item, p, M, first, drift, second)
+    elif kind == TANGENTIAL_FORCE:
+        tangential_force_rows(table, item, p, M, first, drift, second)
+    elif kind == AXLE_ACCELERATION:
+        axle_acceleration_rows(table, item, p, M, first, drift, second)
+    elif kind == OBJECT_BALANCE:
+        object_balance_rows(table, item, p, M, first, drift, second)
     else:
         raise ValueError("a compiled item of an unknown kind")

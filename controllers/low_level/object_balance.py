@@ -200,13 +200,27 @@ class ObjectBalance:
     def rows_count(self) -> int:
         return len(self._constants)
 
-    def tray_motion(self, robot: RobotModel, probe: object) -> TrayMotion:
+    @property
+    def wrench_rows(self) -> Array:
+        """The rows as linear maps of the wrench ``(f, tau)`` (rows x 6): ``G = rows W``."""
+        return self._wrench_rows
+
+    @property
+    def constants(self) -> Array:
+        """The rows' constant terms: ``b = rows w + constants``."""
+        return self._constants
+
+    def tray_motion(self, robot: RobotModel, probe: object | None) -> TrayMotion:
         """The tray's motion at the robot's state, which every row reads (compute it once per
-        step and hand it to :meth:`rows` and :meth:`tangential`)."""
+        step and hand it to :meth:`rows` and :meth:`tangential`). ``probe`` None: the drifts
+        and ``omega`` zero (the rows' Jacobians are right, their constant parts are not)."""
         m, d = robot.model, robot.data
         mujoco.mj_jacSite(m, d, self._jp, self._jr, self.site)
         J_tf = robot.J_tf
-        _, _, a_s, omega, omega_drift = probe.site_motion(self.site)  # type: ignore[attr-defined]
+        if probe is None:
+            a_s = omega = omega_drift = (0.0, 0.0, 0.0)
+        else:
+            _, _, a_s, omega, omega_drift = probe.site_motion(self.site)  # type: ignore[attr-defined]
         return TrayMotion(
             d.site_xmat[self.site].reshape(3, 3).copy(),
             self._jp @ J_tf,
@@ -226,7 +240,7 @@ class ObjectBalance:
         return J_p, motion.a_s + _cross(drift, r) + _cross(omega, _cross(omega, r))
 
     def wrench(
-        self, robot: RobotModel, probe: object, motion: TrayMotion | None = None
+        self, robot: RobotModel, probe: object | None, motion: TrayMotion | None = None
     ) -> tuple[Array, Array]:
         """``(W, w)`` with the contact wrench ``(f, tau) = W nu_dot + w`` (tray frame, per unit
         weight; module docstring): what the plate must give the object for it to move with the
@@ -247,7 +261,7 @@ class ObjectBalance:
         return W, w
 
     def rows(
-        self, robot: RobotModel, probe: object, motion: TrayMotion | None = None
+        self, robot: RobotModel, probe: object | None, motion: TrayMotion | None = None
     ) -> tuple[Array, Array]:
         """``(G, b)``: the balance conditions as ``G nu_dot + b <= 0`` (friction, contact,
         tipping; :attr:`row_names`)."""
@@ -255,7 +269,7 @@ class ObjectBalance:
         return self._wrench_rows @ W, self._wrench_rows @ w + self._constants
 
     def tangential(
-        self, robot: RobotModel, probe: object, motion: TrayMotion | None = None
+        self, robot: RobotModel, probe: object | None, motion: TrayMotion | None = None
     ) -> tuple[Array, Array]:
         """``(T, t)``: the tangential specific force at the object's place on the plate,
         ``(f_x, f_y) = T nu_dot + t`` (tray frame, in g), without the tray's angular

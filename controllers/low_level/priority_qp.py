@@ -25,7 +25,11 @@ Two priorities (``HierarchicalConfig.priority``; docs/upright.md §4):
   are counted.
 
 Without cost and balance rows and with ``weighted``, :meth:`PriorityQP.solve` is
-``TaskQP.solve`` itself.
+``TaskQP.solve`` itself. The rows may come as arrays (:class:`ExtraRows`) or as task and
+constraint objects of the QP (``controllers.low_level.object_tasks``: the cost rows as tasks,
+the balance rows as its last constraint rows, ``balance_rows``), which the one-call step
+computes with the rest (docs/upright.md §4): the weighted QP's unconstrained minimiser that
+meets every row is then the compiled call's, and the other paths split the balance rows off.
 """
 
 from __future__ import annotations
@@ -101,14 +105,26 @@ class PriorityQP:
         constraints: Sequence[Any],
         priority: Priority,
         extra: ExtraRows = ExtraRows(),
+        balance_rows: int = 0,
     ) -> PriorityStep:
-        """The step's solution (``robot`` updated to the state; eq. iso3 from it)."""
+        """The step's solution (``robot`` updated to the state; eq. iso3 from it).
+
+        ``balance_rows``: how many of the constraints' last rows are the object's balance rows,
+        ``G nu_dot + b <= 0`` (an ``object_tasks.ObjectBalanceConstraint`` last in
+        ``constraints``): the one-call step computes them with the rest, and they are soft
+        (weighted) or the object's level (strict) as ``extra.balance``'s, which must then be
+        None. Their unconstrained minimiser, when it meets every row, is the compiled call's."""
         if priority not in PRIORITIES:
             raise ValueError(f"priority must be one of {PRIORITIES}, got {priority!r}")
+        if balance_rows and extra.balance is not None:
+            raise ValueError("balance rows given twice: in the constraints and in extra")
         qp = self.qp
-        if priority == "weighted" and extra.cost is None and extra.balance is None:
+        weighted = priority == "weighted" and extra.cost is None and extra.balance is None
+        if weighted and not balance_rows:
             return PriorityStep(qp.solve(robot, None, tasks, constraints), False, False)
         H, g, C, lower, upper = qp.assemble(robot, None, tasks, constraints)
+        if weighted and (shortcut := qp.shortcut()) is not None:  # the balance rows met too
+            return PriorityStep(shortcut, False, False)
         k = qp.kernel
         assert k is not None
         E, e = k.E, k.e
@@ -120,6 +136,10 @@ class PriorityQP:
         if extra.balance is not None:
             G, b = extra.balance
             Gq, rhs = G @ E, -(G @ e + b)
+        elif balance_rows:
+            hard = len(C) - balance_rows
+            Gq, rhs = C[hard:], upper[hard:]
+            C, lower, upper = C[:hard], lower[:hard], upper[:hard]
         else:
             Gq, rhs = np.zeros((0, len(g))), np.zeros(0)
         if priority == "strict":

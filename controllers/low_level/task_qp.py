@@ -292,14 +292,8 @@ class TaskQP:
         """The task QP of this state (``iso`` None: eq. iso3 computed in the kernel from
         ``robot``). ``proxqp_calls`` counts the steps ProxQP solved."""
         H, g, C, lower, upper = self.assemble(robot, iso, tasks, constraints)
-        k: LowLevelKernel = self.kernel  # type: ignore[assignment]
-        if self.ready_for_shortcut and self._feasible:
-            if self._terms_ready:  # the compiled call computed what x implies
-                self._last_actuators = actuators = k.actuators.copy()
-                return QPSolution(
-                    k.x.copy(), k.nu_dot.copy(), k.generalized.copy(), actuators, True, 0
-                )
-            return self.solution_for(k.x.copy(), iterations=0)
+        if (shortcut := self.shortcut()) is not None:
+            return shortcut
         self.proxqp_calls += 1
         if self._qp is None or self._qp.model.n_in != len(C):
             self._qp = start_proxqp(H, g, C, lower, upper, self.settings)
@@ -313,6 +307,16 @@ class TaskQP:
             return self.solution_for(np.array(results.x), iterations)
         self._qp = None  # start the next step cold: a failed result is no warm start
         return self.fallback(iterations)
+
+    def shortcut(self) -> QPSolution | None:
+        """The last assembled QP's feasible unconstrained minimiser if it may be taken."""
+        if not (self.ready_for_shortcut and self._feasible):
+            return None
+        k: LowLevelKernel = self.kernel  # type: ignore[assignment]
+        if self._terms_ready:  # the compiled call computed what x implies
+            self._last_actuators = actuators = k.actuators.copy()
+            return QPSolution(k.x.copy(), k.nu_dot.copy(), k.generalized.copy(), actuators, True, 0)
+        return self.solution_for(k.x.copy(), iterations=0)
 
     @property
     def ready_for_shortcut(self) -> bool:

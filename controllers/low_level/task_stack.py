@@ -108,10 +108,14 @@ def check_indices(items: Sequence[object], n_sites: int, n_min: int) -> None:
 
 
 def rows_of(item: Any) -> int:
-    """How many rows a task or constraint has: one per column, else one per weight."""
+    """How many rows a task or constraint has: one per column, else its ``rows_count``, else
+    one per weight."""
     columns = getattr(item, "columns", None)
     if columns is not None:
         return len(columns)
+    count = getattr(item, "rows_count", None)
+    if count is not None:
+        return int(count)
     return len(np.atleast_1d(item.weights()))
 
 
