@@ -28,6 +28,9 @@ from gymnasium.vector.utils import batch_space
 from gymnasium.wrappers import TimeLimit
 from numpy.typing import NDArray
 
+from wip_gym.envs import measures as ms
+from wip_gym.envs.base import WIPEnv
+from wip_gym.vector.columns import ColumnBatcher
 from wip_gym.vector.infos import InfoBatcher
 from wip_gym.vector.threads import ParallelLoop
 
@@ -88,9 +91,23 @@ def step_path(env: gym.Env[Any, Any]) -> tuple[gym.Env[Any, Any], int | None]:
     return env, None
 
 
+_NO_TERMS = (0.0, 0.0, 0.0, 0.0)  # a reset sub-env's reward terms (masked out)
+#: a next-step autoreset's result: reward 0, no terms, neither end
+_RESET_RESULT = (0.0, *_NO_TERMS, False, False)
+
+
 class _SubEnvs:
     """The sub-envs and what one pass over them reads and writes (kept apart from the vector
-    env so that its threads hold no reference to it: an unclosed vector env is collected)."""
+    env so that its threads hold no reference to it: an unclosed vector env is collected).
+
+    Two ways to step: the fast one, when every sub-env is a wip env stepped bare (or under
+    the ``TimeLimit`` counted here) with a :meth:`WIPEnv.step_layout` (its infos' types
+    fixed): each sub-env's :meth:`WIPEnv._advance` (the step without its observation and
+    info dicts), its measures kept in its row of :attr:`ColumnBatcher.measures`, from which
+    (and the sub-envs' ``qpos`` and ``qvel``) the step's info and observation are made
+    after the pass (``wip_gym.vector.columns``); otherwise each
+    sub-env's ``step`` and its dicts batched (:class:`InfoBatcher`). Resets take the second
+    way (their infos through Gymnasium's rule)."""
 
     def __init__(
         self, envs: list[gym.Env[Any, Any]], observation_keys: tuple[str, ...], batcher: InfoBatcher
@@ -103,6 +120,21 @@ class _SubEnvs:
         self.batcher = batcher
         n = len(envs)
         self.elapsed = [0] * n  # steps since the reset, against the limits
+        self.started = [False] * n  # reset at least once
+        bases = [env.unwrapped for env in envs]
+        layouts = [
+            base.step_layout() if isinstance(base, WIPEnv) and self.stepped[i] is base else None
+            for i, base in enumerate(bases)
+        ]
+        first = layouts[0]
+        self.columns: ColumnBatcher | None = None
+        self.bases: list[WIPEnv] = []
+        if first is not None and all(layout == first for layout in layouts):
+            self.columns = ColumnBatcher(first, n, ms.N_OUT)
+            self.bases = bases  # type: ignore[assignment]
+            for i, base in enumerate(self.bases):
+                base._measure_into(self.columns.measures[i])
+        self.fast = self.columns is not None
         # one pass's inputs
         self.stepping = True
         self.actions: NDArray[Any] = np.zeros(0)
@@ -119,6 +151,10 @@ class _SubEnvs:
         self.infos: list[dict[str, Any] | None] = [None] * n
         self.last: list[dict[str, Any] | None] = [None] * n  # each sub-env's last observation
         self.finals: list[tuple[int, Any, dict[str, Any]]] = []
+        # the fast way's: each sub-env's _advance result, whether it stepped (False: reset in
+        # the step)
+        self.results: list[tuple[Any, ...]] = [_RESET_RESULT] * n
+        self.stepped_now = [True] * n
 
     def write(self, i: int, observation: dict[str, Any], info: dict[str, Any] | None) -> None:
         self.last[i] = observation
@@ -130,7 +166,21 @@ class _SubEnvs:
 
     def reset_one(self, i: int, seed: int | None, options: dict[str, Any] | None) -> Any:
         self.elapsed[i] = 0
-        return self.stepped[i].reset(seed=seed, options=options)
+        self.started[i] = True
+        observation, info = self.stepped[i].reset(seed=seed, options=options)
+        if self.columns is not None:
+            self.columns.goals[i] = self.bases[i]._goal
+        return observation, info
+
+    def last_observation(self, i: int) -> dict[str, Any]:
+        """Sub-env ``i``'s last observation (it was not reset now)."""
+        if not self.started[i]:
+            raise RuntimeError(f"sub-env {i} was never reset: reset it first")
+        if self.fast:  # its steps kept no dict: the observation is read again, as it was made
+            return self.bases[i]._get_obs()
+        last = self.last[i]
+        assert last is not None
+        return last
 
     def __call__(self, i: int) -> None:
         """Sub-env ``i``'s part of the pass (a step or a reset)."""
@@ -139,10 +189,7 @@ class _SubEnvs:
                 observation, info = self.reset_one(i, self.seeds[i], self.options)
                 self.write(i, observation, info)
             else:  # not reset: its observation stands
-                last = self.last[i]
-                if last is None:
-                    raise RuntimeError(f"sub-env {i} was never reset: reset it first")
-                self.write(i, last, None)
+                self.write(i, self.last_observation(i), None)
             return
         if self.reset_first[i]:
             observation, info = self.reset_one(i, None, None)
@@ -171,6 +218,37 @@ class _SubEnvs:
             observations[key][i] = observation[key]
         self.infos[i] = info
         self.batcher.write(i, info)
+
+    def step_fast(self, i: int) -> None:
+        """Sub-env ``i``'s step the fast way (see the class): its ``_advance``'s result
+        (reward, reward terms, terminated, truncated) kept as it is (its measures are in its
+        row already; its state is read after the pass)."""
+        base = self.bases[i]
+        if self.reset_first[i]:
+            self.results[i] = _RESET_RESULT
+            self.reset_fast(i)
+            return
+        try:
+            result = base._advance(self.actions[i])
+        except ValueError as error:
+            raise ValueError(f"sub-env {i}: {error}") from error
+        limit = self.limits[i]
+        if limit is not None:
+            self.elapsed[i] = elapsed = self.elapsed[i] + 1
+            if elapsed >= limit and not result[6]:
+                result = (*result[:6], True)
+        if self.same_step and (result[5] or result[6]):
+            self.finals.append((i, base._get_obs(), base._step_info(*result[1:5])))
+            self.results[i] = (result[0], *_NO_TERMS, result[5], result[6])  # terms masked
+            self.reset_fast(i)
+            return
+        self.results[i] = result
+        self.stepped_now[i] = True
+
+    def reset_fast(self, i: int) -> None:
+        """Sub-env ``i`` reset within a step (an autoreset), the fast way."""
+        self.reset_one(i, None, None)
+        self.stepped_now[i] = False
 
 
 class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArray[Any]]):
@@ -334,18 +412,28 @@ class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArr
             )
         sub = self._sub
         sub.stepping = True
-        sub.actions = actions
         sub.reset_first = self._ended if mode is AutoresetMode.NEXT_STEP else self._no_resets()
         sub.same_step = mode is AutoresetMode.SAME_STEP
         sub.finals = []
         sub.observations = observations = self._observations_out()
-        self._loop.run()
-        rewards = np.array(sub.rewards, dtype=np.float64)
-        terminations = np.array(sub.terminations, dtype=np.bool_)
-        truncations = np.array(sub.truncations, dtype=np.bool_)
+        columns = sub.columns
+        if columns is None:
+            sub.actions = actions
+            self._loop.run()
+            rewards = np.array(sub.rewards, dtype=np.float64)
+            terminations = np.array(sub.terminations, dtype=np.bool_)
+            truncations = np.array(sub.truncations, dtype=np.bool_)
+            finals = sorted(sub.finals, key=lambda f: f[0]) if sub.finals else ()
+            infos = self._batcher.batch(sub.infos, finals)
+        else:  # the fast way: rows of float64, as each sub-env's step converts its own
+            sub.actions = actions.astype(np.float64, copy=False)
+            self._loop.run(sub.step_fast)
+            columns.observe(observations, sub.bases)
+            rewards, terminations, truncations, infos = columns.batch(sub.results, sub.stepped_now)
+            for i, observation, info in sorted(sub.finals, key=lambda f: f[0]):
+                # Gymnasium's final_obs and final_info
+                infos = self._add_info(infos, {"final_obs": observation, "final_info": info}, i)
         self._ended = terminations | truncations
-        finals = sorted(sub.finals, key=lambda f: f[0]) if sub.finals else ()
-        infos = self._batcher.batch(sub.infos, finals)
         return observations, rewards, terminations, truncations, infos
 
     def _no_resets(self) -> NDArray[np.bool_]:
