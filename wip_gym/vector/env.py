@@ -473,36 +473,24 @@ class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArr
             env.close()
 
 
-class WIPDriveVectorEnv(WIPVectorEnv):
-    """``wip_gym/WIP-v0`` x ``num_envs`` (its ``vector_entry_point``)."""
+def _vector_env_class(env_id: str, name: str) -> type[WIPVectorEnv]:
+    """The class ``name``: :class:`WIPVectorEnv` of ``env_id``, the env's
+    ``vector_entry_point`` (``wip_gym/registration.py``), taking ``num_envs`` and the rest."""
 
-    def __init__(self, num_envs: int = 1, **kwargs: Any) -> None:
-        super().__init__("wip_gym/WIP-v0", num_envs, **kwargs)
+    def __init__(self: WIPVectorEnv, num_envs: int = 1, **kwargs: Any) -> None:
+        WIPVectorEnv.__init__(self, env_id, num_envs, **kwargs)
 
-
-class PlanarVectorEnv(WIPVectorEnv):
-    """``wip_gym/Planar-v0`` x ``num_envs`` (its ``vector_entry_point``)."""
-
-    def __init__(self, num_envs: int = 1, **kwargs: Any) -> None:
-        super().__init__("wip_gym/Planar-v0", num_envs, **kwargs)
-
-
-class PlanarTrayVectorEnv(WIPVectorEnv):
-    """``wip_gym/PlanarTray-v0`` x ``num_envs`` (its ``vector_entry_point``)."""
-
-    def __init__(self, num_envs: int = 1, **kwargs: Any) -> None:
-        super().__init__("wip_gym/PlanarTray-v0", num_envs, **kwargs)
+    namespace = {
+        "__init__": __init__,
+        "__doc__": f"``{env_id}`` x ``num_envs`` (its ``vector_entry_point``).",
+        "__module__": __name__,
+        "__qualname__": name,
+    }
+    return type(name, (WIPVectorEnv,), namespace)
 
 
-class KrangVectorEnv(WIPVectorEnv):
-    """``wip_gym/Krang-v0`` x ``num_envs`` (its ``vector_entry_point``)."""
-
-    def __init__(self, num_envs: int = 1, **kwargs: Any) -> None:
-        super().__init__("wip_gym/Krang-v0", num_envs, **kwargs)
-
-
-class KrangTrayVectorEnv(WIPVectorEnv):
-    """``wip_gym/KrangTray-v0`` x ``num_envs`` (its ``vector_entry_point``)."""
-
-    def __init__(self, num_envs: int = 1, **kwargs: Any) -> None:
-        super().__init__("wip_gym/KrangTray-v0", num_envs, **kwargs)
+WIPDriveVectorEnv = _vector_env_class("wip_gym/WIP-v0", "WIPDriveVectorEnv")
+PlanarVectorEnv = _vector_env_class("wip_gym/Planar-v0", "PlanarVectorEnv")
+PlanarTrayVectorEnv = _vector_env_class("wip_gym/PlanarTray-v0", "PlanarTrayVectorEnv")
+KrangVectorEnv = _vector_env_class("wip_gym/Krang-v0", "KrangVectorEnv")
+KrangTrayVectorEnv = _vector_env_class("wip_gym/KrangTray-v0", "KrangTrayVectorEnv")
