@@ -137,8 +137,8 @@ class _SubEnvs:
         self.fast = self.columns is not None
         # one pass's inputs
         self.stepping = True
-        self.actions: NDArray[Any] = np.zeros(0)
-        self.reset_first = np.zeros(n, dtype=np.bool_)  # next-step autoreset
+        self.actions: Any = ()  # a row per sub-env
+        self.reset_first = [False] * n  # next-step autoreset
         self.same_step = False
         self.seeds: Sequence[int | None] = [None] * n
         self.options: dict[str, Any] | None = None
@@ -322,6 +322,7 @@ class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArr
         }
         self._buffers = self._new_observations()
         self._ended = np.zeros(num_envs, dtype=np.bool_)  # ended at the last step
+        self._no_resets = [False] * num_envs  # reset_first of the modes other than NextStep
         self._has_reset = False
         self._loop = ParallelLoop(self._sub, num_envs, min(threads, num_envs))
         self._finalizer = weakref.finalize(self, self._loop.close)
@@ -412,7 +413,9 @@ class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArr
             )
         sub = self._sub
         sub.stepping = True
-        sub.reset_first = self._ended if mode is AutoresetMode.NEXT_STEP else self._no_resets()
+        sub.reset_first = (
+            self._ended.tolist() if mode is AutoresetMode.NEXT_STEP else self._no_resets
+        )
         sub.same_step = mode is AutoresetMode.SAME_STEP
         sub.finals = []
         sub.observations = observations = self._observations_out()
@@ -426,18 +429,16 @@ class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArr
             finals = sorted(sub.finals, key=lambda f: f[0]) if sub.finals else ()
             infos = self._batcher.batch(sub.infos, finals)
         else:  # the fast way: rows of float64, as each sub-env's step converts its own
-            sub.actions = actions.astype(np.float64, copy=False)
+            sub.actions = list(actions.astype(np.float64, copy=False))
             self._loop.run(sub.step_fast)
             columns.observe(observations, sub.bases)
             rewards, terminations, truncations, infos = columns.batch(sub.results, sub.stepped_now)
-            for i, observation, info in sorted(sub.finals, key=lambda f: f[0]):
-                # Gymnasium's final_obs and final_info
-                infos = self._add_info(infos, {"final_obs": observation, "final_info": info}, i)
+            if sub.finals:  # Gymnasium's final_obs and final_info, in the sub-envs' order
+                for i, observation, info in sorted(sub.finals, key=lambda f: f[0]):
+                    final = {"final_obs": observation, "final_info": info}
+                    infos = self._add_info(infos, final, i)
         self._ended = terminations | truncations
         return observations, rewards, terminations, truncations, infos
-
-    def _no_resets(self) -> NDArray[np.bool_]:
-        return np.zeros(self.num_envs, dtype=np.bool_)
 
     # ------------------------------------------------------------------ the rest
     def render(self) -> tuple[Any, ...] | None:
