@@ -85,25 +85,29 @@ def test_make_vec_makes_the_native_vector_env(env_id: str) -> None:
     single.close()
 
 
-def run_pair(env_id: str, mode: AutoresetMode, threads: int, steps: int = 300) -> tuple[int, int]:
+def run_pair(
+    env_id: str,
+    mode: AutoresetMode,
+    threads: int,
+    steps: int = 300,
+    limit: dict[str, Any] | None = None,
+) -> tuple[int, int]:
     """The native vector env against Gymnasium's SyncVectorEnv of the same envs, step by step,
     to the bit (observations, rewards, ends, every info key, dtype and mask, final_obs and
-    final_info); the numbers of terminations and truncations seen."""
+    final_info); the numbers of terminations and truncations seen. ``limit``: how the
+    episodes are cut short (default: ``max_episode_steps``, a ``TimeLimit`` counted beside
+    the sub-env)."""
+    limit = {"max_episode_steps": QUICK_STEPS} if limit is None else limit
     sync = gym.make_vec(
         env_id,
         num_envs=4,
         vectorization_mode="sync",
         vector_kwargs={"autoreset_mode": mode},
-        max_episode_steps=QUICK_STEPS,
+        **limit,
         **QUICK_ENDS,
     )
     native = gym.make_vec(
-        env_id,
-        num_envs=4,
-        autoreset_mode=mode,
-        num_threads=threads,
-        max_episode_steps=QUICK_STEPS,
-        **QUICK_ENDS,
+        env_id, num_envs=4, autoreset_mode=mode, num_threads=threads, **limit, **QUICK_ENDS
     )
     assert isinstance(sync, SyncVectorEnv) and isinstance(native, WIPVectorEnv)
     assert native.num_threads == threads
@@ -141,15 +145,19 @@ def test_equals_sync_vector_env_in_3d() -> None:
 @pytest.mark.parametrize(
     "env_id", ["wip_gym/Planar-v0", "wip_gym/Krang-v0", "wip_gym/KrangTray-v0"]
 )
-def test_every_env_equals_sync_vector_env_on_the_fast_path(env_id: str) -> None:
+@pytest.mark.parametrize("threads", [1, 2])
+def test_every_env_equals_sync_vector_env_on_the_fast_path(env_id: str, threads: int) -> None:
     """The fast path (each sub-env's _advance, the infos from its measures, wip_gym/vector/
     columns.py) for every observation and info layout: 2-D and 3-D, with and without a
-    tray and an end effector."""
+    tray and an end effector; the episodes cut by the env's own time limit (no step count
+    beside it: one thread steps the sub-envs in a plain loop)."""
     probe = gym.make_vec(env_id, num_envs=2, **QUICK_ENDS)
     assert probe.unwrapped._sub.fast
     probe.close()
-    terminations, truncations = run_pair(env_id, AutoresetMode.NEXT_STEP, 1, 80)
-    assert terminations + truncations > 0
+    terminations, truncations = run_pair(
+        env_id, AutoresetMode.NEXT_STEP, threads, 100, limit={"time_limit": 0.03}
+    )
+    assert truncations > 0  # and the steps after: every sub-env reset at once
 
 
 @pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])

@@ -18,6 +18,7 @@ masked out, and ``fallen`` False), with no dict made per sub-env.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from itertools import chain
 from typing import Any
 
 import numpy as np
@@ -39,9 +40,10 @@ class ColumnBatcher:
         self.state = layout.state
         self.goal = layout.goal
         self._measured = tuple((key, a, a + n) for key, a, n in layout.measured)
-        self._floats = np.array([index for _, index in layout.floats], dtype=np.intp)
         singles = [where[0] for _, where in layout.flags]
-        self._flags = np.array(singles, dtype=np.intp)
+        # the entries taken at each step: the floats', then the flags'
+        self._taken = np.array([index for _, index in layout.floats] + singles, dtype=np.intp)
+        self._n_floats = len(layout.floats)
         # a flag of several entries (cup_on_tray: on the plate and upright): their rows' AND
         self._conjunctions = [
             (position, [singles.index(w) for w in where[1:]])
@@ -62,17 +64,26 @@ class ColumnBatcher:
         self._masks = tuple("_" + key for key in self._all_keys)
         self._all_true = np.ones((len(self._all_keys), num_envs), dtype=np.bool_)
 
-    def observe(self, observations: dict[str, NDArray[np.float64]], envs: Sequence[WIPEnv]) -> None:
-        """Write the step's observation into ``observations`` (a row per sub-env): the state of
-        the sub-envs ``envs`` (their ``qpos``, ``qvel``, a copy each), the goals and the
-        measured entries."""
+    def observe(
+        self, envs: Sequence[WIPEnv], into: dict[str, NDArray[np.float64]] | None
+    ) -> dict[str, NDArray[np.float64]]:
+        """The step's observation (a row per sub-env), in fresh arrays or written ``into``
+        these: the state of the sub-envs ``envs`` (their ``qpos``, ``qvel``, one copy each),
+        the goals and the measured entries."""
         states = zip(*[env._state_views() for env in envs], strict=True)
-        for key, views in zip(self.state, states, strict=True):
-            np.concatenate(views, out=observations[key].reshape(-1))  # the rows, in one copy
-        np.copyto(observations[self.goal], self.goals)
         measures = self.measures
+        if into is None:
+            out = {key: np.array(views) for key, views in zip(self.state, states, strict=True)}
+            out[self.goal] = self.goals.copy()
+            for key, a, b in self._measured:
+                out[key] = measures[:, a:b].copy()
+            return out
+        for key, views in zip(self.state, states, strict=True):
+            np.concatenate(views, out=into[key].reshape(-1))
+        np.copyto(into[self.goal], self.goals)
         for key, a, b in self._measured:
-            np.copyto(observations[key], measures[:, a:b])
+            np.copyto(into[key], measures[:, a:b])
+        return into
 
     def batch(
         self, results: list[tuple[Any, ...]], stepped: list[bool]
@@ -83,30 +94,37 @@ class ColumnBatcher:
         ``stepped`` (False: the sub-env was reset in this step, its info is the reset's). The
         info has Gymnasium's keys and arrays, in another order (the values, then the
         masks)."""
+        n = self.num_envs
         # one conversion of every sub-env's Python numbers (floats and bools: exact), a row each
-        numbers = np.array(results, dtype=np.float64).T.copy()
+        numbers = np.fromiter(chain.from_iterable(results), np.float64, 7 * n)
+        numbers = numbers.reshape(n, 7).T.copy()
         ends = numbers[5:7] != 0.0
-        columns = self.measures.T
-        everyone = all(stepped)
-        flags = columns.take(self._flags, axis=0) != 0.0
+        measures = self.measures
+        taken = measures.T.take(self._taken, axis=0)  # the floats' and flags' rows
+        floats = self._n_floats
+        flags = taken[floats:] != 0.0
         for position, others in self._conjunctions:
             row = flags[position]
             for other in others:
                 row &= flags[other]
+        everyone = all(stepped)
         if not everyone:
             flags[self._fallen] &= np.array(stepped, dtype=np.bool_)  # a reset's: False
-        measures = self.measures
-        values: list[Any] = [*columns.take(self._floats, axis=0), *flags]
-        values.extend([measures[:, a:b].copy() for a, b in self._arrays])
-        if not any(stepped):  # every sub-env reset: no reward terms at all
-            info = dict(zip(self._keys, values, strict=True))
-            masks = self._all_true[: len(self._keys)].copy()
-            info.update(zip(self._masks[: len(self._keys)], masks, strict=True))
-        else:
+        values: list[Any] = [*taken[:floats], *flags]
+        for a, b in self._arrays:
+            values.append(measures[:, a:b].copy())
+        if everyone:
+            values.extend(numbers[1:5])
+            info = dict(zip(self._all_keys, values, strict=True))
+            info.update(zip(self._masks, self._all_true.copy(), strict=True))
+        elif any(stepped):
             values.extend(numbers[1:5])
             info = dict(zip(self._all_keys, values, strict=True))
             masks = self._all_true.copy()
-            if not everyone:
-                masks[len(self._keys) :] = np.array(stepped, dtype=np.bool_)
+            masks[len(self._keys) :] = np.array(stepped, dtype=np.bool_)
             info.update(zip(self._masks, masks, strict=True))
+        else:  # every sub-env reset: no reward terms at all
+            info = dict(zip(self._keys, values, strict=True))
+            masks = self._all_true[: len(self._keys)].copy()
+            info.update(zip(self._masks[: len(self._keys)], masks, strict=True))
         return numbers[0], ends[0], ends[1], info

@@ -5,14 +5,19 @@
 **kwargs)`` itself (its own MjModel and MjData, since an episode may change its model: mass
 randomisation, a payload; its own time limit), reset with seed ``S + i`` by ``reset(seed=S)``,
 so that it equals the single env bit for bit, through autoresets. What it saves over
-Gymnasium's ``SyncVectorEnv`` is the batching around the sub-envs' steps: observations are
-written row by row into the batch's arrays, infos are batched a few conversions per step
-(``wip_gym.vector.infos``); with ``num_threads`` > 1, threads overlap one sub-env's physics
+Gymnasium's ``SyncVectorEnv`` is everything around the sub-envs' physics that a batch does not
+need (docs/vector.md §3): a sub-env's step is its ``WIPEnv._advance`` (``step`` without its
+observation and info dicts), its measures written by the compiled code straight into its row
+of one batch array, and the step's observation and info are made from the batch's arrays after
+the pass, a few array operations per step (``wip_gym.vector.columns``); sub-envs whose infos
+may change type take their own ``step`` and the dicts are batched a few conversions per step
+(``wip_gym.vector.infos``). With ``num_threads`` > 1, threads overlap one sub-env's physics
 (which releases the GIL) with another's Python (``wip_gym.vector.threads``).
 """
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import os
 import weakref
@@ -107,7 +112,9 @@ class _SubEnvs:
     (and the sub-envs' ``qpos`` and ``qvel``) the step's info and observation are made
     after the pass (``wip_gym.vector.columns``); otherwise each
     sub-env's ``step`` and its dicts batched (:class:`InfoBatcher`). Resets take the second
-    way (their infos through Gymnasium's rule)."""
+    way (their infos through Gymnasium's rule). On one thread the fast way's pass is
+    :meth:`pass_fast`, a plain loop over the sub-envs' ``_advance``; on several, each thread
+    takes sub-envs one at a time (:meth:`step_fast`)."""
 
     def __init__(
         self, envs: list[gym.Env[Any, Any]], observation_keys: tuple[str, ...], batcher: InfoBatcher
@@ -135,6 +142,10 @@ class _SubEnvs:
             for i, base in enumerate(self.bases):
                 base._measure_into(self.columns.measures[i])
         self.fast = self.columns is not None
+        self.advances = [base._advance for base in self.bases]
+        self.everyone = list(range(n))
+        self.has_limits = any(limit is not None for limit in self.limits)
+        self.counted = False  # a pass with a time limit counted here or same-step autoresets
         # one pass's inputs
         self.stepping = True
         self.actions: Any = ()  # a row per sub-env
@@ -220,30 +231,65 @@ class _SubEnvs:
         self.batcher.write(i, info)
 
     def step_fast(self, i: int) -> None:
-        """Sub-env ``i``'s step the fast way (see the class): its ``_advance``'s result
-        (reward, reward terms, terminated, truncated) kept as it is (its measures are in its
-        row already; its state is read after the pass)."""
-        base = self.bases[i]
+        """Sub-env ``i``'s step the fast way (see the class; a thread's share of the pass):
+        its ``_advance``'s result (reward, reward terms, terminated, truncated) kept as it is
+        (its measures are in its row already; its state is read after the pass)."""
         if self.reset_first[i]:
             self.results[i] = _RESET_RESULT
             self.reset_fast(i)
             return
         try:
-            result = base._advance(self.actions[i])
+            result = self.bases[i]._advance(self.actions[i])
         except ValueError as error:
             raise ValueError(f"sub-env {i}: {error}") from error
+        self.results[i] = result
+        self.stepped_now[i] = True
+        if self.counted:
+            self.finish(i)
+
+    def pass_fast(self) -> None:
+        """Every sub-env's step the fast way in this thread: as :meth:`step_fast` for each,
+        the sub-envs' ``_advance`` called in a plain loop (a sub-env's step comes to its
+        ``_advance`` and a list entry). As a pass of threads, every sub-env is stepped even if
+        one raises, and the lowest index's error is raised."""
+        reset_first, results = self.reset_first, self.results
+        self.stepped_now = [not reset for reset in reset_first]
+        if any(reset_first):
+            for i in [i for i, reset in enumerate(reset_first) if reset]:
+                results[i] = _RESET_RESULT
+                self.reset_fast(i)
+            todo = [i for i, reset in enumerate(reset_first) if not reset]
+        else:
+            todo = self.everyone
+        advances, actions = self.advances, self.actions
+        k = 0
+        try:
+            for k, i in enumerate(todo):  # noqa: B007  (k tells where an error came from)
+                results[i] = advances[i](actions[i])
+        except ValueError as error:
+            first = ValueError(f"sub-env {todo[k]}: {error}")
+            for i in todo[k + 1 :]:  # the others still step
+                with contextlib.suppress(ValueError):
+                    results[i] = advances[i](actions[i])
+            raise first from error
+        if self.counted:
+            for i in todo:
+                self.finish(i)
+
+    def finish(self, i: int) -> None:
+        """After sub-env ``i``'s ``_advance``: the time limit counted here, the same-step
+        autoreset."""
+        result = self.results[i]
         limit = self.limits[i]
         if limit is not None:
             self.elapsed[i] = elapsed = self.elapsed[i] + 1
             if elapsed >= limit and not result[6]:
-                result = (*result[:6], True)
+                self.results[i] = result = (*result[:6], True)
         if self.same_step and (result[5] or result[6]):
+            base = self.bases[i]
             self.finals.append((i, base._get_obs(), base._step_info(*result[1:5])))
             self.results[i] = (result[0], *_NO_TERMS, result[5], result[6])  # terms masked
             self.reset_fast(i)
-            return
-        self.results[i] = result
-        self.stepped_now[i] = True
 
     def reset_fast(self, i: int) -> None:
         """Sub-env ``i`` reset within a step (an autoreset), the fast way."""
@@ -418,9 +464,9 @@ class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArr
         )
         sub.same_step = mode is AutoresetMode.SAME_STEP
         sub.finals = []
-        sub.observations = observations = self._observations_out()
         columns = sub.columns
         if columns is None:
+            sub.observations = observations = self._observations_out()
             sub.actions = actions
             self._loop.run()
             rewards = np.array(sub.rewards, dtype=np.float64)
@@ -430,8 +476,12 @@ class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArr
             infos = self._batcher.batch(sub.infos, finals)
         else:  # the fast way: rows of float64, as each sub-env's step converts its own
             sub.actions = list(actions.astype(np.float64, copy=False))
-            self._loop.run(sub.step_fast)
-            columns.observe(observations, sub.bases)
+            sub.counted = sub.has_limits or sub.same_step
+            if self._loop.threads == 1:
+                sub.pass_fast()
+            else:
+                self._loop.run(sub.step_fast)
+            observations = columns.observe(sub.bases, None if self.copy else self._buffers)
             rewards, terminations, truncations, infos = columns.batch(sub.results, sub.stepped_now)
             if sub.finals:  # Gymnasium's final_obs and final_info, in the sub-envs' order
                 for i, observation, info in sorted(sub.finals, key=lambda f: f[0]):
