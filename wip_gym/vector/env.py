@@ -41,9 +41,10 @@ from wip_gym.vector.threads import ParallelLoop
 
 _MODES = {mode.value: mode for mode in AutoresetMode}
 #: the default number of threads: one. A sub-env's step holds the GIL for about half its time
-#: (its Python; MuJoCo's step and the env's compiled measures release it) and hands it over
-#: four times, so two threads can at best bring it to that half, and measured on a shared
-#: 2-core machine they were slower than one (docs/vector.md §3)
+#: (its Python; MuJoCo's step and the env's compiled measures release it) and the batch's
+#: arrays are made in the caller's thread after the pass, so two threads can at best bring a
+#: step to that half, and measured on a shared 2-core machine they were slower than one
+#: (docs/vector.md §3)
 DEFAULT_THREADS = 1
 
 
@@ -180,7 +181,7 @@ class _SubEnvs:
         self.started[i] = True
         observation, info = self.stepped[i].reset(seed=seed, options=options)
         if self.columns is not None:
-            self.columns.goals[i] = self.bases[i]._goal
+            self.columns.goals[i] = self.bases[i].goal
         return observation, info
 
     def last_observation(self, i: int) -> dict[str, Any]:
