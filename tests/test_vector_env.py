@@ -85,25 +85,29 @@ def test_make_vec_makes_the_native_vector_env(env_id: str) -> None:
     single.close()
 
 
-def run_pair(env_id: str, mode: AutoresetMode, threads: int, steps: int = 300) -> tuple[int, int]:
+def run_pair(
+    env_id: str,
+    mode: AutoresetMode,
+    threads: int,
+    steps: int = 300,
+    limit: dict[str, Any] | None = None,
+) -> tuple[int, int]:
     """The native vector env against Gymnasium's SyncVectorEnv of the same envs, step by step,
     to the bit (observations, rewards, ends, every info key, dtype and mask, final_obs and
-    final_info); the numbers of terminations and truncations seen."""
+    final_info); the numbers of terminations and truncations seen. ``limit``: how the
+    episodes are cut short (default: ``max_episode_steps``, a ``TimeLimit`` counted beside
+    the sub-env)."""
+    limit = {"max_episode_steps": QUICK_STEPS} if limit is None else limit
     sync = gym.make_vec(
         env_id,
         num_envs=4,
         vectorization_mode="sync",
         vector_kwargs={"autoreset_mode": mode},
-        max_episode_steps=QUICK_STEPS,
+        **limit,
         **QUICK_ENDS,
     )
     native = gym.make_vec(
-        env_id,
-        num_envs=4,
-        autoreset_mode=mode,
-        num_threads=threads,
-        max_episode_steps=QUICK_STEPS,
-        **QUICK_ENDS,
+        env_id, num_envs=4, autoreset_mode=mode, num_threads=threads, **limit, **QUICK_ENDS
     )
     assert isinstance(sync, SyncVectorEnv) and isinstance(native, WIPVectorEnv)
     assert native.num_threads == threads
@@ -136,6 +140,87 @@ def test_equals_sync_vector_env_bit_for_bit(mode: AutoresetMode, threads: int) -
 def test_equals_sync_vector_env_in_3d() -> None:
     terminations, truncations = run_pair("wip_gym/WIP-v0", AutoresetMode.SAME_STEP, 2, 200)
     assert terminations + truncations > 0
+
+
+@pytest.mark.parametrize(
+    "env_id", ["wip_gym/Planar-v0", "wip_gym/Krang-v0", "wip_gym/KrangTray-v0"]
+)
+@pytest.mark.parametrize("threads", [1, 2])
+def test_every_env_equals_sync_vector_env_on_the_fast_path(env_id: str, threads: int) -> None:
+    """The fast path (each sub-env's _advance, the infos from its measures, wip_gym/vector/
+    columns.py) for every observation and info layout: 2-D and 3-D, with and without a
+    tray and an end effector; the episodes cut by the env's own time limit (no step count
+    beside it: one thread steps the sub-envs in a plain loop)."""
+    probe = gym.make_vec(env_id, num_envs=2, **QUICK_ENDS)
+    assert probe.unwrapped._sub.fast
+    probe.close()
+    terminations, truncations = run_pair(
+        env_id, AutoresetMode.NEXT_STEP, threads, 100, limit={"time_limit": 0.03}
+    )
+    assert truncations > 0  # and the steps after: every sub-env reset at once
+
+
+@pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
+def test_every_sub_env_ending_at_once_equals_sync_vector_env(mode: AutoresetMode) -> None:
+    """All sub-envs truncated in the same step and reset together (a step whose info has no
+    reward terms at all, next-step; final infos for every sub-env, same-step)."""
+    sync = gym.make_vec(
+        "wip_gym/WIP-v0",
+        num_envs=3,
+        vectorization_mode="sync",
+        vector_kwargs={"autoreset_mode": mode},
+        max_episode_steps=3,
+    )
+    native = gym.make_vec("wip_gym/WIP-v0", num_envs=3, autoreset_mode=mode, max_episode_steps=3)
+    assert native.unwrapped._sub.fast
+    assert_same(sync.reset(seed=2), native.reset(seed=2))
+    zeros = np.zeros(native.action_space.shape)
+    for k in range(8):
+        expected, got = sync.step(zeros), native.step(zeros)
+        assert_same(expected, got)
+        if k == 3 and mode is AutoresetMode.NEXT_STEP:
+            assert "reward_progress" not in got[4]
+    sync.close()
+    native.close()
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"fall_penalty": 10},  # an int penalty: the info's reward_fall is an int when it falls
+        {"sensor_noise": 0.01},  # an observation perturbation: the observation is not the data
+    ],
+)
+def test_the_dict_path_where_the_fast_one_does_not_apply(kwargs: dict[str, Any]) -> None:
+    """Sub-envs whose infos' types may vary or whose observation is perturbed are stepped
+    through their own step() and the dicts batched, still equal to SyncVectorEnv's."""
+    sync = gym.make_vec(
+        "wip_gym/Planar-v0",
+        num_envs=3,
+        vectorization_mode="sync",
+        vector_kwargs={"autoreset_mode": AutoresetMode.SAME_STEP},
+        max_episode_steps=QUICK_STEPS,
+        **QUICK_ENDS,
+        **kwargs,
+    )
+    native = gym.make_vec(
+        "wip_gym/Planar-v0",
+        num_envs=3,
+        autoreset_mode=AutoresetMode.SAME_STEP,
+        max_episode_steps=QUICK_STEPS,
+        **QUICK_ENDS,
+        **kwargs,
+    )
+    assert not native.unwrapped._sub.fast
+    assert_same(sync.reset(seed=4), native.reset(seed=4))
+    ends = 0
+    for action in random_actions(native.action_space, 80):
+        expected, got = sync.step(action), native.step(action)
+        assert_same(expected, got)
+        ends += int((expected[2] | expected[3]).sum())
+    assert ends > 0
+    sync.close()
+    native.close()
 
 
 def test_sub_env_i_is_the_single_env_with_seed_s_plus_i() -> None:
@@ -189,14 +274,15 @@ def test_max_episode_steps_is_the_single_envs() -> None:
 
 
 def test_observations_are_fresh_arrays_unless_copy_is_false() -> None:
-    vec = gym.make_vec("wip_gym/WIP-v0", num_envs=2)
+    vec = gym.make_vec("wip_gym/PlanarTray-v0", num_envs=2)
     first, _ = vec.reset(seed=0)
     second = vec.step(np.zeros(vec.action_space.shape))[0]
     assert not np.shares_memory(first["qpos"], second["qpos"])
-    shared = gym.make_vec("wip_gym/WIP-v0", num_envs=2, copy=False)
+    shared = gym.make_vec("wip_gym/PlanarTray-v0", num_envs=2, copy=False)
     first, _ = shared.reset(seed=0)
-    second = shared.step(np.zeros(shared.action_space.shape))[0]
-    assert first["qpos"] is second["qpos"]
+    shared_second = shared.step(np.zeros(shared.action_space.shape))[0]
+    assert first["qpos"] is shared_second["qpos"]
+    assert_same(second, shared_second)  # the same values written into the buffers
     vec.close()
     shared.close()
 

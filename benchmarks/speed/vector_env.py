@@ -19,10 +19,11 @@ contender's ratio in a round is its rate over the single env's in the same round
 figure is the median of the rounds' ratios (the machine's load drifts between rounds; a round
 is short). The actions are drawn before the clock starts (one table, replayed in turn).
 
-``--split`` measures instead where a sub-env's step goes (this thread's CPU time, one thread):
-the single env's step and the native vector env's per sub-env, and the part of the latter in
-``mujoco.mj_step`` (which releases the GIL; the env's compiled measures release it too and are
-counted with the rest, so the split's GIL share is an upper bound). The bounds it prints: one
+``--split`` measures instead where a sub-env's step goes (this thread's CPU time, one thread,
+the median of rounds taken in turn): the single env's step and the native vector env's per
+sub-env, and the part of the latter in ``mujoco.mj_step`` (which releases the GIL; the env's
+compiled measures release it too and are counted with the rest, so the split's GIL share is
+an upper bound). The bounds it prints: one
 thread, single over native; two threads, single over the larger of the GIL's part and half the
 step (a GIL-bound part can overlap only the other thread's physics).
 
@@ -172,10 +173,12 @@ def measure(
     return result
 
 
-def gil_split(env_id: str, n: int, steps: int = 400) -> dict[str, float]:
+def gil_split(env_id: str, n: int, steps: int = 100, rounds: int = 7) -> dict[str, float]:
     """Microseconds of this thread's CPU per sub-env step (zero torques): ``single``,
     ``native`` (one thread) and ``native_physics`` (its ``mujoco.mj_step`` calls), with the
-    bounds of the module's docstring."""
+    bounds of the module's docstring. In turn, ``rounds`` times (the first warms up): ``steps``
+    vector steps, then ``steps * n`` single-env steps; each figure is the median of the
+    rounds'."""
     clock = time.thread_time
     inside = [0.0]
     step = mujoco.mj_step
@@ -187,30 +190,32 @@ def gil_split(env_id: str, n: int, steps: int = 400) -> dict[str, float]:
 
     vec = gym.make_vec(env_id, num_envs=n)
     single = gym.make(env_id)
+    measured: dict[str, list[float]] = {"single": [], "native": [], "physics": []}
     try:
         vec.reset(seed=0)
         single.reset(seed=0)
         zeros = np.zeros(vec.action_space.shape)
-        for _ in range(50):
-            vec.step(zeros)
         mujoco.mj_step = timed_step  # the envs call it through the module
         try:
-            start = clock()
-            for _ in range(steps):
-                vec.step(zeros)
-            native = (clock() - start) / (steps * n) * 1e6
-            physics = inside[0] / (steps * n) * 1e6
-            start = clock()
-            for _ in range(steps * n):
-                _, _, terminated, truncated, _ = single.step(zeros[0])
-                if terminated or truncated:
-                    single.reset()
-            alone = (clock() - start) / (steps * n) * 1e6
+            for _ in range(rounds):
+                inside[0] = 0.0
+                start = clock()
+                for _ in range(steps):
+                    vec.step(zeros)
+                measured["native"].append((clock() - start) / (steps * n) * 1e6)
+                measured["physics"].append(inside[0] / (steps * n) * 1e6)
+                start = clock()
+                for _ in range(steps * n):
+                    _, _, terminated, truncated, _ = single.step(zeros[0])
+                    if terminated or truncated:
+                        single.reset()
+                measured["single"].append((clock() - start) / (steps * n) * 1e6)
         finally:
             mujoco.mj_step = step
     finally:
         vec.close()
         single.close()
+    alone, native, physics = (statistics.median(measured[k][1:]) for k in measured)
     held = native - physics
     return {
         "single_us": alone,

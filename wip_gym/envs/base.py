@@ -7,6 +7,7 @@ class docstrings there hold the tables of spaces, rewards and arguments.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
@@ -78,6 +79,41 @@ def _check_frame_skip(frame_skip: Any) -> None:
     integer = isinstance(frame_skip, int | np.integer) and not isinstance(frame_skip, bool)
     if not integer or frame_skip < 1:
         raise ValueError(f"frame_skip must be a positive integer, got {frame_skip!r}")
+
+
+#: the step info's reward terms, after the entries of :class:`StepLayout`
+REWARD_TERMS = ("reward_progress", "reward_ctrl", "reward_fall", "reward_cup_loss")
+
+
+def _cup_kept(values: list[float]) -> bool:
+    """Whether the cup is kept at ``_measure``'s ``values``: on the tray (on the plate and
+    upright), and the tray on the hand."""
+    OUT = ms.OUT
+    return (
+        values[OUT.cup_on_plate] != 0.0
+        and values[OUT.cup_upright] != 0.0
+        and values[OUT.tray_on_hand] != 0.0
+    )
+
+
+@dataclass(frozen=True)
+class StepLayout:
+    """Where a step's info and observation are (``WIPEnv.step_layout``), for the native
+    vector env (docs/vector.md §3). The info's entries (:data:`REWARD_TERMS` after them in a
+    step's; a reset's has the same but those) are entries of ``WIPEnv._block``
+    (``wip_gym.envs.measures.OUT``): Python floats (key, entry), flags (key, entries: True
+    where every listed entry is nonzero; a reset's ``fallen`` is False) and float64 arrays
+    (key, start, length); ``keys`` in the info's order. The observation is ``state`` (the
+    keys of ``WIPEnv._state_views``' arrays), ``goal`` (``WIPEnv.goal``) and ``measured``
+    (entries of ``_block``: key, start, length)."""
+
+    floats: tuple[tuple[str, int], ...]
+    flags: tuple[tuple[str, tuple[int, ...]], ...]
+    arrays: tuple[tuple[str, int, int], ...]
+    keys: tuple[str, ...]
+    state: tuple[str, ...]
+    goal: str
+    measured: tuple[tuple[str, int, int], ...]
 
 
 class WIPEnv(MujocoEnv, utils.EzPickle):
@@ -632,11 +668,26 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
     def step(  # type: ignore[override]
         self, action: NDArray[np.floating]
     ) -> tuple[dict[str, NDArray[np.float64]], float, bool, bool, dict[str, Any]]:
-        # the action's check and its ctrl cost, one compiled call (_check_action explains a
-        # rejected action)
         a = np.asarray(action, dtype=np.float64)
         if a.shape != self._action_shape:
             a = self._check_action(a)
+        reward, progress, ctrl, fall, cup_loss, terminated, truncated = self._advance(a)
+        info = self._step_info(progress, ctrl, fall, cup_loss)
+        if self.render_mode == "human":
+            self.render()
+        obs = self._get_obs()
+        if self._perturb_observation:  # what the sensors report, when it arrives
+            obs = self._perturber.observe(obs)
+        return obs, reward, terminated, truncated, info
+
+    def _advance(self, a: NDArray[np.float64]) -> tuple[float, Any, Any, Any, Any, bool, bool]:
+        """The step without its observation and info (``step`` is this and them; the native
+        vector env calls it and reads the batch's rows itself, docs/vector.md §3): the action
+        ``a`` (float64 of the action's shape) checked, the physics, the measures (kept as
+        ``_values``, ``_block``), the cup's loss; returns the reward, its terms (progress,
+        ctrl, fall, cup loss), terminated and truncated."""
+        # the action's check and its ctrl cost, one compiled call (_check_action explains a
+        # rejected action)
         effort = self._action_effort(a, self._action_table)
         if effort != effort:  # NaN: a torque beyond the band, or NaN
             a = self._check_action(a)
@@ -647,33 +698,41 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             a = self._perturber.actuate(a)
         self.do_simulation(a, self.frame_skip)
         values = self._measure()
-        fallen = values[ms.OUT.fallen] != 0.0
-        info = self._info(values, fallen)
+        OUT = ms.OUT
+        fallen = values[OUT.fallen] != 0.0
         newly_lost = False
         if self._tray:
-            kept = self._tray_entries(info, values)
+            kept = _cup_kept(values)
             newly_lost = not kept and not self._cup_lost
             self._cup_lost = self._cup_lost or not kept
             if newly_lost:
                 self._solve_by_islands(True)
-        distance = values[ms.OUT.goal_distance]
+        distance = values[OUT.goal_distance]
         progress_w, ctrl_w, fall_pen, cup_pen = self._weights
-        info["reward_progress"] = progress = progress_w * (self._prev_distance - distance)
-        info["reward_ctrl"] = ctrl = -ctrl_w * effort * self._step_dt
-        info["reward_fall"] = fall = -fall_pen if fallen else 0.0
-        info["reward_cup_loss"] = cup_loss = -cup_pen if newly_lost else 0.0
+        progress = progress_w * (self._prev_distance - distance)
+        ctrl = -ctrl_w * effort * self._step_dt
+        fall = -fall_pen if fallen else 0.0
+        cup_loss = -cup_pen if newly_lost else 0.0
         self._prev_distance = distance
         terminated = bool(fallen or (self._tray and self._terminate_on_cup_loss and self._cup_lost))
         # the time limit in simulated seconds, whatever frame_skip is (half a MuJoCo step of
         # margin for the sum of the steps' rounding)
         limit = self._time_limit
         truncated = limit is not None and self.data.time >= limit - 0.5 * self.model.opt.timestep
-        if self.render_mode == "human":
-            self.render()
-        obs = self._get_obs()
-        if self._perturb_observation:  # what the sensors report, when it arrives
-            obs = self._perturber.observe(obs)
-        return obs, float(progress + ctrl + fall + cup_loss), terminated, truncated, info
+        reward = float(progress + ctrl + fall + cup_loss)
+        return reward, progress, ctrl, fall, cup_loss, terminated, truncated
+
+    def _step_info(self, progress: Any, ctrl: Any, fall: Any, cup_loss: Any) -> dict[str, Any]:
+        """The info of the step :meth:`_advance` made, with its reward terms."""
+        values = self._values
+        info = self._info(values, values[ms.OUT.fallen] != 0.0)
+        if self._tray:
+            self._tray_entries(info, values)
+        info["reward_progress"] = progress
+        info["reward_ctrl"] = ctrl
+        info["reward_fall"] = fall
+        info["reward_cup_loss"] = cup_loss
+        return info
 
     def _solve_by_islands(self, cup_lost: bool) -> None:
         """Constraint islands, off in the models (assets/mjcf/README.md: while the cup rides the
@@ -829,9 +888,8 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             info["ee_error"] = values[ms.OUT.ee_error]
         return info
 
-    def _tray_entries(self, info: dict[str, Any], values: list[float]) -> bool:
-        """Add the tray task's info entries from ``_measure``'s ``values``; return whether the
-        cup is kept (on the tray, and the tray on the hand)."""
+    def _tray_entries(self, info: dict[str, Any], values: list[float]) -> None:
+        """Add the tray task's info entries from ``_measure``'s ``values``."""
         OUT, block = ms.OUT, self._block
         tilt, tray_tilt = values[OUT.cup_tilt_deg], values[OUT.tray_tilt_deg]
         upright, on_plate = values[OUT.cup_upright] != 0.0, values[OUT.cup_on_plate] != 0.0
@@ -848,7 +906,77 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             tray_offset=block[ms.OUT.tray_offset : ms.OUT.tray_offset + 3],
             tray_on_hand=on_hand,
         )
-        return on_tray and on_hand
+
+    def step_layout(self) -> StepLayout | None:
+        """Where every entry of this env's step and reset infos and observations is (what
+        :meth:`_info`, :meth:`_tray_entries` and :meth:`_get_obs` read), for the native vector
+        env's batching (docs/vector.md §3); None if an entry's type may vary from step to step
+        (a reward weight not a float: ``-fall_penalty`` of an int is an int) or the
+        observation is not read from the data (an observation perturbation): there that
+        vector env batches the dicts themselves."""
+        progress_w, ctrl_w, fall_pen, cup_pen = self._weights
+        if self._perturb_observation or not (
+            type(progress_w) in (int, float)
+            and type(ctrl_w) in (int, float)
+            and type(fall_pen) is float
+            and type(cup_pen) is float
+        ):
+            return None
+        OUT = ms.OUT
+        entries: list[tuple[str, str, tuple[int, ...]]] = [
+            ("x", "float", (OUT.x,)),
+            ("xd", "float", (OUT.xd,)),
+            ("theta", "float", (OUT.theta,)),
+            ("thetad", "float", (OUT.thetad,)),
+            ("axle_position", "array", (OUT.axle, 3)),
+            ("goal_distance", "float", (OUT.goal_distance,)),
+            ("fallen", "flag", (OUT.fallen,)),
+        ]
+        if not self._planar:
+            entries += [("psi", "float", (OUT.psi,)), ("psid", "float", (OUT.psid,))]
+        if self._ee_site >= 0:
+            entries.append(("ee_error", "float", (OUT.ee_error,)))
+        if self._tray:
+            entries += [
+                ("tray_tilt_deg", "float", (OUT.tray_tilt_deg,)),
+                ("cup_offset", "array", (OUT.cup_pose, 3)),
+                ("cup_tilt_deg", "float", (OUT.cup_tilt_deg,)),
+                ("cup_upright", "flag", (OUT.cup_upright,)),
+                ("cup_on_plate", "flag", (OUT.cup_on_plate,)),
+                ("cup_on_tray", "flag", (OUT.cup_on_plate, OUT.cup_upright)),
+                ("cup_friction_use", "float", (OUT.cup_friction_use,)),
+                ("tray_offset", "array", (OUT.tray_offset, 3)),
+                ("tray_on_hand", "flag", (OUT.tray_on_hand,)),
+            ]
+        return StepLayout(
+            floats=tuple((key, where[0]) for key, kind, where in entries if kind == "float"),
+            flags=tuple((key, where) for key, kind, where in entries if kind == "flag"),
+            arrays=tuple(
+                (key, where[0], where[1]) for key, kind, where in entries if kind == "array"
+            ),
+            keys=tuple(key for key, _, _ in entries),
+            state=("qpos", "qvel"),
+            goal="goal",
+            measured=(("cup_pose", OUT.cup_pose, 7),) if self._tray else (),
+        )
+
+    def _state_views(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The robot's ``qpos`` and ``qvel``, which :meth:`_get_obs` copies (views of the
+        data, read at once: the next step or reset overwrites them)."""
+        return self._view_robot_qpos, self._view_robot_qvel
+
+    def _measure_into(self, row: NDArray[np.float64]) -> None:
+        """Keep the measures (``_measures``, ``wip_gym.envs.measures.OUT``) in ``row`` from
+        now on (a C-contiguous float64 vector of ``N_OUT``, a row of the native vector env's
+        batch, which writes no copy of them then): their values copied there, the compiled
+        measures' table made again for it. The step's results are the same."""
+        if row.shape != self._measures.shape or row.dtype != np.float64:
+            raise ValueError(f"expected a float64 vector of {self._measures.shape}, got {row}")
+        if not row.flags.c_contiguous:
+            raise ValueError("the measures' row must be C-contiguous")
+        row[:] = self._measures
+        self._measures = row
+        self._bind_views()
 
     def _get_obs(self) -> dict[str, NDArray[np.float64]]:
         """The observation at the last ``_measure`` (fresh arrays, none shared with the info)."""

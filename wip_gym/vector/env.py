@@ -5,14 +5,19 @@
 **kwargs)`` itself (its own MjModel and MjData, since an episode may change its model: mass
 randomisation, a payload; its own time limit), reset with seed ``S + i`` by ``reset(seed=S)``,
 so that it equals the single env bit for bit, through autoresets. What it saves over
-Gymnasium's ``SyncVectorEnv`` is the batching around the sub-envs' steps: observations are
-written row by row into the batch's arrays, infos are batched a few conversions per step
-(``wip_gym.vector.infos``); with ``num_threads`` > 1, threads overlap one sub-env's physics
+Gymnasium's ``SyncVectorEnv`` is everything around the sub-envs' physics that a batch does not
+need (docs/vector.md §3): a sub-env's step is its ``WIPEnv._advance`` (``step`` without its
+observation and info dicts), its measures written by the compiled code straight into its row
+of one batch array, and the step's observation and info are made from the batch's arrays after
+the pass, a few array operations per step (``wip_gym.vector.columns``); sub-envs whose infos
+may change type take their own ``step`` and the dicts are batched a few conversions per step
+(``wip_gym.vector.infos``). With ``num_threads`` > 1, threads overlap one sub-env's physics
 (which releases the GIL) with another's Python (``wip_gym.vector.threads``).
 """
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import os
 import weakref
@@ -28,14 +33,18 @@ from gymnasium.vector.utils import batch_space
 from gymnasium.wrappers import TimeLimit
 from numpy.typing import NDArray
 
+from wip_gym.envs import measures as ms
+from wip_gym.envs.base import WIPEnv
+from wip_gym.vector.columns import ColumnBatcher
 from wip_gym.vector.infos import InfoBatcher
 from wip_gym.vector.threads import ParallelLoop
 
 _MODES = {mode.value: mode for mode in AutoresetMode}
 #: the default number of threads: one. A sub-env's step holds the GIL for about half its time
-#: (its Python; MuJoCo's step and the env's compiled measures release it) and hands it over
-#: four times, so two threads can at best bring it to that half, and measured on a shared
-#: 2-core machine they were slower than one (docs/vector.md §3)
+#: (its Python; MuJoCo's step and the env's compiled measures release it) and the batch's
+#: arrays are made in the caller's thread after the pass, so two threads can at best bring a
+#: step to that half, and measured on a shared 2-core machine they were slower than one
+#: (docs/vector.md §3)
 DEFAULT_THREADS = 1
 
 
@@ -88,9 +97,25 @@ def step_path(env: gym.Env[Any, Any]) -> tuple[gym.Env[Any, Any], int | None]:
     return env, None
 
 
+_NO_TERMS = (0.0, 0.0, 0.0, 0.0)  # a reset sub-env's reward terms (masked out)
+#: a next-step autoreset's result: reward 0, no terms, neither end
+_RESET_RESULT = (0.0, *_NO_TERMS, False, False)
+
+
 class _SubEnvs:
     """The sub-envs and what one pass over them reads and writes (kept apart from the vector
-    env so that its threads hold no reference to it: an unclosed vector env is collected)."""
+    env so that its threads hold no reference to it: an unclosed vector env is collected).
+
+    Two ways to step: the fast one, when every sub-env is a wip env stepped bare (or under
+    the ``TimeLimit`` counted here) with a :meth:`WIPEnv.step_layout` (its infos' types
+    fixed): each sub-env's :meth:`WIPEnv._advance` (the step without its observation and
+    info dicts), its measures kept in its row of :attr:`ColumnBatcher.measures`, from which
+    (and the sub-envs' ``qpos`` and ``qvel``) the step's info and observation are made
+    after the pass (``wip_gym.vector.columns``); otherwise each
+    sub-env's ``step`` and its dicts batched (:class:`InfoBatcher`). Resets take the second
+    way (their infos through Gymnasium's rule). On one thread the fast way's pass is
+    :meth:`pass_fast`, a plain loop over the sub-envs' ``_advance``; on several, each thread
+    takes sub-envs one at a time (:meth:`step_fast`)."""
 
     def __init__(
         self, envs: list[gym.Env[Any, Any]], observation_keys: tuple[str, ...], batcher: InfoBatcher
@@ -103,10 +128,29 @@ class _SubEnvs:
         self.batcher = batcher
         n = len(envs)
         self.elapsed = [0] * n  # steps since the reset, against the limits
+        self.started = [False] * n  # reset at least once
+        bases = [env.unwrapped for env in envs]
+        layouts = [
+            base.step_layout() if isinstance(base, WIPEnv) and self.stepped[i] is base else None
+            for i, base in enumerate(bases)
+        ]
+        first = layouts[0]
+        self.columns: ColumnBatcher | None = None
+        self.bases: list[WIPEnv] = []
+        if first is not None and all(layout == first for layout in layouts):
+            self.columns = ColumnBatcher(first, n, ms.N_OUT)
+            self.bases = bases  # type: ignore[assignment]
+            for i, base in enumerate(self.bases):
+                base._measure_into(self.columns.measures[i])
+        self.fast = self.columns is not None
+        self.advances = [base._advance for base in self.bases]
+        self.everyone = list(range(n))
+        self.has_limits = any(limit is not None for limit in self.limits)
+        self.counted = False  # a pass with a time limit counted here or same-step autoresets
         # one pass's inputs
         self.stepping = True
-        self.actions: NDArray[Any] = np.zeros(0)
-        self.reset_first = np.zeros(n, dtype=np.bool_)  # next-step autoreset
+        self.actions: Any = ()  # a row per sub-env
+        self.reset_first = [False] * n  # next-step autoreset
         self.same_step = False
         self.seeds: Sequence[int | None] = [None] * n
         self.options: dict[str, Any] | None = None
@@ -119,6 +163,10 @@ class _SubEnvs:
         self.infos: list[dict[str, Any] | None] = [None] * n
         self.last: list[dict[str, Any] | None] = [None] * n  # each sub-env's last observation
         self.finals: list[tuple[int, Any, dict[str, Any]]] = []
+        # the fast way's: each sub-env's _advance result, whether it stepped (False: reset in
+        # the step)
+        self.results: list[tuple[Any, ...]] = [_RESET_RESULT] * n
+        self.stepped_now = [True] * n
 
     def write(self, i: int, observation: dict[str, Any], info: dict[str, Any] | None) -> None:
         self.last[i] = observation
@@ -130,7 +178,21 @@ class _SubEnvs:
 
     def reset_one(self, i: int, seed: int | None, options: dict[str, Any] | None) -> Any:
         self.elapsed[i] = 0
-        return self.stepped[i].reset(seed=seed, options=options)
+        self.started[i] = True
+        observation, info = self.stepped[i].reset(seed=seed, options=options)
+        if self.columns is not None:
+            self.columns.goals[i] = self.bases[i].goal
+        return observation, info
+
+    def last_observation(self, i: int) -> dict[str, Any]:
+        """Sub-env ``i``'s last observation (it was not reset now)."""
+        if not self.started[i]:
+            raise RuntimeError(f"sub-env {i} was never reset: reset it first")
+        if self.fast:  # its steps kept no dict: the observation is read again, as it was made
+            return self.bases[i]._get_obs()
+        last = self.last[i]
+        assert last is not None
+        return last
 
     def __call__(self, i: int) -> None:
         """Sub-env ``i``'s part of the pass (a step or a reset)."""
@@ -139,10 +201,7 @@ class _SubEnvs:
                 observation, info = self.reset_one(i, self.seeds[i], self.options)
                 self.write(i, observation, info)
             else:  # not reset: its observation stands
-                last = self.last[i]
-                if last is None:
-                    raise RuntimeError(f"sub-env {i} was never reset: reset it first")
-                self.write(i, last, None)
+                self.write(i, self.last_observation(i), None)
             return
         if self.reset_first[i]:
             observation, info = self.reset_one(i, None, None)
@@ -171,6 +230,72 @@ class _SubEnvs:
             observations[key][i] = observation[key]
         self.infos[i] = info
         self.batcher.write(i, info)
+
+    def step_fast(self, i: int) -> None:
+        """Sub-env ``i``'s step the fast way (see the class; a thread's share of the pass):
+        its ``_advance``'s result (reward, reward terms, terminated, truncated) kept as it is
+        (its measures are in its row already; its state is read after the pass)."""
+        if self.reset_first[i]:
+            self.results[i] = _RESET_RESULT
+            self.reset_fast(i)
+            return
+        try:
+            result = self.bases[i]._advance(self.actions[i])
+        except ValueError as error:
+            raise ValueError(f"sub-env {i}: {error}") from error
+        self.results[i] = result
+        self.stepped_now[i] = True
+        if self.counted:
+            self.finish(i)
+
+    def pass_fast(self) -> None:
+        """Every sub-env's step the fast way in this thread: as :meth:`step_fast` for each,
+        the sub-envs' ``_advance`` called in a plain loop (a sub-env's step comes to its
+        ``_advance`` and a list entry). As a pass of threads, every sub-env is stepped even if
+        one raises, and the lowest index's error is raised."""
+        reset_first, results = self.reset_first, self.results
+        self.stepped_now = [not reset for reset in reset_first]
+        if any(reset_first):
+            for i in [i for i, reset in enumerate(reset_first) if reset]:
+                results[i] = _RESET_RESULT
+                self.reset_fast(i)
+            todo = [i for i, reset in enumerate(reset_first) if not reset]
+        else:
+            todo = self.everyone
+        advances, actions = self.advances, self.actions
+        k = 0
+        try:
+            for k, i in enumerate(todo):  # noqa: B007  (k tells where an error came from)
+                results[i] = advances[i](actions[i])
+        except ValueError as error:
+            first = ValueError(f"sub-env {todo[k]}: {error}")
+            for i in todo[k + 1 :]:  # the others still step
+                with contextlib.suppress(ValueError):
+                    results[i] = advances[i](actions[i])
+            raise first from error
+        if self.counted:
+            for i in todo:
+                self.finish(i)
+
+    def finish(self, i: int) -> None:
+        """After sub-env ``i``'s ``_advance``: the time limit counted here, the same-step
+        autoreset."""
+        result = self.results[i]
+        limit = self.limits[i]
+        if limit is not None:
+            self.elapsed[i] = elapsed = self.elapsed[i] + 1
+            if elapsed >= limit and not result[6]:
+                self.results[i] = result = (*result[:6], True)
+        if self.same_step and (result[5] or result[6]):
+            base = self.bases[i]
+            self.finals.append((i, base._get_obs(), base._step_info(*result[1:5])))
+            self.results[i] = (result[0], *_NO_TERMS, result[5], result[6])  # terms masked
+            self.reset_fast(i)
+
+    def reset_fast(self, i: int) -> None:
+        """Sub-env ``i`` reset within a step (an autoreset), the fast way."""
+        self.reset_one(i, None, None)
+        self.stepped_now[i] = False
 
 
 class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArray[Any]]):
@@ -244,6 +369,7 @@ class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArr
         }
         self._buffers = self._new_observations()
         self._ended = np.zeros(num_envs, dtype=np.bool_)  # ended at the last step
+        self._no_resets = [False] * num_envs  # reset_first of the modes other than NextStep
         self._has_reset = False
         self._loop = ParallelLoop(self._sub, num_envs, min(threads, num_envs))
         self._finalizer = weakref.finalize(self, self._loop.close)
@@ -334,22 +460,36 @@ class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArr
             )
         sub = self._sub
         sub.stepping = True
-        sub.actions = actions
-        sub.reset_first = self._ended if mode is AutoresetMode.NEXT_STEP else self._no_resets()
+        sub.reset_first = (
+            self._ended.tolist() if mode is AutoresetMode.NEXT_STEP else self._no_resets
+        )
         sub.same_step = mode is AutoresetMode.SAME_STEP
         sub.finals = []
-        sub.observations = observations = self._observations_out()
-        self._loop.run()
-        rewards = np.array(sub.rewards, dtype=np.float64)
-        terminations = np.array(sub.terminations, dtype=np.bool_)
-        truncations = np.array(sub.truncations, dtype=np.bool_)
+        columns = sub.columns
+        if columns is None:
+            sub.observations = observations = self._observations_out()
+            sub.actions = actions
+            self._loop.run()
+            rewards = np.array(sub.rewards, dtype=np.float64)
+            terminations = np.array(sub.terminations, dtype=np.bool_)
+            truncations = np.array(sub.truncations, dtype=np.bool_)
+            finals = sorted(sub.finals, key=lambda f: f[0]) if sub.finals else ()
+            infos = self._batcher.batch(sub.infos, finals)
+        else:  # the fast way: rows of float64, as each sub-env's step converts its own
+            sub.actions = list(actions.astype(np.float64, copy=False))
+            sub.counted = sub.has_limits or sub.same_step
+            if self._loop.threads == 1:
+                sub.pass_fast()
+            else:
+                self._loop.run(sub.step_fast)
+            observations = columns.observe(sub.bases, None if self.copy else self._buffers)
+            rewards, terminations, truncations, infos = columns.batch(sub.results, sub.stepped_now)
+            if sub.finals:  # Gymnasium's final_obs and final_info, in the sub-envs' order
+                for i, observation, info in sorted(sub.finals, key=lambda f: f[0]):
+                    final = {"final_obs": observation, "final_info": info}
+                    infos = self._add_info(infos, final, i)
         self._ended = terminations | truncations
-        finals = sorted(sub.finals, key=lambda f: f[0]) if sub.finals else ()
-        infos = self._batcher.batch(sub.infos, finals)
         return observations, rewards, terminations, truncations, infos
-
-    def _no_resets(self) -> NDArray[np.bool_]:
-        return np.zeros(self.num_envs, dtype=np.bool_)
 
     # ------------------------------------------------------------------ the rest
     def render(self) -> tuple[Any, ...] | None:
@@ -385,36 +525,24 @@ class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArr
             env.close()
 
 
-class WIPDriveVectorEnv(WIPVectorEnv):
-    """``wip_gym/WIP-v0`` x ``num_envs`` (its ``vector_entry_point``)."""
+def _vector_env_class(env_id: str, name: str) -> type[WIPVectorEnv]:
+    """The class ``name``: :class:`WIPVectorEnv` of ``env_id``, the env's
+    ``vector_entry_point`` (``wip_gym/registration.py``), taking ``num_envs`` and the rest."""
 
-    def __init__(self, num_envs: int = 1, **kwargs: Any) -> None:
-        super().__init__("wip_gym/WIP-v0", num_envs, **kwargs)
+    def __init__(self: WIPVectorEnv, num_envs: int = 1, **kwargs: Any) -> None:
+        WIPVectorEnv.__init__(self, env_id, num_envs, **kwargs)
 
-
-class PlanarVectorEnv(WIPVectorEnv):
-    """``wip_gym/Planar-v0`` x ``num_envs`` (its ``vector_entry_point``)."""
-
-    def __init__(self, num_envs: int = 1, **kwargs: Any) -> None:
-        super().__init__("wip_gym/Planar-v0", num_envs, **kwargs)
-
-
-class PlanarTrayVectorEnv(WIPVectorEnv):
-    """``wip_gym/PlanarTray-v0`` x ``num_envs`` (its ``vector_entry_point``)."""
-
-    def __init__(self, num_envs: int = 1, **kwargs: Any) -> None:
-        super().__init__("wip_gym/PlanarTray-v0", num_envs, **kwargs)
+    namespace = {
+        "__init__": __init__,
+        "__doc__": f"``{env_id}`` x ``num_envs`` (its ``vector_entry_point``).",
+        "__module__": __name__,
+        "__qualname__": name,
+    }
+    return type(name, (WIPVectorEnv,), namespace)
 
 
-class KrangVectorEnv(WIPVectorEnv):
-    """``wip_gym/Krang-v0`` x ``num_envs`` (its ``vector_entry_point``)."""
-
-    def __init__(self, num_envs: int = 1, **kwargs: Any) -> None:
-        super().__init__("wip_gym/Krang-v0", num_envs, **kwargs)
-
-
-class KrangTrayVectorEnv(WIPVectorEnv):
-    """``wip_gym/KrangTray-v0`` x ``num_envs`` (its ``vector_entry_point``)."""
-
-    def __init__(self, num_envs: int = 1, **kwargs: Any) -> None:
-        super().__init__("wip_gym/KrangTray-v0", num_envs, **kwargs)
+WIPDriveVectorEnv = _vector_env_class("wip_gym/WIP-v0", "WIPDriveVectorEnv")
+PlanarVectorEnv = _vector_env_class("wip_gym/Planar-v0", "PlanarVectorEnv")
+PlanarTrayVectorEnv = _vector_env_class("wip_gym/PlanarTray-v0", "PlanarTrayVectorEnv")
+KrangVectorEnv = _vector_env_class("wip_gym/Krang-v0", "KrangVectorEnv")
+KrangTrayVectorEnv = _vector_env_class("wip_gym/KrangTray-v0", "KrangTrayVectorEnv")

@@ -18,7 +18,8 @@ from collections.abc import Callable
 
 class ParallelLoop:
     """``body(i)`` for ``i`` in ``range(count)`` on ``threads`` threads (the caller's one of
-    them) at each :meth:`run`; ``threads=1`` runs in the caller alone.
+    them) at each :meth:`run` (or another body for one pass, ``run(body)``); ``threads=1``
+    runs in the caller alone.
 
     An exception of ``body`` is raised by :meth:`run` once every index has been handed out and
     the threads have stopped (the lowest index's, if several raised).
@@ -28,6 +29,7 @@ class ParallelLoop:
         if count < 1 or threads < 1:
             raise ValueError(f"count and threads must be >= 1, got {count}, {threads}")
         self._body = body
+        self._pass_body = body  # this pass's
         self._count = count
         self._counter = itertools.count()
         self._errors: list[tuple[int, BaseException]] = []
@@ -53,7 +55,7 @@ class ParallelLoop:
         return len(self._threads) + 1
 
     def _drain(self) -> None:
-        count, counter, body = self._count, self._counter, self._body
+        count, counter, body = self._count, self._counter, self._pass_body
         while True:
             i = next(counter)  # atomic under the GIL
             if i >= count:
@@ -72,12 +74,12 @@ class ParallelLoop:
             self._drain()
             done.release()
 
-    def run(self) -> None:
-        """One pass over every index."""
+    def run(self, body: Callable[[int], None] | None = None) -> None:
+        """One pass over every index, of ``body`` if given (else the loop's own)."""
         if self._closed:
             raise RuntimeError("the loop is closed")
+        body = self._body if body is None else body
         if not self._threads:  # one thread: a plain loop
-            body = self._body
             for i in range(self._count):
                 try:
                     body(i)
@@ -85,6 +87,7 @@ class ParallelLoop:
                     self._errors.append((i, error))
         else:
             self._counter = itertools.count()
+            self._pass_body = body
             for start in self._starts:
                 start.release()
             self._drain()
