@@ -1,0 +1,80 @@
+"""Where a free tray rests on the hands at this episode's pose (docs/upright.md §6).
+
+A controller's nominal model welds a free tray where it rested on the hands when the env's
+model was built (``controllers.policy.controller_model``). At each reset the env lets the tray
+settle again on its supports at the noisy reset pose (``wip_gym.envs.base``,
+``TraySettler``): on Krang the reset noise moves the two grippers' finger plates against each
+other by a few mm, which turns the tray by up to 2 to 3 deg about its forward axis against the
+nominal weld, as much as the friction angle of a cup at ``mu = 0.05``. The controller knows
+the tray and the plates (the scenario's, ``TaskInfo.free_tray``), not how the contacts stand:
+:class:`TraySeat` settles the tray on the plates of its own kinematics at the reset pose, as
+the env does, and moves the nominal model's weld there, so that the tray frame the controller
+plans with is the one the cup stands on.
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+
+from wip_gym.robot_model import RobotModel
+from wip_gym.scene import (
+    TRAY_RESET_MAX_SPEED,
+    TRAY_RESET_SETTLE_TIME,
+    SceneOptions,
+    TraySettler,
+    support_model,
+)
+
+Array = NDArray[np.float64]
+TRAY_BODY = "tray"
+
+
+class TraySeat:
+    """Re-seats the welded tray of ``robot``'s model on the supports of ``options`` (a free
+    tray's scene options) at a pose (module docstring). The weld it starts each settling from
+    is the model's at construction, as the env's from its build-time rest place."""
+
+    def __init__(self, robot: RobotModel, options: SceneOptions) -> None:
+        if options.tray_attachment != "free":
+            raise ValueError(f"a free tray's scene options, got {options.tray_attachment!r}")
+        m = robot.model
+        self.body = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, TRAY_BODY)
+        if self.body < 0:
+            raise ValueError("the controller's model has no tray body to seat")
+        self.mount = int(m.body_parentid[self.body])
+        self.robot = robot
+        self._pos = m.body_pos[self.body].copy()
+        self._quat = m.body_quat[self.body].copy()
+        self.model = support_model(options)
+        self.data = mujoco.MjData(self.model)
+        self.settler = TraySettler(self.model, options)
+        self._mount = self.model.body(m.body(self.mount).name).id
+        self._nq = robot.layout.nq
+
+    def seat(self, qpos: Array) -> tuple[Array, Array]:
+        """Settle the tray on the supports at the robot pose ``qpos`` (the robot's ``nq``
+        entries) and weld it there in the robot's model; returns the weld ``(pos, quat)`` in
+        the mount body's frame."""
+        qpos = np.asarray(qpos, dtype=float)
+        if qpos.shape != (self._nq,) or not np.all(np.isfinite(qpos)):
+            raise ValueError(f"qpos must be {self._nq} finite numbers, got shape {qpos.shape}")
+        d, body = self.data, self._mount
+        d.qpos[: self._nq] = qpos
+        mujoco.mj_kinematics(self.model, d)
+        R = d.xmat[body].reshape(3, 3)
+        start = d.xpos[body] + R @ self._pos
+        quat = np.zeros(4)
+        mujoco.mju_mulQuat(quat, d.xquat[body], self._quat)
+        position, world_quat = self.settler.settle(
+            d, start, quat, TRAY_RESET_SETTLE_TIME, TRAY_RESET_MAX_SPEED
+        )
+        inverse, relative = np.zeros(4), np.zeros(4)
+        mujoco.mju_negQuat(inverse, d.xquat[body])
+        mujoco.mju_mulQuat(relative, inverse, world_quat)
+        pos = R.T @ (position - d.xpos[body])
+        m = self.robot.model
+        m.body_pos[self.body] = pos
+        m.body_quat[self.body] = relative
+        return pos, relative
