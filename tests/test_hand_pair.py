@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import wip_gym  # noqa: F401
-from controllers.high_level.tray_seat import TraySeat
+from controllers.high_level.tray_seat import TRAY_SINK_TIME, TraySeat
 from controllers.low_level.hand_pair import HandPair
 from controllers.low_level.motion_probe import MotionProbe
 from controllers.policy import controller_model, task_info
@@ -111,15 +111,36 @@ def test_bad_input_is_refused():
         HandPair(robot, a, b, 1.0, float("nan"), 1.0)
 
 
+def _held(env, steps: int) -> None:
+    """Step the env's physics ``steps`` times with the robot held at its pose, from the tray
+    at rest (the reset gives it the hand's noisy velocity) and the cup lifted 5 m clear."""
+    base = env.unwrapped
+    m, d = base.model, base.data
+    cup = m.joint("cup").qposadr[0]
+    d.qpos[cup + 2] += 5.0
+    robot_q = d.qpos[:25].copy()
+    tray_dof = int(m.joint("tray").dofadr[0])
+    d.qvel[tray_dof : tray_dof + 6] = 0.0
+    for _ in range(steps):
+        d.qpos[:25] = robot_q
+        d.qvel[:tray_dof] = 0.0
+        mujoco.mj_step(m, d)
+    mujoco.mj_kinematics(m, d)
+
+
 @pytest.mark.parametrize("rim", [0.0, 0.005])
-def test_the_seat_is_where_the_env_settled_the_tray(rim):
-    """The controller's nominal tray, seated at the reset pose, is the env's tray: same place
-    and frame of the plate's top, on seeds whose reset noise turns the tray differently."""
-    env = gym.make(ENV, tray_attachment="free", tray_rim=rim, mass_randomization=0.05)
+@pytest.mark.parametrize("sink_s", [0.0, TRAY_SINK_TIME])
+def test_the_seat_is_where_the_env_puts_the_tray(rim, sink_s):
+    """The controller's nominal tray, seated at the reset pose, is the env's tray: without
+    sinking, where the env placed it at reset; with it, where the env's tray is after as long
+    with the robot held still. Same place and frame of the plate's top, on seeds whose reset
+    noise turns the tray differently."""
+    env = gym.make(ENV, tray_attachment="free", tray_rim=rim)
     robot = RobotModel(controller_model(env, "nominal"))
     options = task_info(env, "nominal").free_tray
     assert options is not None and options.tray_rim == rim
-    seat = TraySeat(robot, options)
+    seat = TraySeat(robot, options, sink_s=sink_s)
+    assert robot.layout.nq == 25 == seat._tray_qpos
     site = robot.model.site("tray_top").id
     base = env.unwrapped
     env_site = base.model.site("tray_top").id
@@ -130,6 +151,7 @@ def test_the_seat_is_where_the_env_settled_the_tray(rim):
         before = robot.data.site_xmat[site].reshape(3, 3).copy()
         seat.seat(observation["qpos"])
         robot.update(observation["qpos"], observation["qvel"])
+        _held(env, round(sink_s / base.model.opt.timestep))
         np.testing.assert_allclose(
             robot.data.site_xpos[site], base.data.site_xpos[env_site], atol=1e-9
         )
