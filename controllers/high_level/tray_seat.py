@@ -10,7 +10,7 @@ the tray and the plates (the scenario's, ``TaskInfo.free_tray``), not how the co
 :class:`TraySeat` settles the tray on the plates of its own kinematics at the reset pose, as
 the env does, then lets it sink for :data:`TRAY_SINK_TIME` into the plates of the whole scene
 with the robot held still (the settler's fixed supports are stiffer than the arm's plates in
-the scene: the tray sinks about 4 mm more, and turns by up to 0.6 deg, within 0.1 s), and
+the scene: the tray sinks about 4 mm more, and turns by up to 0.7 deg, within 0.1 s), and
 moves the nominal model's weld there, so that the tray frame the controller plans with is the
 one the cup stands on.
 """
