@@ -79,15 +79,15 @@ class TraySeat:
 
     def seat(self, qpos: Array) -> tuple[Array, Array]:
         """Settle the tray on the supports at the robot pose ``qpos`` (the robot's ``nq``
-        entries) and weld it there in the robot's model; returns the weld ``(pos, quat)`` in
-        the mount body's frame."""
+        entries), let it sink (:meth:`_sink`) and weld it there in the robot's model; returns
+        the weld ``(pos, quat)`` in the mount body's frame."""
         qpos = np.asarray(qpos, dtype=float)
         if qpos.shape != (self._nq,) or not np.all(np.isfinite(qpos)):
             raise ValueError(f"qpos must be {self._nq} finite numbers, got shape {qpos.shape}")
         d, body = self.data, self._mount
         d.qpos[: self._nq] = qpos
         mujoco.mj_kinematics(self.model, d)
-        R = d.xmat[body].reshape(3, 3)
+        R = d.xmat[body].reshape(3, 3).copy()
         start = d.xpos[body] + R @ self._pos
         quat = np.zeros(4)
         mujoco.mju_mulQuat(quat, d.xquat[body], self._quat)
@@ -105,8 +105,8 @@ class TraySeat:
         return pos, relative
 
     def _sink(self, qpos: Array, position: Array, quat: Array) -> tuple[Array, Array]:
-        """The tray's pose after :data:`TRAY_SINK_TIME` in the whole scene from ``(position,
-        quat)`` (world) with the robot held at ``qpos``."""
+        """The tray's pose after ``sink_s`` in the whole scene from ``(position, quat)``
+        (world), at rest, with the robot held at ``qpos``."""
         m, d, a = self.scene, self.scene_data, self._tray_qpos
         mujoco.mj_resetData(m, d)
         if self._cup_qpos is not None:
