@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 
 from wip_gym.envs.base import wip_env
 from wip_gym.robot_model import RobotModel
-from wip_gym.scene import build_model
+from wip_gym.scene import SceneOptions, build_model
 
 ModelChoice = Literal["nominal", "oracle"]
 
@@ -65,6 +65,9 @@ class TaskInfo:
         control_dt: the env's step (s).
         torque_low, torque_high: the action bounds (the actuators' torque limits).
         model_choice: ``nominal`` or ``oracle`` (recorded in the scenario).
+        free_tray: with a free tray, the scene options it was built from (the designer knows
+            the tray, its supports and their friction, not how the contacts stand); None
+            otherwise.
     """
 
     goal: NDArray[np.float64]
@@ -73,6 +76,7 @@ class TaskInfo:
     torque_low: NDArray[np.float64]
     torque_high: NDArray[np.float64]
     model_choice: ModelChoice
+    free_tray: SceneOptions | None = None
 
 
 def controller_model(env: gym.Env, choice: ModelChoice) -> mujoco.MjModel:
@@ -105,6 +109,7 @@ def task_info(env: gym.Env, choice: ModelChoice) -> TaskInfo:
         torque_low=np.asarray(base.action_space.low, dtype=np.float64),
         torque_high=np.asarray(base.action_space.high, dtype=np.float64),
         model_choice=choice,
+        free_tray=base.scene_options if base.scene_options.tray_attachment == "free" else None,
     )
 
 

@@ -42,6 +42,8 @@ from controllers.hierarchical import HierarchicalConfig, HierarchicalController
 from controllers.high_level.planning import PlanConfig
 from controllers.high_level.receding_horizon import HighLevelConfig
 from controllers.high_level.tray_reference import TrayGains, TrayReference, plan_acceleration
+from controllers.high_level.tray_seat import TraySeat
+from controllers.low_level.hand_pair import HandPair
 from controllers.low_level.object_balance import CarriedObject, ObjectBalance
 from controllers.low_level.object_tasks import (
     AxleAccelerationTask,
@@ -68,6 +70,9 @@ class UprightConfig(HierarchicalConfig):
         carried: what the controller is told about the cup (its friction None: the env's).
         tray: the tray targets' lead and outer-loop gains.
         tangential_weight: weight of the cup's tangential specific force (in g) toward zero.
+        two_hand_tangential_weight: the same with a tray held by two hands (Krang): at 3000
+            the task outweighed the hands' position tasks and walked both hands off their
+            places, the body's oscillation growing until the tray fell (docs/upright.md §6).
         drive_weight: weight of the axle's acceleration toward the MPC's prediction (m/s^2).
         slack_weight: weight of a balance row's slack in the weighted QP (the rows are in units
             of the cup's weight: 1e6 makes a slack of 1e-3 cost as much as a 1 m/s^2 error of a
@@ -78,21 +83,40 @@ class UprightConfig(HierarchicalConfig):
             about 0.1 s (the lead).
         hand_observer_bandwidth: None: the tilt targets move the hands on purpose; an
             observer of their unmodelled acceleration read that as a disturbance.
+        seat_tray: a free tray: weld the nominal model's tray where it settles on the hand's
+            supports at each reset pose (``controllers.high_level.tray_seat``).
+        hand_pair_weight, hand_pair_kp, hand_pair_kv: with two hands under the tray (Krang),
+            the second hand's pose relative to the first held at its reset value
+            (``controllers.low_level.hand_pair``; 0: not held). docs/upright.md §6 measured
+            them on KrangTray-v0 in the paper's configuration.
     """
 
     carried: CarriedObject = field(default_factory=CarriedObject)
     tray: TrayGains = field(default_factory=TrayGains)
     tangential_weight: float = 3000.0
+    two_hand_tangential_weight: float = 300.0
     drive_weight: float = 10.0
     slack_weight: float = 1e6
     ee_position_weight: float | tuple[float, float, float] = (0.1, 10.0, 10.0)
     orientation_kp: float = 400.0
     orientation_kv: float = 40.0
     hand_observer_bandwidth: float | None = None
+    seat_tray: bool = True
+    hand_pair_weight: float = 100.0
+    hand_pair_kp: float = 400.0
+    hand_pair_kv: float = 40.0
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        for name in ("tangential_weight", "drive_weight", "slack_weight"):
+        for name in (
+            "tangential_weight",
+            "two_hand_tangential_weight",
+            "drive_weight",
+            "slack_weight",
+            "hand_pair_weight",
+            "hand_pair_kp",
+            "hand_pair_kv",
+        ):
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} must be finite and >= 0, got {value!r}")
@@ -118,12 +142,18 @@ class UprightController(HierarchicalController):
         return "unified-upright"
 
     def reset(self, observation: dict[str, Array], info: dict[str, Any]) -> None:
+        if self.task.free_tray is not None and self.config.seat_tray:
+            # the nominal weld where the env's tray settled at this reset pose (tray_seat)
+            if getattr(self, "_seat", None) is None:
+                self._seat = TraySeat(self.robot, self.task.free_tray)
+            self._seat.seat(observation["qpos"][: self.robot.layout.nq])
         super().reset(observation, info)
         robot, cfg, m = self.robot, self.config, self.robot.model
         self._active = self._relaxed = 0
         self.priority_qp.slack_weight = cfg.slack_weight
         self.balance: ObjectBalance | None = None
         self.tray_reference: TrayReference | None = None
+        self.hand_pair: HandPair | None = None
         site = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, TRAY_TOP_SITE)
         if self.task.cup_friction is None or site < 0 or not self.orientation_tasks:
             return  # no cup on a tray: the unified controller with this config
@@ -132,12 +162,22 @@ class UprightController(HierarchicalController):
         self._tray_site = site
         # the cup's rows as objects of the task QP, computed in its one-call step: the
         # tangential force and the drive as tasks, the balance rows as its last constraint
+        # (with two hands, their pair's rows too: readable only, so Krang's QP runs the
+        # readable path)
+        two_hands = len(self._sites) == 2
+        weight = cfg.two_hand_tangential_weight if two_hands else cfg.tangential_weight
         self._drive = AxleAccelerationTask(cfg.drive_weight)
         self._qp_tasks = [
             *self.tasks,
-            TangentialForceTask(self.balance, robot, cfg.tangential_weight),
+            TangentialForceTask(self.balance, robot, weight),
             self._drive,
         ]
+        if two_hands and cfg.hand_pair_weight > 0:
+            left, right = self._sites
+            self.hand_pair = HandPair(
+                robot, left, right, cfg.hand_pair_weight, cfg.hand_pair_kp, cfg.hand_pair_kv
+            )
+            self._qp_tasks.append(self.hand_pair)
         self._qp_constraints = [*self.constraints, ObjectBalanceConstraint(self.balance, robot)]
         plate, plate_rotation, _, _ = site_in_axle_frame(robot, site)
         self._plate_reset = plate.copy()

@@ -529,6 +529,16 @@ class TraySettler:
         return d.qpos[:3].copy(), d.qpos[3:7].copy()
 
 
+def support_model(options: SceneOptions) -> mujoco.MjModel:
+    """The robot with a free tray's supports (Krang's finger plates, :func:`tray_support_geoms`)
+    and no tray: with :class:`TraySettler` on it, a controller finds where the tray rests on
+    the supports at a pose of its own kinematics, as the env places it at reset
+    (``controllers.high_level.tray_seat``)."""
+    spec = _robot_spec(options)
+    _add_supports(spec, options)
+    return spec.compile()
+
+
 def _settled_free_tray(options: SceneOptions) -> mujoco.MjSpec:
     """The spec with a free tray resting on its supports at the robot's reset pose
     (:func:`_settle_on_supports`): its settled pose is the tray body's initial pose and the

@@ -1,0 +1,170 @@
+"""Two hands held as one rigid support (controllers/low_level/hand_pair.py) and the free tray's
+seat on them (controllers/high_level/tray_seat.py), against MuJoCo.
+
+The relative velocity and drift of the hand pair's rows against central differences of
+MuJoCo's kinematics on random states of Krang that turn, pitch and move every joint; the
+tray's seat against the env's own tray, settled on the finger plates at reset."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+import pytest
+
+import wip_gym  # noqa: F401
+from controllers.high_level.tray_seat import TRAY_SINK_TIME, TraySeat
+from controllers.low_level.hand_pair import HandPair
+from controllers.low_level.motion_probe import MotionProbe
+from controllers.policy import controller_model, task_info
+from wip_gym.robot_model import RobotModel
+
+ENV = "wip_gym/KrangTray-v0"
+
+
+def _setup():
+    env = gym.make(ENV)
+    env.reset(seed=0)
+    model = env.unwrapped.model
+    robot = RobotModel(model)
+    robot.update(
+        env.unwrapped.data.qpos[: robot.layout.nq], env.unwrapped.data.qvel[: robot.layout.nv]
+    )
+    sites = [model.site(name).id for name in ("ee", "ee_right")]
+    return model, robot, sites
+
+
+def _rotation_rate(R_plus: np.ndarray, R_minus: np.ndarray, eps: float) -> np.ndarray:
+    """World angular velocity from two rotations ``2 eps`` apart (central difference)."""
+    quat, vector = np.zeros(4), np.zeros(3)
+    mujoco.mju_mat2Quat(quat, (R_plus @ R_minus.T).reshape(-1))
+    mujoco.mju_quat2Vel(vector, quat, 2 * eps)
+    return vector
+
+
+def test_the_rows_equal_differences_of_mujoco_kinematics():
+    model, robot, (a, b) = _setup()
+    pair = HandPair(robot, a, b, weight=2.0, kp=0.0, kv=0.0)
+    probe = MotionProbe(robot)
+    other = RobotModel(model)
+    rng = np.random.default_rng(4)
+    eps = 1e-6
+    for _ in range(5):
+        q = robot.q + rng.uniform(-0.3, 0.3, robot.layout.n_min)
+        nu = rng.uniform(-1.0, 1.0, robot.layout.n_min)
+        xy = rng.uniform(-1, 1, 2)
+        robot.update(*robot.full_state(q, nu, xy))
+        probe.update(robot)
+        J = pair.jacobian(robot)
+        step = eps * nu[0] * np.array([np.cos(robot.psi), np.sin(robot.psi)])
+        errors, rotations, rates = [], {a: [], b: []}, []
+        for sign in (1.0, -1.0):
+            other.update(*robot.full_state(q + sign * eps * nu, nu, xy + sign * step))
+            errors.append(pair.errors(other)[0])
+            for site in (a, b):
+                rotations[site].append(other.data.site_xmat[site].reshape(3, 3).copy())
+            rates.append(pair.jacobian(other) @ nu)
+        # the position error's rate is the rows' linear part
+        np.testing.assert_allclose(
+            J[:3] @ nu, (errors[0] - errors[1]) / (2 * eps), rtol=1e-6, atol=1e-7
+        )
+        # the angular part: w_b - w_a, each from its rotation's difference
+        w = [_rotation_rate(*rotations[site], eps) for site in (a, b)]
+        np.testing.assert_allclose(J[3:] @ nu, w[1] - w[0], rtol=1e-6, atol=1e-7)
+        # the drift: d/dt (J nu) at fixed nu
+        drift = (rates[0] - rates[1]) / (2 * eps)
+        assert np.abs(drift).max() > 0.05  # the states move: not trivially zero
+        np.testing.assert_allclose(pair.drift(robot, probe), drift, rtol=1e-5, atol=1e-6)
+        # the weighted rows: the PD law with these gains (0) is the drift itself
+        A, c = pair.rows(robot, probe)
+        np.testing.assert_allclose(A, 2.0 * J)
+        np.testing.assert_allclose(c, 2.0 * pair.drift(robot, probe))
+
+
+def test_the_pair_holds_only_the_relative_pose():
+    """Zero error at the pose it was made at and wherever only the wheels and the heading
+    change (the hands move together); an error when one arm moves."""
+    model, robot, (a, b) = _setup()
+    pair = HandPair(robot, a, b, weight=1.0, kp=1.0, kv=1.0)
+    position, rotation = pair.errors(robot)
+    assert np.abs(position).max() < 1e-12 and np.abs(rotation).max() < 1e-12
+    q, nu = robot.q.copy(), np.zeros(robot.layout.n_min)
+    q[0] += 0.4  # x
+    robot.update(*robot.full_state(q, nu, (0.3, -0.2)))
+    position, rotation = pair.errors(robot)
+    assert np.abs(position).max() < 1e-9 and np.abs(rotation).max() < 1e-9
+    q[-1] += 0.1  # the last joint: one arm's wrist
+    robot.update(*robot.full_state(q, nu, (0.3, -0.2)))
+    position, rotation = pair.errors(robot)
+    assert np.abs(np.concatenate([position, rotation])).max() > 1e-3
+
+
+def test_bad_input_is_refused():
+    model, robot, (a, b) = _setup()
+    with pytest.raises(ValueError, match="two different sites"):
+        HandPair(robot, a, a, 1.0, 1.0, 1.0)
+    with pytest.raises(ValueError, match="not a site"):
+        HandPair(robot, a, model.nsite, 1.0, 1.0, 1.0)
+    with pytest.raises(ValueError, match="kp"):
+        HandPair(robot, a, b, 1.0, float("nan"), 1.0)
+
+
+def _held(env, steps: int) -> None:
+    """Step the env's physics ``steps`` times with the robot held at its pose, from the tray
+    at rest (the reset gives it the hand's noisy velocity) and the cup lifted 5 m clear."""
+    base = env.unwrapped
+    m, d = base.model, base.data
+    cup = m.joint("cup").qposadr[0]
+    d.qpos[cup + 2] += 5.0
+    robot_q = d.qpos[:25].copy()
+    tray_dof = int(m.joint("tray").dofadr[0])
+    d.qvel[tray_dof : tray_dof + 6] = 0.0
+    for _ in range(steps):
+        d.qpos[:25] = robot_q
+        d.qvel[:tray_dof] = 0.0
+        mujoco.mj_step(m, d)
+    mujoco.mj_kinematics(m, d)
+
+
+@pytest.mark.parametrize("rim", [0.0, 0.005])
+@pytest.mark.parametrize("sink_s", [0.0, TRAY_SINK_TIME])
+def test_the_seat_is_where_the_env_puts_the_tray(rim, sink_s):
+    """The controller's nominal tray, seated at the reset pose, is the env's tray: without
+    sinking, where the env placed it at reset; with it, where the env's tray is after as long
+    with the robot held still. Same place and frame of the plate's top, on seeds whose reset
+    noise turns the tray differently."""
+    env = gym.make(ENV, tray_attachment="free", tray_rim=rim)
+    robot = RobotModel(controller_model(env, "nominal"))
+    options = task_info(env, "nominal").free_tray
+    assert options is not None and options.tray_rim == rim
+    seat = TraySeat(robot, options, sink_s=sink_s)
+    assert robot.layout.nq == 25 == seat._tray_qpos
+    site = robot.model.site("tray_top").id
+    base = env.unwrapped
+    env_site = base.model.site("tray_top").id
+    turns = []
+    for seed in range(4):
+        observation, _ = env.reset(seed=seed)
+        robot.update(observation["qpos"], observation["qvel"])
+        before = robot.data.site_xmat[site].reshape(3, 3).copy()
+        seat.seat(observation["qpos"])
+        robot.update(observation["qpos"], observation["qvel"])
+        _held(env, round(sink_s / base.model.opt.timestep))
+        np.testing.assert_allclose(
+            robot.data.site_xpos[site], base.data.site_xpos[env_site], atol=1e-9
+        )
+        R = robot.data.site_xmat[site].reshape(3, 3)
+        np.testing.assert_allclose(R, base.data.site_xmat[env_site].reshape(3, 3), atol=1e-9)
+        turns.append(np.degrees(np.arccos(np.clip((np.trace(R @ before.T) - 1) / 2, -1, 1))))
+    assert max(turns) > 0.5  # the nominal weld was off by more than half a degree
+
+
+def test_a_welded_tray_has_no_seat():
+    env = gym.make(ENV, tray_attachment="welded")
+    assert task_info(env, "nominal").free_tray is None
+    robot = RobotModel(controller_model(env, "nominal"))
+    options = dataclasses.replace(env.unwrapped.scene_options, tray_attachment="welded")
+    with pytest.raises(ValueError, match="free tray"):
+        TraySeat(robot, options)
