@@ -80,7 +80,8 @@ class UprightConfig(HierarchicalConfig):
         ee_position_weight: (forward, lateral, up) 0.1, 10, 10: the hand may move along the
             axle's forward axis, which the tray's tilt about the plate's centre needs.
         orientation_kp, orientation_kv: 400, 40: the tray follows its tilt target within
-            about 0.1 s (the lead).
+            about 0.1 s (the targets lead by ``tray.lead``, which covers this lag and the
+            body's).
         hand_observer_bandwidth: None: the tilt targets move the hands on purpose; an
             observer of their unmodelled acceleration read that as a disturbance.
         seat_tray: a free tray: weld the nominal model's tray where it settles on the hand's
@@ -192,7 +193,7 @@ class UprightController(HierarchicalController):
             normal=plate_rotation[:, 2],
         )
         # the tray's targets at the MPC's rate (its acceleration changes no faster; the drift
-        # loop's bandwidth, 2 rad/s, is far below 100 Hz)
+        # loop's bandwidth, about 1 rad/s, is far below 100 Hz)
         self._tray_every = max(1, round(self.high_level.config.mpc.dt / self.task.control_dt))
         self._set_tray_targets(robot)
 

@@ -12,6 +12,7 @@ import pytest
 
 import wip_gym  # noqa: F401
 from benchmarks.overrides import resolve_run
+from benchmarks.rollout import run_configured_episode
 from controllers.high_level.planning import PlanConfig
 from controllers.registry import controller_names, default_config, make_policy
 from controllers.upright import UprightConfig, UprightController
@@ -108,3 +109,16 @@ def test_strict_priorities_run_the_cup_aware_stack():
     assert policy.config.priority == "strict"
     assert policy.controller_counters()["qp_fallbacks"] == 0
     assert dataclasses.replace(policy.config, priority="weighted").priority == "weighted"
+
+
+def test_it_reaches_the_goal_with_the_plan_on_the_aggressive_drive():
+    """The claim map's cell (friction 0.05, no cap, 5 % mass randomisation), seed 0, 8 s: the
+    cup carried and the goal criterion (benchmarks/metrics.py) met by 4.0 s, the issue's
+    target, where the plan's own reference meets it at 3.7 s (docs/controllers.md §3.1). With
+    the drift loop's former gains (kp 4, kv 4, lead 0.1) it met it at 5.3 s, oscillating about
+    the goal with the body (docs/upright.md §5)."""
+    overrides = {**AGGRESSIVE, "env.mass_randomization": 0.05, "env.tray_attachment": "welded"}
+    row = run_configured_episode("wip_gym/PlanarTray-v0", "unified-upright", overrides, 0, 8.0)
+    assert row["outcome"] == "carried", row["outcome"]
+    assert row["cup_friction_use_p99"] < 0.8, row["cup_friction_use_p99"]
+    assert row["goal_reached"] and row["time_to_goal_s"] <= 4.0, row["time_to_goal_s"]

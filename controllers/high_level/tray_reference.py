@@ -71,21 +71,28 @@ def plan_acceleration(plan: Plan, t: float) -> tuple[float, float]:
 
 @dataclass(frozen=True)
 class TrayGains:
-    """The cascade's settings (docs/upright.md §3 measured them on PlanarTray-v0's aggressive
-    drive).
+    """The cascade's settings (docs/upright.md §3 and §5 measured them on PlanarTray-v0's
+    aggressive drive).
 
     Attributes:
-        lead: how far ahead the plan's acceleration is read (s): the orientation tasks' lag.
-        kp, kv: the outer loop's gains on the tray's drift over the axle (1/s^2, 1/s).
+        lead: how far ahead the plan's acceleration is read (s): the orientation tasks' lag
+            and the body's. 0.25: at friction 0.05 the mean time to goal is 3.75 s; 0.1 to 0.2
+            (kp 1, kv 1.5) leaves some seeds about the goal past 4.2 s, 0.3 raised one seed's
+            p99 friction use to 0.84 (docs/upright.md §5).
+        kp, kv: the outer loop's gains on the tray's drift over the axle (1/s^2, 1/s). 1 and
+            1.5: a stiffer loop oscillates with the body about the goal (kp 4, kv 4: time to
+            goal 5.3 to 7.9 s) or drops the cup (kv 8); a softer one let the body fall in one
+            seed (kp 1, kv 1). The tray then leaves its place over the axle by up to 23 cm
+            during the drive (docs/upright.md §5).
         max_tilt_deg: the tilt's bound (deg).
         level_s: a tray that rests tilted at reset is levelled over this time (s), along a
             smooth step (a free tray on Krang's finger plates rests 3 to 4 deg off level: turned
             level at once, the turn's own acceleration slid the cup within 20 ms).
     """
 
-    lead: float = 0.1
-    kp: float = 4.0
-    kv: float = 4.0
+    lead: float = 0.25
+    kp: float = 1.0
+    kv: float = 1.5
     max_tilt_deg: float = 35.0
     level_s: float = 1.0
 
