@@ -68,7 +68,11 @@ class UprightConfig(HierarchicalConfig):
 
     Attributes:
         carried: what the controller is told about the cup (its friction None: the env's).
-        tray: the tray targets' lead and outer-loop gains.
+        tray: the tray targets' lead and outer-loop gains (one hand: PlanarTray-v0).
+        two_hand_tray: the same with a tray held by two hands (Krang): lead 0.1 s, kp 4,
+            kv 4. The one hand's softer loop (kp 1, kv 1.5, lead 0.25) let Krang's body and
+            free tray oscillate: in the paper's configuration at friction 0.05 it carried 4
+            of 10 (3 fell) where these carry 8 (docs/upright.md §6).
         tangential_weight: weight of the cup's tangential specific force (in g) toward zero.
         two_hand_tangential_weight: the same with a tray held by two hands (Krang): at 3000
             the task outweighed the hands' position tasks and walked both hands off their
@@ -94,6 +98,7 @@ class UprightConfig(HierarchicalConfig):
 
     carried: CarriedObject = field(default_factory=CarriedObject)
     tray: TrayGains = field(default_factory=TrayGains)
+    two_hand_tray: TrayGains = field(default_factory=lambda: TrayGains(lead=0.1, kp=4.0, kv=4.0))
     tangential_weight: float = 3000.0
     two_hand_tangential_weight: float = 300.0
     drive_weight: float = 10.0
@@ -189,7 +194,7 @@ class UprightController(HierarchicalController):
             plate,
             [task.target.copy() for task in self._hands],
             [rotation.copy() for rotation in self._orientation_reset],
-            cfg.tray,
+            cfg.two_hand_tray if two_hands else cfg.tray,
             normal=plate_rotation[:, 2],
         )
         # the tray's targets at the MPC's rate (its acceleration changes no faster; the drift

@@ -122,3 +122,26 @@ def test_it_reaches_the_goal_with_the_plan_on_the_aggressive_drive():
     assert row["outcome"] == "carried", row["outcome"]
     assert row["cup_friction_use_p99"] < 0.8, row["cup_friction_use_p99"]
     assert row["goal_reached"] and row["time_to_goal_s"] <= 4.0, row["time_to_goal_s"]
+
+
+@pytest.mark.parametrize("env_id", ["wip_gym/PlanarTray-v0", "wip_gym/KrangTray-v0"])
+def test_one_hand_and_two_hands_follow_their_own_tray_gains(env_id):
+    """A tray on one hand takes ``tray``, one on two hands (Krang) ``two_hand_tray``, with its
+    hand pair and tangential weight; each set read from the config, not fixed in the code."""
+    config = dataclasses.replace(
+        default_config("unified-upright"),
+        tray=dataclasses.replace(default_config("unified-upright").tray, kp=2.5),
+        two_hand_tray=dataclasses.replace(default_config("unified-upright").two_hand_tray, kv=3.5),
+    )
+    env = gym.make(env_id)
+    observation, info = env.reset(seed=0)
+    policy = make_policy("unified-upright", env, config)
+    policy.reset(observation, info)
+    two_hands = env_id == "wip_gym/KrangTray-v0"
+    gains = policy.tray_reference.gains
+    assert gains == (config.two_hand_tray if two_hands else config.tray)
+    assert (gains.kv == 3.5) if two_hands else (gains.kp == 2.5)
+    assert (policy.hand_pair is not None) == two_hands
+    tangential = [t for t in policy._qp_tasks if type(t).__name__ == "TangentialForceTask"]
+    weight = config.two_hand_tangential_weight if two_hands else config.tangential_weight
+    assert [t.weight for t in tangential] == [weight]
