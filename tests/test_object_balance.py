@@ -187,3 +187,13 @@ def test_a_support_that_does_not_hold_the_centre_of_mass_is_refused():
         CarriedObject(friction=0.0)
     with pytest.raises(ValueError, match="margin"):
         CarriedObject(margin=1.0)
+
+
+@pytest.mark.parametrize(
+    "env_id",
+    ["wip_gym/WIP-v0", "wip_gym/Planar-v0", "wip_gym/PlanarTray-v0", "wip_gym/KrangTray-v0"],
+)
+def test_every_model_keeps_the_gravity_the_rows_assume(env_id):
+    """The rows divide by ``wip_gym.scene.GRAVITY``: every model's ``opt.gravity`` is it."""
+    model = gym.make(env_id).unwrapped.model
+    np.testing.assert_array_equal(model.opt.gravity, [0.0, 0.0, -GRAVITY])

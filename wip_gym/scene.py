@@ -43,6 +43,9 @@ from wip_gym.assets import mjcf_path
 from wip_gym.robot_model import RobotModel
 from wip_gym.robots import robot_spec
 
+#: m/s^2, MuJoCo's default ``opt.gravity`` (0, 0, -9.81), which every model of the gym keeps
+#: (tests/test_object_balance.py); what the controllers' models of a carried object assume
+GRAVITY = 9.81
 TRAY_HALF_SIZE = (0.15, 0.10, 0.005)  # 0.30 x 0.20 m plate, 1 cm thick
 TRAY_MASS = 0.2  # the whole tray, rim included
 TRAY_RIM_THICKNESS = 0.005  # the authors' rim wall (inner floor 0.29 x 0.19 m)

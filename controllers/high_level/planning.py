@@ -40,6 +40,7 @@ from controllers.simplified.wipm_problem import (
     ddp_solver_for,
     refs_for,
 )
+from wip_gym.scene import GRAVITY
 
 A_MAX_SPELLINGS = ("cup_safe", "none")
 #: a plan has arrived within 1 cm of the goal (m), slower than 1 cm/s and 0.01 rad/s
@@ -176,7 +177,7 @@ class PlanConfig:
             raise ValueError(f"horizon {self.horizon_s} s is not a whole number of {self.dt} s")
         return int(round(steps))
 
-    def acceleration_bound(self, cup_friction: float | None, gravity: float = 9.81) -> float:
+    def acceleration_bound(self, cup_friction: float | None, gravity: float = GRAVITY) -> float:
         """The cap on the axle's horizontal acceleration (m/s^2; ``inf`` for ``"none"``)."""
         if self.a_max == "none":
             return float("inf")

@@ -32,9 +32,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from controllers.high_level.planning import Plan
+from wip_gym.scene import GRAVITY
 
 Array = NDArray[np.float64]
-GRAVITY = 9.81
 
 
 def tilt_toward(acceleration: Array, max_tilt_deg: float) -> Array:

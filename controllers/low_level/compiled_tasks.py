@@ -54,6 +54,7 @@ from wip_gym.array_table import (
     float_vector,
     int_vector,
 )
+from wip_gym.scene import GRAVITY
 
 THETA, SPIN, POSITION, ORIENTATION, POSTURE, ACCELERATION_BOUND = 0, 1, 2, 3, 4, 5
 TANGENTIAL_FORCE, AXLE_ACCELERATION, OBJECT_BALANCE = 6, 7, 8
@@ -634,10 +635,6 @@ def acceleration_bound_rows(
         upper[row] = p[count + row]
 
 
-#: the standard gravity the object's rows are scaled by (``object_balance.GRAVITY``)
-_GRAVITY = 9.81
-
-
 @njit(cache=True)
 def _tray_point(
     table: np.ndarray, i: int, x: float, y: float, z: float, JJ: np.ndarray, out: np.ndarray
@@ -707,8 +704,8 @@ def tangential_force_rows(
     for row in range(2):  # R^T's rows 0 and 1: R's columns
         a0, a1, a2 = R[row], R[3 + row], R[6 + row]
         for j in range(J.shape[1]):
-            J[row, j] = (a0 * JJ[0, j] + a1 * JJ[1, j] + a2 * JJ[2, j]) / _GRAVITY
-        jdot_nu[row] = (a0 * d[0] + a1 * d[1] + a2 * (d[2] + _GRAVITY)) / _GRAVITY
+            J[row, j] = (a0 * JJ[0, j] + a1 * JJ[1, j] + a2 * JJ[2, j]) / GRAVITY
+        jdot_nu[row] = (a0 * d[0] + a1 * d[1] + a2 * (d[2] + GRAVITY)) / GRAVITY
         target[row] = 0.0
         w[row] = p[2]
 
@@ -755,10 +752,10 @@ def object_balance_rows(
     W = np.empty(6)
     for j in range(G.shape[1]):
         for k in range(3):  # R^T J_c / g, I R^T J_r / g
-            W[k] = (R[k] * JJ[0, j] + R[3 + k] * JJ[1, j] + R[6 + k] * JJ[2, j]) / _GRAVITY
+            W[k] = (R[k] * JJ[0, j] + R[3 + k] * JJ[1, j] + R[6 + k] * JJ[2, j]) / GRAVITY
             W[3 + k] = (
                 inertia[k] * (R[k] * JJ[3, j] + R[3 + k] * JJ[4, j] + R[6 + k] * JJ[5, j])
-            ) / _GRAVITY
+            ) / GRAVITY
         for row in range(count):
             total = 0.0
             for k in range(6):
@@ -770,11 +767,11 @@ def object_balance_rows(
         t[k] = R[k] * omega[0] + R[3 + k] * omega[1] + R[6 + k] * omega[2]
     It0, It1, It2 = inertia[0] * t[0], inertia[1] * t[1], inertia[2] * t[2]
     gyro = (t[1] * It2 - t[2] * It1, t[2] * It0 - t[0] * It2, t[0] * It1 - t[1] * It0)
-    d2 = d[2] + _GRAVITY
+    d2 = d[2] + GRAVITY
     for k in range(3):
-        W[k] = (R[k] * d[0] + R[3 + k] * d[1] + R[6 + k] * d2) / _GRAVITY
+        W[k] = (R[k] * d[0] + R[3 + k] * d[1] + R[6 + k] * d2) / GRAVITY
         spin = R[k] * drift[0] + R[3 + k] * drift[1] + R[6 + k] * drift[2]
-        W[3 + k] = (inertia[k] * spin + gyro[k]) / _GRAVITY
+        W[3 + k] = (inertia[k] * spin + gyro[k]) / GRAVITY
     for row in range(count):
         total = 0.0
         for k in range(6):

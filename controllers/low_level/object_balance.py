@@ -48,10 +48,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wip_gym.robot_model import RobotModel
-from wip_gym.scene import CUP_FOOT_RADIUS, CUP_HALF_HEIGHT, CUP_RADIUS
+from wip_gym.scene import CUP_FOOT_RADIUS, CUP_HALF_HEIGHT, CUP_RADIUS, GRAVITY
 
 Array = NDArray[np.float64]
-GRAVITY = 9.81
 
 
 def _cup_support() -> tuple[tuple[float, float], ...]:
