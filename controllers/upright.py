@@ -168,8 +168,7 @@ class UprightController(HierarchicalController):
         self._tray_site = site
         # the cup's rows as objects of the task QP, computed in its one-call step: the
         # tangential force and the drive as tasks, the balance rows as its last constraint
-        # (with two hands, their pair's rows too: readable only, so Krang's QP runs the
-        # readable path)
+        # (with two hands, their pair's rows too)
         two_hands = len(self._sites) == 2
         weight = cfg.two_hand_tangential_weight if two_hands else cfg.tangential_weight
         self._drive = AxleAccelerationTask(cfg.drive_weight)

@@ -168,3 +168,42 @@ def test_a_welded_tray_has_no_seat():
     options = dataclasses.replace(env.unwrapped.scene_options, tray_attachment="welded")
     with pytest.raises(ValueError, match="free tray"):
         TraySeat(robot, options)
+
+
+def test_the_compiled_rows_equal_the_readable_rows():
+    """``compiled_tasks.hand_pair_rows`` (the task QP's one-call step) against the readable rows
+    (``J``, ``jdot_nu``, the target and the weights) to 1e-12 of their scale, on random states
+    of Krang on and off the rolling manifold, with the pair held away from its reset pose."""
+    from controllers.low_level.task_qp import QPSettings, TaskQP
+
+    model, robot, (a, b) = _setup()
+    pair = HandPair(robot, a, b, weight=3.0, kp=400.0, kv=40.0)
+    low, high = model.actuator_ctrlrange.T.copy()
+    compiled = TaskQP(robot, low, high, QPSettings())
+    readable = TaskQP(robot, low, high, QPSettings(compiled_tasks=False))
+    rng = np.random.default_rng(7)
+    lay = robot.layout
+    q0 = robot.q.copy()
+    for step in range(8):
+        q = q0 + rng.uniform(-0.3, 0.3, lay.n_min)
+        nu = rng.uniform(-1.0, 1.0, lay.n_min)
+        qpos, qvel = robot.full_state(q, nu, rng.uniform(-1, 1, 2))
+        if step % 2:  # off the manifold, as the closed loop's measured states are
+            qpos = qpos + 1e-5 * rng.normal(size=qpos.shape)
+            qvel = qvel + 2e-3 * rng.normal(size=qvel.shape)
+            qpos[3:7] /= np.linalg.norm(qpos[3:7])
+        robot.update(qpos, qvel)
+        kernels = []
+        for qp in (compiled, readable):
+            qp.assemble(robot, None, [pair], [])
+            kernels.append(qp.kernel)
+        assert compiled.compiled and not readable.compiled
+        ours, theirs = kernels
+        for name in ("J", "target", "jdot_nu", "w"):
+            actual, expected = getattr(ours, name), getattr(theirs, name)
+            scale = max(1.0, float(np.abs(expected).max()))
+            np.testing.assert_allclose(actual, expected, rtol=0.0, atol=1e-12 * scale, err_msg=name)
+        # the rows are not trivially zero: the pair is away from its pose and moving
+        position, rotation = pair.errors(robot)
+        assert np.abs(position).max() > 1e-3 and np.abs(rotation).max() > 1e-3
+        assert np.abs(theirs.jdot_nu).max() > 1e-3 and np.abs(theirs.target).max() > 1e-1

@@ -58,6 +58,7 @@ from wip_gym.scene import GRAVITY
 
 THETA, SPIN, POSITION, ORIENTATION, POSTURE, ACCELERATION_BOUND = 0, 1, 2, 3, 4, 5
 TANGENTIAL_FORCE, AXLE_ACCELERATION, OBJECT_BALANCE = 6, 7, 8
+HAND_PAIR = 9
 """The compiled kinds (a task class's ``compiled_kind``; :func:`kind_rows` calls each one's
 function)."""
 
@@ -72,6 +73,7 @@ ITEM, ITEM_FIELDS = field_offsets(
         ("column", 1),  # its first column (posture-like items)
         ("site", 1),  # its site slot (-1: none)
         ("observer", 1),  # its observer slot (-1: none)
+        ("paired_site", 1),  # its second site's slot (-1: none; a hand pair's hand b)
     ),
 )
 """The columns of the stack's ``items``: one row per task, then per constraint."""
@@ -782,6 +784,71 @@ def object_balance_rows(
 
 
 @njit(cache=True)
+def hand_pair_rows(
+    table: np.ndarray,
+    item: np.ndarray,
+    p: np.ndarray,
+    J: np.ndarray,
+    target: np.ndarray,
+    jdot_nu: np.ndarray,
+    w: np.ndarray,
+) -> None:
+    """``HandPair`` (``controllers.low_level.hand_pair``): ``p = (kp, kv, weight, offset (3),
+    rotation (3 x 3, row-major))``, its site slot hand ``a``'s, its paired slot hand ``b``'s;
+    ``J = [J_b - J_P; Jr_b - Jr_a]`` (world, over ``nu``) with ``P`` the point ``offset`` of
+    hand ``a``'s frame (``_tray_point``), ``jdot_nu`` the two drifts' difference, the target
+    ``-kp (p_b - P, e_R) - kv J nu`` with ``e_R = log(R_b (R_a rotation)^T)``."""
+    i, k = item[ITEM.site], item[ITEM.paired_site]
+    kp, kv = p[0], p[1]
+    JJ, out = float_matrix(table[S.frame_JJ]), np.empty((4, 3))
+    _tray_point(table, i, p[3], p[4], p[5], JJ, out)
+    site_jac, J_tf = float_cube(table[S.site_jac])[k], float_matrix(table[S.J_tf])
+    for row in range(6):  # hand b's [jacp; jacr] J_tf, less P's
+        for j in range(J.shape[1]):
+            total = 0.0
+            for c in range(J_tf.shape[0]):
+                total += site_jac[row, c] * J_tf[c, j]
+            J[row, j] = total - JJ[row, j]
+    motion = float_matrix(table[S.point_motion])
+    _point_motion(
+        float_cube(table[S.probe_jac])[1 + k],
+        float_cube(table[S.probe_jac_dot])[1 + k],
+        float_vector(table[S.probe_qvel]),
+        float_vector(table[S.probe_qacc0]),
+        motion[0],
+        motion[1],
+    )
+    drift_b = motion[1]
+    for row in range(3):
+        jdot_nu[row] = drift_b[row] - out[0, row]
+        jdot_nu[3 + row] = drift_b[3 + row] - out[2, row]
+    site_ids, site_xmat = int_vector(table[S.site_ids]), float_matrix(table[S.site_xmat])
+    site_xpos = float_matrix(table[S.site_xpos])
+    a, b = site_ids[i], site_ids[k]
+    R_a, R_b = site_xmat[a].reshape(3, 3), site_xmat[b].reshape(3, 3)
+    rotation = p[6:15].reshape(3, 3)
+    R_target = np.zeros((3, 3))
+    for r in range(3):
+        for c in range(3):
+            total = 0.0
+            for m in range(3):
+                total += R_a[r, m] * rotation[m, c]
+            R_target[r, c] = total
+    error = np.empty(6)
+    r0 = out[3]  # R_a offset: P - p_a
+    for row in range(3):
+        error[row] = site_xpos[b, row] - (site_xpos[a, row] + r0[row])
+    error[3], error[4], error[5] = _rotation_error(R_b, R_target)
+    nu = float_vector(table[S.nu])
+    for row in range(6):
+        rate = 0.0
+        for j in range(len(nu)):
+            rate += J[row, j] * nu[j]
+        target[row] = -kp * error[row] - kv * rate
+        w[row] = p[2]
+
+
+@njit(cache=True)
 def kind_rows(
     kind: int,
     table: np.ndarray,
@@ -812,5 +879,7 @@ def kind_rows(
         axle_acceleration_rows(table, item, p, M, first, drift, second)
     elif kind == OBJECT_BALANCE:
         object_balance_rows(table, item, p, M, first, drift, second)
+    elif kind == HAND_PAIR:
+        hand_pair_rows(table, item, p, M, first, drift, second)
     else:
         raise ValueError("a compiled item of an unknown kind")

@@ -15,18 +15,24 @@ body where hand ``b`` sat at reset (``r_0 = R_a^T (p_b - p_a)`` then), and the r
     (Jr_b - Jr_a) nu_dot + (dw_b - dw_a) = -kp e_R - kv (w_b - w_a)
 
 in world, each side weighted; ``J`` are MuJoCo's point Jacobians mapped to the minimal
-coordinates by ``J_tf`` and ``d`` the drifts ``Jdot nu`` (``MotionProbe.point_motion``). The
+coordinates by ``J_tf`` and ``d`` the drifts ``Jdot nu`` (``MotionProbe.site_motion``, ``P``'s
+by the rigid-body lever from hand ``a``'s site, :meth:`HandPair.drift`). The
 rows hold only the hands' relative motion: both may move together as one body (the tray's tilt
 and place are the other tasks' business). Tested against central differences of MuJoCo's
-kinematics (tests/test_hand_pair.py).
+kinematics (tests/test_hand_pair.py). Its compiled rows (``compiled_tasks.hand_pair_rows``, kind
+``HAND_PAIR``: hand ``a`` the item's site, hand ``b`` its paired site) let the task QP take its
+one-call step with the pair; tests/test_hand_pair.py holds them to these.
 """
 
 from __future__ import annotations
+
+from typing import ClassVar
 
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from controllers.low_level import compiled_tasks as ct
 from controllers.low_level.tasks import rotation_error
 from wip_gym.robot_model import RobotModel
 
@@ -39,7 +45,11 @@ def _skew(v: Array) -> Array:
 
 class HandPair:
     """The relative pose of site ``b`` in site ``a``'s frame, held at its value at
-    construction (the robot's current state), as weighted cost rows (module docstring)."""
+    construction (the robot's current state), as weighted cost rows (module docstring).
+    ``site`` and ``paired_site`` (hands ``a`` and ``b``) are the compiled stack's two site
+    slots."""
+
+    compiled_kind: ClassVar[int | None] = ct.HAND_PAIR
 
     def __init__(
         self,
@@ -60,6 +70,7 @@ class HandPair:
             if not (np.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} must be finite and >= 0, got {value!r}")
         self.robot, self.site_a, self.site_b = robot, site_a, site_b
+        self.site, self.paired_site = site_a, site_b
         self.name = "hand_pair"
         self.weight, self.kp, self.kv = float(weight), float(kp), float(kv)
         self._body_a = int(m.site_bodyid[site_a])
@@ -92,15 +103,19 @@ class HandPair:
 
     def drift(self, robot: RobotModel, probe: object) -> Array:
         """``(6,)``: the relative drift acceleration ``Jdot nu`` (world), from a motion probe
-        updated at the robot's state."""
-        d = robot.data
-        R_a = d.site_xmat[self.site_a].reshape(3, 3)
-        point = d.site_xpos[self.site_a] + R_a @ self.offset
-        _, a_b, _, dw_b = probe.point_motion(d.site_xpos[self.site_b], self._body_b)  # type: ignore[attr-defined]
-        _, a_p, _, dw_a = probe.point_motion(point, self._body_a)  # type: ignore[attr-defined]
-        return np.array([*a_b, *dw_b]) - np.array([*a_p, *dw_a])
+        updated at the robot's state: each site's motion at the probe's state
+        (``MotionProbe.site_motion``), ``P``'s drift that of hand ``a``'s body at the lever
+        ``r = R_a offset``, ``a_a + omega_drift x r + omega x (omega x r)`` (as
+        ``ObjectBalance``'s points on the tray)."""
+        R_a = robot.data.site_xmat[self.site_a].reshape(3, 3)
+        r = R_a @ self.offset
+        _, _, a_b, _, dw_b = probe.site_motion(self.site_b)  # type: ignore[attr-defined]
+        _, _, a_a, w_a, dw_a = probe.site_motion(self.site_a)  # type: ignore[attr-defined]
+        omega, spin = np.array(w_a), np.array(dw_a)
+        a_p = np.array(a_a) + np.cross(spin, r) + np.cross(omega, np.cross(omega, r))
+        return np.array([*a_b, *dw_b]) - np.concatenate([a_p, spin])
 
-    # the task QP's task protocol (controllers.low_level.task_qp): readable rows only
+    # the task QP's task protocol (controllers.low_level.task_qp)
     def reference_acceleration(self, robot: RobotModel) -> Array:
         """``-kp (p_b - P, e_R) - kv (relative velocity)``: the relative acceleration wanted."""
         position, rotation = self.errors(robot)
@@ -113,6 +128,17 @@ class HandPair:
     def jdot_nu(self, probe: object) -> Array:
         """The relative drift at the state of the robot this pair was made for."""
         return self.drift(self.robot, probe)
+
+    def parameters(self) -> list[float]:
+        """``(kp, kv, weight, offset (3), rotation (3 x 3, row-major))``: what the compiled rows
+        read every step."""
+        return [
+            self.kp,
+            self.kv,
+            self.weight,
+            *self.offset.tolist(),
+            *self.rotation.ravel().tolist(),
+        ]
 
     def rows(self, robot: RobotModel, probe: object) -> tuple[Array, Array]:
         """``(A, a)``: the weighted cost rows ``||A nu_dot + a||^2`` (module docstring), the

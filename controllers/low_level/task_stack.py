@@ -5,14 +5,15 @@ disturbance observer, ``DisturbanceRejectingTask``, may wrap one) and of constra
 (``controllers.low_level.constraints``), every one of a class with compiled rows
 (``compiled_kind``), into the table of ``controllers.low_level.compiled_step.rows_and_kernel``
 (``compiled_tasks.STEP``), once: one row of ``items`` per task and per constraint (its kind,
-rows, parameters, columns, site slot, observer slot), the sites' slots and their buffers, the
-observers' memory, the robot model's, the motion probe's and the kernel's buffers. Then, every
-control step, :meth:`CompiledTaskStack.prepare` copies each object's current parameters
-(``parameters()``: gains, targets, weights, bounds) into the table's ``parameters`` and marks
-which observers advance; the compiled call reads nothing else of the objects. What the stack
-reads once (the objects, the task an observer wraps, each task's site and columns, its number
-of rows and parameters) is its structure: :meth:`CompiledTaskStack.serves` compares it at every
-step, and a change makes the task QP build a new stack.
+rows, parameters, columns, site slot, a second site's slot (``paired_site``), observer slot),
+the sites' slots and their buffers, the observers' memory, the robot model's, the motion probe's
+and the kernel's buffers. Then, every control step, :meth:`CompiledTaskStack.prepare` copies
+each object's current parameters (``parameters()``: gains, targets, weights, bounds) into the
+table's ``parameters`` and marks which observers advance; the compiled call reads nothing else
+of the objects. What the stack reads once (the objects, the task an observer wraps, each task's
+site and columns, its number of rows and parameters) is its structure:
+:meth:`CompiledTaskStack.serves` compares it at every step, and a change makes the task QP build
+a new stack.
 
 The disturbance observers keep their state in one array of this stack
 (``DisturbanceRejectingTask.adopt_memory``), advanced by the compiled call.
@@ -41,6 +42,7 @@ from wip_gym.robot_model import RobotModel
 
 Array = NDArray[np.float64]
 _task, _site = operator.attrgetter("task"), operator.attrgetter("site")
+_paired_site = operator.attrgetter("paired_site")
 _columns, _memory = operator.attrgetter("columns"), operator.attrgetter("memory")
 
 
@@ -70,10 +72,11 @@ def supports(tasks: Sequence[object], constraints: Sequence[object], planar: boo
 
 
 def structure(item: object) -> tuple[object, ...]:
-    """What a stack reads of a task or constraint once: its site, and its columns' bytes."""
+    """What a stack reads of a task or constraint once: its sites, and its columns' bytes."""
     columns = getattr(item, "columns", None)
     return (
         getattr(item, "site", None),
+        getattr(item, "paired_site", None),
         None if columns is None else np.asarray(columns).tobytes(),
     )
 
@@ -87,8 +90,9 @@ def check_indices(items: Sequence[object], n_sites: int, n_min: int) -> None:
     readable path at every step."""
     for item in (unwrap(item)[0] for item in items):
         name = getattr(item, "name", type(item).__name__)
-        site = getattr(item, "site", None)
-        if site is not None:
+        for site in (getattr(item, "site", None), getattr(item, "paired_site", None)):
+            if site is None:
+                continue
             if isinstance(site, bool) or not isinstance(site, int | np.integer):
                 raise ValueError(f"task {name!r}: site must be an integer id, got {site!r}")
             if not 0 <= site < n_sites:
@@ -157,6 +161,8 @@ class CompiledTaskStack:
         self._wrapped = [inner_task for inner_task, o in inner if o]
         self._site_items = [item for item in items if getattr(item, "site", None) is not None]
         self._site_ids = list(map(_site, self._site_items))
+        self._paired_items = [i for i in items if getattr(i, "paired_site", None) is not None]
+        self._paired_ids = list(map(_paired_site, self._paired_items))
         self._column_items = [i for i in items if getattr(i, "columns", None) is not None]
         self._columns = self._column_bytes(self._column_items)
         # the per-step copy: each item's parameters() and how many it gives
@@ -181,11 +187,14 @@ class CompiledTaskStack:
             if getattr(item, "columns", None) is not None:
                 row[ITEM.column] = len(columns)
                 columns += np.asarray(item.columns).tolist()
-            site = getattr(item, "site", None)
-            if site is not None:
-                if site not in sites:
-                    sites.append(int(site))
-                row[ITEM.site] = sites.index(site)
+            for field, site in (
+                (ITEM.site, getattr(item, "site", None)),
+                (ITEM.paired_site, getattr(item, "paired_site", None)),
+            ):
+                if site is not None:
+                    if site not in sites:
+                        sites.append(int(site))
+                    row[field] = sites.index(site)
         self.items = table_items
         self.parameters = np.zeros(parameter)
         self._pack = struct.Struct(f"={parameter}d").pack_into
@@ -308,6 +317,7 @@ class CompiledTaskStack:
             )
             and all(map(operator.is_, map(_task, self._wrappers), self._wrapped))
             and list(map(_site, self._site_items)) == self._site_ids
+            and list(map(_paired_site, self._paired_items)) == self._paired_ids
             and self._column_bytes(self._column_items) == self._columns
         )
 
