@@ -70,7 +70,6 @@ class HandPair:
             if not (np.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} must be finite and >= 0, got {value!r}")
         self.robot, self.site_a, self.site_b = robot, site_a, site_b
-        self.site, self.paired_site = site_a, site_b
         self.name = "hand_pair"
         self.weight, self.kp, self.kv = float(weight), float(kp), float(kv)
         self._body_a = int(m.site_bodyid[site_a])
@@ -81,6 +80,16 @@ class HandPair:
         self.offset = R_a.T @ (d.site_xpos[site_b] - d.site_xpos[site_a])
         self.rotation = R_a.T @ d.site_xmat[site_b].reshape(3, 3)
         self._jac = np.zeros((6, m.nv))
+
+    @property
+    def site(self) -> int:
+        """Hand ``a``'s site: the compiled stack's site slot of this item."""
+        return self.site_a
+
+    @property
+    def paired_site(self) -> int:
+        """Hand ``b``'s site: the compiled stack's second site slot of this item."""
+        return self.site_b
 
     def errors(self, robot: RobotModel) -> tuple[Array, Array]:
         """``(p_b - P, e_R)`` (world): hand b's position and rotation errors from where hand
