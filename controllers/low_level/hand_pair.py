@@ -39,10 +39,6 @@ from wip_gym.robot_model import RobotModel
 Array = NDArray[np.float64]
 
 
-def _skew(v: Array) -> Array:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-
-
 class HandPair:
     """The relative pose of site ``b`` in site ``a``'s frame, held at its value at
     construction (the robot's current state), as weighted cost rows (module docstring).
