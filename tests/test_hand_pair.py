@@ -19,19 +19,15 @@ from controllers.high_level.tray_seat import TRAY_SINK_TIME, TraySeat
 from controllers.low_level.hand_pair import HandPair
 from controllers.low_level.motion_probe import MotionProbe
 from controllers.policy import controller_model, task_info
+from tests.robot_states import random_states, robot_at_reset
 from wip_gym.robot_model import RobotModel
 
 ENV = "wip_gym/KrangTray-v0"
 
 
 def _setup():
-    env = gym.make(ENV)
-    env.reset(seed=0)
-    model = env.unwrapped.model
-    robot = RobotModel(model)
-    robot.update(
-        env.unwrapped.data.qpos[: robot.layout.nq], env.unwrapped.data.qvel[: robot.layout.nv]
-    )
+    _, robot = robot_at_reset(ENV)
+    model = robot.model
     sites = [model.site(name).id for name in ("ee", "ee_right")]
     return model, robot, sites
 
@@ -182,16 +178,7 @@ def test_the_compiled_rows_equal_the_readable_rows():
     compiled = TaskQP(robot, low, high, QPSettings())
     readable = TaskQP(robot, low, high, QPSettings(compiled_tasks=False))
     rng = np.random.default_rng(7)
-    lay = robot.layout
-    q0 = robot.q.copy()
-    for step in range(8):
-        q = q0 + rng.uniform(-0.3, 0.3, lay.n_min)
-        nu = rng.uniform(-1.0, 1.0, lay.n_min)
-        qpos, qvel = robot.full_state(q, nu, rng.uniform(-1, 1, 2))
-        if step % 2:  # off the manifold, as the closed loop's measured states are
-            qpos = qpos + 1e-5 * rng.normal(size=qpos.shape)
-            qvel = qvel + 2e-3 * rng.normal(size=qvel.shape)
-            qpos[3:7] /= np.linalg.norm(qpos[3:7])
+    for qpos, qvel in random_states(robot, rng, 8):
         robot.update(qpos, qvel)
         kernels = []
         for qp in (compiled, readable):

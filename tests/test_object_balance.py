@@ -22,6 +22,7 @@ from controllers.low_level.object_balance import (
     ObjectBalance,
     cylinder_inertia_per_mass,
 )
+from tests.robot_states import robot_at_reset
 from wip_gym.robot_model import RobotModel
 from wip_gym.scene import CUP_HALF_HEIGHT, CUP_MASS, CUP_RADIUS
 
@@ -36,13 +37,8 @@ def _random_state(robot: RobotModel, rng: np.random.Generator) -> tuple[np.ndarr
 
 
 def _setup(env_id: str, place: tuple[float, float] = (0.0, 0.0)):
-    env = gym.make(env_id)
-    env.reset(seed=0)
-    model = env.unwrapped.model
-    robot = RobotModel(model)
-    robot.update(
-        env.unwrapped.data.qpos[: robot.layout.nq], env.unwrapped.data.qvel[: robot.layout.nv]
-    )
+    env, robot = robot_at_reset(env_id)
+    model = robot.model
     site = model.site("tray_top").id
     balance = ObjectBalance(robot, site, CarriedObject(place=place), friction=0.3)
     return env, model, robot, site, balance

@@ -26,7 +26,7 @@ from controllers.low_level.object_tasks import (
 from controllers.low_level.priority_qp import ExtraRows, PriorityQP
 from controllers.low_level.task_qp import QPSettings, TaskQP
 from controllers.registry import make_policy
-from wip_gym.robot_model import RobotModel
+from tests.robot_states import random_states, robot_at_reset
 
 ENVS = ("wip_gym/PlanarTray-v0", "wip_gym/KrangTray-v0")
 
@@ -38,12 +38,8 @@ def _close(actual: np.ndarray, expected: np.ndarray, tol: float = 1e-12) -> None
 
 @pytest.mark.parametrize("env_id", ENVS)
 def test_compiled_rows_equal_the_readable_rows_and_the_object_balance(env_id: str) -> None:
-    env = gym.make(env_id)
-    env.reset(seed=0)
-    model = env.unwrapped.model
-    robot = RobotModel(model)
-    lay = robot.layout
-    robot.update(env.unwrapped.data.qpos[: lay.nq], env.unwrapped.data.qvel[: lay.nv])
+    env, robot = robot_at_reset(env_id)
+    model = robot.model
     site = model.site("tray_top").id
     balance = ObjectBalance(robot, site, CarriedObject(place=(0.03, -0.02)), friction=0.3)
     drive = AxleAccelerationTask(7.0)
@@ -54,16 +50,7 @@ def test_compiled_rows_equal_the_readable_rows_and_the_object_balance(env_id: st
     readable = TaskQP(robot, low, high, QPSettings(compiled_tasks=False))
     probe = MotionProbe(robot)
     rng = np.random.default_rng(4)
-    q0, nu0 = robot.q.copy(), robot.nu.copy()
-    for step in range(8):
-        q = q0 + rng.uniform(-0.3, 0.3, lay.n_min)
-        nu = nu0 + rng.uniform(-1.0, 1.0, lay.n_min)
-        qpos, qvel = robot.full_state(q, nu, rng.uniform(-1, 1, 2))
-        if step % 2:  # off the manifold, as the closed loop's measured states are
-            qpos = qpos + 1e-5 * rng.normal(size=qpos.shape)
-            qvel = qvel + 2e-3 * rng.normal(size=qvel.shape)
-            if not lay.planar:
-                qpos[3:7] /= np.linalg.norm(qpos[3:7])
+    for qpos, qvel in random_states(robot, rng, 8):
         robot.update(qpos, qvel)
         drive.target = float(rng.normal())
         kernels = []
