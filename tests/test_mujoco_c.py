@@ -6,16 +6,19 @@ range."""
 
 from __future__ import annotations
 
+import ctypes
 import os
 import re
 import warnings
 
+import gymnasium
 import mujoco
 import numpy as np
 import pytest
 from dynamics_reference import random_minimal_state
 from numba import carray, njit
 
+import wip_gym  # noqa: F401  (registers the envs)
 from wip_gym import mujoco_c as mjc
 from wip_gym.array_table import float64_view, int32_pointer
 from wip_gym.assets import mjcf_path
@@ -203,3 +206,25 @@ def test_compiled_contact_reads_equal_the_bindings(cone: mujoco.mjtCone) -> None
     np.testing.assert_array_equal(geoms, geom)
     np.testing.assert_array_equal(forces, expected)
     assert (expected[:, 0] > 0).all()  # real forces, not zeros on both sides
+
+
+def test_size_addresses_read_the_datas_ncon_and_time() -> None:
+    """The addresses compiled code reads ``mjData.ncon`` and ``mjData.time`` at (the native
+    vector env's compiled steps) hold the bindings' values along an episode of the tray env
+    (its contacts come and go)."""
+    env = gymnasium.make("wip_gym/KrangTray-v0", fall_angle=0.3)
+    env.reset(seed=1)
+    env.action_space.seed(1)
+    data = env.unwrapped.data
+    ncon, time = mjc.size_addresses(data)
+    rng = np.random.default_rng(0)
+    counts = set()
+    for _ in range(300):
+        _, _, terminated, truncated, _ = env.step(env.action_space.sample() * rng.uniform())
+        assert ctypes.c_int.from_address(ncon).value == data.ncon
+        assert ctypes.c_double.from_address(time).value == data.time
+        counts.add(data.ncon)
+        if terminated or truncated:
+            env.reset()
+    assert len(counts) > 3
+    env.close()

@@ -23,6 +23,7 @@ is made), and one warning says what that costs.
 
 from __future__ import annotations
 
+import ctypes
 import glob
 import os
 import warnings
@@ -94,6 +95,7 @@ DECLARATIONS: dict[str, tuple[str, tuple[types.Type, ...]]] = {
         "void mj_contactForce(const mjModel* m, const mjData* d, int id, mjtNum result[6])",
         (_ptr, _ptr, _int, _ptr),
     ),
+    "mj_step": ("void mj_step(const mjModel* m, mjData* d)", (_ptr, _ptr)),
 }
 
 
@@ -118,6 +120,7 @@ mj_jacDot = _declare("mj_jacDot")  # as mj_jac
 mj_jacSite = _declare("mj_jacSite")  # (m, d, jacp, jacr, site)
 mj_jacSubtreeCom = _declare("mj_jacSubtreeCom")  # (m, d, jacp, body)
 mj_contactForce = _declare("mj_contactForce")  # (m, d, id, result[6])
+mj_step = _declare("mj_step")  # the native vector env's compiled steps (wip_gym.vector.compiled)
 
 
 def release() -> str:
@@ -224,3 +227,57 @@ def contact_layout(data: mujoco.MjData) -> tuple[int, int, int, int]:
         )
     stride = int(geom.strides[0])
     return int(geom.ctypes.data), int(frame.ctypes.data), stride, int(data.narena) // stride
+
+
+_SIZES_PROBE = """<mujoco><worldbody><geom type="plane" size="1 1 .1"/>
+<body pos="0 0 .1"><freejoint/><geom type="box" size=".1 .1 .1"/></body></worldbody></mujoco>"""
+_sizes_offset: int | None = None  # ncon's offset before time in mjData (found once)
+
+
+def _find_sizes_offset() -> int:
+    """How many bytes ``mjData.ncon`` lies before ``mjData.time`` on this release: the
+    variable sizes (``ncon, ne, nf, nl, nefc``, ints, then more that vary by release: 88
+    bytes on 3.17) come shortly before ``time`` in every 3.x ``mjdata.h``; found on a probe
+    box resting on a plane
+    (4 contacts, 16 constraint rows) as the place of the bindings' own five values, and
+    ``RuntimeError`` if no place or several hold them."""
+    model = mujoco.MjModel.from_xml_string(_SIZES_PROBE)
+    data = mujoco.MjData(model)
+    for _ in range(100):
+        mujoco.mj_step(model, data)
+    expected = (data.ncon, data.ne, data.nf, data.nl, data.nefc)
+    if expected[0] < 1 or expected[4] < 1:
+        raise RuntimeError(f"the probe has no contacts to find ncon by: {expected}")
+    time = int(data.energy.ctypes.data) - 8  # mjtNum time; mjtNum energy[2]
+    if ctypes.c_double.from_address(time).value != data.time:
+        raise RuntimeError("mjData.time is not right before mjData.energy on this release")
+    found = [
+        offset
+        for offset in range(8, 260, 4)
+        if tuple(ctypes.c_int.from_address(time - offset + 4 * k).value for k in range(5))
+        == expected
+    ]
+    if len(found) != 1:
+        raise RuntimeError(f"mjData.ncon not found before mjData.time: candidates {found}")
+    return found[0]
+
+
+def size_addresses(data: mujoco.MjData) -> tuple[int, int]:
+    """The addresses of ``data``'s ``ncon`` (int) and ``time`` (mjtNum), which the bindings
+    give only as Python numbers, for compiled code that steps ``data`` and then reads them
+    (``wip_gym.vector.compiled``): ``time`` right before ``energy`` (whose view the bindings
+    give), ``ncon`` where :func:`_find_sizes_offset` found it on this release; each checked
+    against the bindings' value. ``RuntimeError`` where the layout differs."""
+    global _sizes_offset
+    if not available():
+        raise RuntimeError("the compiled fast path is not available (wip_gym.mujoco_c)")
+    if _sizes_offset is None:
+        _sizes_offset = _find_sizes_offset()
+    time = int(data.energy.ctypes.data) - 8
+    ncon = time - _sizes_offset
+    if (
+        ctypes.c_double.from_address(time).value != data.time
+        or ctypes.c_int.from_address(ncon).value != data.ncon
+    ):
+        raise RuntimeError("mjData's ncon and time are not where this release keeps them")
+    return ncon, time

@@ -21,11 +21,10 @@ is short). The actions are drawn before the clock starts (one table, replayed in
 
 ``--split`` measures instead where a sub-env's step goes (this thread's CPU time, one thread,
 the median of rounds taken in turn): the single env's step and the native vector env's per
-sub-env, and the part of the latter in ``mujoco.mj_step`` (which releases the GIL; the env's
-compiled measures release it too and are counted with the rest, so the split's GIL share is
-an upper bound). The bounds it prints: one
+sub-env, and the part of the latter in its compiled steps (``wip_gym.vector.compiled``: the
+physics, the measures, the reward and the ends, holding no GIL). The bounds it prints: one
 thread, single over native; two threads, single over the larger of the GIL's part and half the
-step (a GIL-bound part can overlap only the other thread's physics).
+step (a GIL-bound part can overlap only the other thread's compiled part).
 
 Two clocks: ``wall`` (``time.perf_counter``, the figure) and ``cpu`` (``time.process_time``:
 this process's CPU time, its threads summed, the ``async`` workers' not counted, so that
@@ -46,10 +45,10 @@ from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
-import mujoco
 import numpy as np
 
 import wip_gym  # noqa: F401  (registers the envs)
+from wip_gym.vector import compiled
 from wip_gym.vector.env import available_cores
 
 ENVS = ("wip_gym/WIP-v0", "wip_gym/Planar-v0", "wip_gym/PlanarTray-v0", "wip_gym/KrangTray-v0")
@@ -175,27 +174,28 @@ def measure(
 
 def gil_split(env_id: str, n: int, steps: int = 100, rounds: int = 7) -> dict[str, float]:
     """Microseconds of this thread's CPU per sub-env step (zero torques): ``single``,
-    ``native`` (one thread) and ``native_physics`` (its ``mujoco.mj_step`` calls), with the
-    bounds of the module's docstring. In turn, ``rounds`` times (the first warms up): ``steps``
-    vector steps, then ``steps * n`` single-env steps; each figure is the median of the
-    rounds'."""
+    ``native`` (one thread) and ``native_compiled`` (its compiled steps,
+    ``wip_gym.vector.compiled.advance``, which hold no GIL), with the bounds of the module's
+    docstring. In turn, ``rounds`` times (the first warms up): ``steps`` vector steps, then
+    ``steps * n`` single-env steps; each figure is the median of the rounds'."""
     clock = time.thread_time
     inside = [0.0]
-    step = mujoco.mj_step
+    advance = compiled.advance
 
-    def timed_step(*args: Any) -> None:
+    def timed_advance(*args: Any) -> int:
         start = clock()
-        step(*args)
+        rejected = advance(*args)
         inside[0] += clock() - start
+        return int(rejected)
 
     vec = gym.make_vec(env_id, num_envs=n)
     single = gym.make(env_id)
-    measured: dict[str, list[float]] = {"single": [], "native": [], "physics": []}
+    measured: dict[str, list[float]] = {"single": [], "native": [], "compiled": []}
     try:
         vec.reset(seed=0)
         single.reset(seed=0)
         zeros = np.zeros(vec.action_space.shape)
-        mujoco.mj_step = timed_step  # the envs call it through the module
+        compiled.advance = timed_advance  # the vector env calls it through the module
         try:
             for _ in range(rounds):
                 inside[0] = 0.0
@@ -203,7 +203,7 @@ def gil_split(env_id: str, n: int, steps: int = 100, rounds: int = 7) -> dict[st
                 for _ in range(steps):
                     vec.step(zeros)
                 measured["native"].append((clock() - start) / (steps * n) * 1e6)
-                measured["physics"].append(inside[0] / (steps * n) * 1e6)
+                measured["compiled"].append(inside[0] / (steps * n) * 1e6)
                 start = clock()
                 for _ in range(steps * n):
                     _, _, terminated, truncated, _ = single.step(zeros[0])
@@ -211,16 +211,16 @@ def gil_split(env_id: str, n: int, steps: int = 100, rounds: int = 7) -> dict[st
                         single.reset()
                 measured["single"].append((clock() - start) / (steps * n) * 1e6)
         finally:
-            mujoco.mj_step = step
+            compiled.advance = advance
     finally:
         vec.close()
         single.close()
-    alone, native, physics = (statistics.median(measured[k][1:]) for k in measured)
-    held = native - physics
+    alone, native, nogil = (statistics.median(measured[k][1:]) for k in measured)
+    held = native - nogil
     return {
         "single_us": alone,
         "native_us": native,
-        "native_physics_us": physics,
+        "native_compiled_us": nogil,
         "one_thread_bound": alone / native,
         "two_thread_bound": alone / max(held, native / 2),
     }
@@ -250,7 +250,7 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
             splits.append(split)
             print(
                 f"{env_id:<24}single {split['single_us']:5.1f} us  native {split['native_us']:5.1f}"
-                f" us (mj_step {split['native_physics_us']:5.1f} us)  bounds: one thread "
+                f" us (compiled {split['native_compiled_us']:5.1f} us)  bounds: one thread "
                 f"{split['one_thread_bound']:.2f}, two {split['two_thread_bound']:.2f}",
                 flush=True,
             )

@@ -834,7 +834,13 @@ class WIPEnv(MujocoEnv, utils.EzPickle):
             step_reference.measures(
                 self.model, self.data, self._measure_ints, self._measure_floats, out
             )
-        self._block = block = out.copy()
+        return self._keep_measures()
+
+    def _keep_measures(self) -> list[float]:
+        """``_block`` and ``_values`` made from ``_measures`` (:meth:`_measure`'s last part;
+        the native vector env's compiled steps leave it to the vector env,
+        ``wip_gym.vector.compiled``)."""
+        self._block = block = self._measures.copy()
         self._values = values = block.tolist()
         return values
 

@@ -6,7 +6,7 @@ A wip env's step info, reset info and observation are read from its data (``qpos
 step's reward terms; ``WIPEnv.step_layout`` says where each entry is. On the vector env's fast
 path every sub-env keeps its measures in a row of one ``(N, N_OUT)`` array
 (``WIPEnv._measure_into``: the compiled measures write them there) and leaves its
-``WIPEnv._advance`` result (reward, terms, ends: Python numbers) in a list; after the pass
+``WIPEnv._advance`` result (reward, terms, ends) in a row of one array; after the pass
 :meth:`ColumnBatcher.observe` makes the step's observation (the sub-envs' ``qpos`` and
 ``qvel`` in one copy each) and :meth:`ColumnBatcher.batch` its rewards, ends and info. The
 info is what Gymnasium's ``VectorEnv._add_info`` makes of the sub-envs' info dicts (every key
@@ -18,7 +18,6 @@ masked out, and ``fallen`` False), with no dict made per sub-env.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from itertools import chain
 from typing import Any
 
 import numpy as np
@@ -29,12 +28,18 @@ from wip_gym.envs.base import REWARD_TERMS, StepLayout, WIPEnv
 
 class ColumnBatcher:
     """Batches ``num_envs`` sub-envs' steps of the layout ``layout`` from their measures
-    (``width`` entries each, in the rows of :attr:`measures`)."""
+    (``width`` entries each, in the rows of :attr:`measures`) and their state (the sizes
+    ``state_sizes`` of ``WIPEnv._state_views``, in the rows of :attr:`states`)."""
 
-    def __init__(self, layout: StepLayout, num_envs: int, width: int) -> None:
+    def __init__(
+        self, layout: StepLayout, num_envs: int, width: int, state_sizes: tuple[int, ...]
+    ) -> None:
         self.num_envs = num_envs
         #: the sub-envs' measures, a row each (``WIPEnv._measure_into``)
         self.measures = np.zeros((num_envs, width))
+        #: the sub-envs' state (``qpos``, ``qvel``), a row each: written by the compiled
+        #: steps, or from the sub-env's views by :meth:`observe`
+        self.states = tuple(np.zeros((num_envs, size)) for size in state_sizes)
         #: the sub-envs' goals, a row each (written at their resets)
         self.goals = np.zeros((num_envs, 2))
         self.state = layout.state
@@ -65,39 +70,48 @@ class ColumnBatcher:
         self._all_true = np.ones((len(self._all_keys), num_envs), dtype=np.bool_)
 
     def observe(
-        self, envs: Sequence[WIPEnv], into: dict[str, NDArray[np.float64]] | None
+        self,
+        envs: Sequence[WIPEnv],
+        into: dict[str, NDArray[np.float64]] | None,
+        unwritten: Sequence[int] | None = None,
     ) -> dict[str, NDArray[np.float64]]:
         """The step's observation (a row per sub-env), in fresh arrays or written ``into``
-        these: the state of the sub-envs ``envs`` (their ``qpos``, ``qvel``, one copy each),
-        the goals and the measured entries."""
-        states = zip(*[env._state_views() for env in envs], strict=True)
+        these: the state of the sub-envs ``envs`` (their ``qpos``, ``qvel``: the rows of
+        :attr:`states`, those of ``unwritten`` first copied from the sub-envs' views, every
+        one if None), the goals and the measured entries."""
+        states = self.states
+        if unwritten is None:
+            views = zip(*[env._state_views() for env in envs], strict=True)
+            for rows, state in zip(states, views, strict=True):
+                np.concatenate(state, out=rows.reshape(-1))
+        else:
+            for i in unwritten:
+                for rows, view in zip(states, envs[i]._state_views(), strict=True):
+                    rows[i] = view
         measures = self.measures
         if into is None:
-            out = {key: np.array(views) for key, views in zip(self.state, states, strict=True)}
+            out = {key: rows.copy() for key, rows in zip(self.state, states, strict=True)}
             out[self.goal] = self.goals.copy()
             for key, a, b in self._measured:
                 out[key] = measures[:, a:b].copy()
             return out
-        for key, views in zip(self.state, states, strict=True):
-            np.concatenate(views, out=into[key].reshape(-1))
+        for key, rows in zip(self.state, states, strict=True):
+            np.copyto(into[key], rows)
         np.copyto(into[self.goal], self.goals)
         for key, a, b in self._measured:
             np.copyto(into[key], measures[:, a:b])
         return into
 
     def batch(
-        self, results: list[tuple[Any, ...]], stepped: list[bool]
+        self, results: NDArray[np.float64], stepped: list[bool]
     ) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_], dict[str, Any]]:
         """The rewards, terminations, truncations and info of a step from :attr:`measures`,
-        ``results`` (each sub-env's ``WIPEnv._advance`` result: reward, the four reward terms,
-        terminated, truncated, as Python numbers; zero terms where it was reset) and
+        ``results`` (each sub-env's ``WIPEnv._advance`` result, a row: reward, the four reward
+        terms, terminated, truncated, as float64; zero terms where it was reset) and
         ``stepped`` (False: the sub-env was reset in this step, its info is the reset's). The
         info has Gymnasium's keys and arrays, in another order (the values, then the
         masks)."""
-        n = self.num_envs
-        # one conversion of every sub-env's Python numbers (floats and bools: exact), a row each
-        numbers = np.fromiter(chain.from_iterable(results), np.float64, 7 * n)
-        numbers = numbers.reshape(n, 7).T.copy()
+        numbers = results.T.copy()  # a row per entry
         ends = numbers[5:7] != 0.0
         measures = self.measures
         taken = measures.T.take(self._taken, axis=0)  # the floats' and flags' rows

@@ -17,7 +17,6 @@ may change type take their own ``step`` and the dicts are batched a few conversi
 
 from __future__ import annotations
 
-import contextlib
 import copy
 import os
 import weakref
@@ -36,6 +35,7 @@ from numpy.typing import NDArray
 from wip_gym.envs import measures as ms
 from wip_gym.envs.base import WIPEnv
 from wip_gym.vector.columns import ColumnBatcher
+from wip_gym.vector.compiled import CompiledSteps
 from wip_gym.vector.infos import InfoBatcher
 from wip_gym.vector.threads import ParallelLoop
 
@@ -114,11 +114,16 @@ class _SubEnvs:
     after the pass (``wip_gym.vector.columns``); otherwise each
     sub-env's ``step`` and its dicts batched (:class:`InfoBatcher`). Resets take the second
     way (their infos through Gymnasium's rule). On one thread the fast way's pass is
-    :meth:`pass_fast`, a plain loop over the sub-envs' ``_advance``; on several, each thread
-    takes sub-envs one at a time (:meth:`step_fast`)."""
+    :meth:`pass_fast`; on several, each thread steps its share (:meth:`share_fast`): the
+    sub-envs that can take them in one compiled call, the others by their ``_advance``
+    (:meth:`step_part`)."""
 
     def __init__(
-        self, envs: list[gym.Env[Any, Any]], observation_keys: tuple[str, ...], batcher: InfoBatcher
+        self,
+        envs: list[gym.Env[Any, Any]],
+        observation_keys: tuple[str, ...],
+        batcher: InfoBatcher,
+        threads: int,
     ) -> None:
         self.envs = envs
         paths = [step_path(env) for env in envs]
@@ -138,18 +143,30 @@ class _SubEnvs:
         self.columns: ColumnBatcher | None = None
         self.bases: list[WIPEnv] = []
         if first is not None and all(layout == first for layout in layouts):
-            self.columns = ColumnBatcher(first, n, ms.N_OUT)
             self.bases = bases  # type: ignore[assignment]
+            sizes = tuple(len(view) for view in self.bases[0]._state_views())
+            self.columns = ColumnBatcher(first, n, ms.N_OUT, sizes)
             for i, base in enumerate(self.bases):
                 base._measure_into(self.columns.measures[i])
         self.fast = self.columns is not None
         self.advances = [base._advance for base in self.bases]
+        # the compiled steps (wip_gym.vector.compiled), where a sub-env can take them; the
+        # sub-envs they stepped have their _values and _block made only when read (fresh)
+        # each sub-env's _advance result: reward, the four reward terms, terminated,
+        # truncated (a row each; zero terms where it was reset in the step)
+        self.results = np.zeros((n, 7))
+        self.compiled: CompiledSteps | None = None
+        if self.columns is not None and any(CompiledSteps.can_take(b) for b in self.bases):
+            qpos, qvel = self.columns.states
+            self.compiled = CompiledSteps(self.bases, self.results, (qpos, qvel), threads)
         self.everyone = list(range(n))
+        self.shares: list[list[int]] = [self.everyone]  # each thread's sub-envs (set_threads)
         self.has_limits = any(limit is not None for limit in self.limits)
         self.counted = False  # a pass with a time limit counted here or same-step autoresets
         # one pass's inputs
         self.stepping = True
         self.actions: Any = ()  # a row per sub-env
+        self.action_array = np.zeros((0, 0))  # the same, one C-contiguous float64 array
         self.reset_first = [False] * n  # next-step autoreset
         self.same_step = False
         self.seeds: Sequence[int | None] = [None] * n
@@ -163,10 +180,28 @@ class _SubEnvs:
         self.infos: list[dict[str, Any] | None] = [None] * n
         self.last: list[dict[str, Any] | None] = [None] * n  # each sub-env's last observation
         self.finals: list[tuple[int, Any, dict[str, Any]]] = []
-        # the fast way's: each sub-env's _advance result, whether it stepped (False: reset in
-        # the step)
-        self.results: list[tuple[Any, ...]] = [_RESET_RESULT] * n
+        # the fast way's: whether each sub-env stepped (False: reset in the step)
         self.stepped_now = [True] * n
+        # the sub-envs whose state rows the compiled steps did not write since their state
+        # changed (resets, steps in Python); without compiled steps, every one at every step
+        self.unwritten: list[int] = list(range(n))
+        self.errors: list[tuple[int, ValueError, ValueError]] = []  # a pass's rejected actions
+
+    def set_threads(self, threads: int) -> None:
+        """Split the sub-envs into ``threads`` shares, one per thread of the fast way's pass."""
+        self.shares = [self.everyone[k::threads] for k in range(threads)]
+
+    def fresh(self, i: int) -> None:
+        """Sub-env ``i`` given back what a compiled step left in the batch (its measures'
+        values, its episode's numbers: ``CompiledSteps.fresh``), before its own code runs."""
+        if self.compiled is not None:
+            self.compiled.fresh(i)
+
+    def fresh_all(self) -> None:
+        """:meth:`fresh` for every sub-env (before the sub-envs are handed out)."""
+        if self.compiled is not None and self.compiled.stale.any():
+            for i in self.everyone:
+                self.compiled.fresh(i)
 
     def write(self, i: int, observation: dict[str, Any], info: dict[str, Any] | None) -> None:
         self.last[i] = observation
@@ -179,6 +214,9 @@ class _SubEnvs:
     def reset_one(self, i: int, seed: int | None, options: dict[str, Any] | None) -> Any:
         self.elapsed[i] = 0
         self.started[i] = True
+        if self.compiled is not None:  # the reset makes the env's numbers anew
+            self.compiled.forget(i)
+            self.unwritten.append(i)
         observation, info = self.stepped[i].reset(seed=seed, options=options)
         if self.columns is not None:
             self.columns.goals[i] = self.bases[i].goal
@@ -189,6 +227,7 @@ class _SubEnvs:
         if not self.started[i]:
             raise RuntimeError(f"sub-env {i} was never reset: reset it first")
         if self.fast:  # its steps kept no dict: the observation is read again, as it was made
+            self.fresh(i)
             return self.bases[i]._get_obs()
         last = self.last[i]
         assert last is not None
@@ -231,48 +270,64 @@ class _SubEnvs:
         self.infos[i] = info
         self.batcher.write(i, info)
 
-    def step_fast(self, i: int) -> None:
-        """Sub-env ``i``'s step the fast way (see the class; a thread's share of the pass):
-        its ``_advance``'s result (reward, reward terms, terminated, truncated) kept as it is
-        (its measures are in its row already; its state is read after the pass)."""
-        if self.reset_first[i]:
-            self.results[i] = _RESET_RESULT
-            self.reset_fast(i)
-            return
-        try:
-            result = self.bases[i]._advance(self.actions[i])
-        except ValueError as error:
-            raise ValueError(f"sub-env {i}: {error}") from error
-        self.results[i] = result
-        self.stepped_now[i] = True
-        if self.counted:
-            self.finish(i)
-
     def pass_fast(self) -> None:
-        """Every sub-env's step the fast way in this thread: as :meth:`step_fast` for each,
-        the sub-envs' ``_advance`` called in a plain loop (a sub-env's step comes to its
-        ``_advance`` and a list entry). As a pass of threads, every sub-env is stepped even if
-        one raises, and the lowest index's error is raised."""
-        reset_first, results = self.reset_first, self.results
-        self.stepped_now = [not reset for reset in reset_first]
+        """Every sub-env's step the fast way in this thread (:meth:`step_part` of all)."""
+        self.step_part(self.everyone)
+        self.raise_errors()
+
+    def share_fast(self, k: int) -> None:
+        """Thread ``k``'s part of the fast way's pass (:meth:`step_part` of its share)."""
+        self.step_part(self.shares[k])
+
+    def raise_errors(self) -> None:
+        """After a pass: the lowest sub-env's rejected action raised, if any (every sub-env
+        was stepped all the same)."""
+        if self.errors:
+            errors, self.errors = sorted(self.errors, key=lambda e: e[0]), []
+            _, error, cause = errors[0]
+            raise error from cause
+
+    def step_part(self, part: list[int]) -> None:
+        """Step the sub-envs ``part`` the fast way: a sub-env that ended is reset
+        (``NextStep``), the others advance: in one compiled call those that can
+        (``wip_gym.vector.compiled``), the rest by their ``_advance``; each one's result
+        (reward, reward terms, terminated, truncated) kept as it is (its measures are in its
+        row; its state is read after the pass). A rejected action is kept in
+        :attr:`errors`, its sub-env not stepped, the others stepped."""
+        reset_first, results, stepped_now = self.reset_first, self.results, self.stepped_now
+        todo = part
         if any(reset_first):
-            for i in [i for i, reset in enumerate(reset_first) if reset]:
-                results[i] = _RESET_RESULT
-                self.reset_fast(i)
-            todo = [i for i, reset in enumerate(reset_first) if not reset]
+            todo = []
+            for i in part:
+                if reset_first[i]:
+                    results[i] = _RESET_RESULT
+                    self.reset_fast(i)
+                else:
+                    stepped_now[i] = True
+                    todo.append(i)
         else:
-            todo = self.everyone
-        advances, actions = self.advances, self.actions
-        k = 0
-        try:
-            for k, i in enumerate(todo):  # noqa: B007  (k tells where an error came from)
-                results[i] = advances[i](actions[i])
-        except ValueError as error:
-            first = ValueError(f"sub-env {todo[k]}: {error}")
-            for i in todo[k + 1 :]:  # the others still step
-                with contextlib.suppress(ValueError):
-                    results[i] = advances[i](actions[i])
-            raise first from error
+            for i in part:
+                stepped_now[i] = True
+        by_python = todo
+        compiled = self.compiled
+        if compiled is not None:
+            ready = [i for i in todo if compiled.eligible(i)]
+            if ready:
+                rejected = compiled.step(ready, self.action_array)
+                if len(ready) < len(todo) or rejected:
+                    taken = set(ready).difference(rejected)
+                    by_python = [i for i in todo if i not in taken]
+                else:
+                    by_python = []
+        for i in by_python:
+            self.fresh(i)
+            try:
+                results[i] = self.advances[i](self.action_array[i])
+            except ValueError as error:
+                self.errors.append((i, ValueError(f"sub-env {i}: {error}"), error))
+            if compiled is not None:
+                compiled.forget(i)
+                self.unwritten.append(i)
         if self.counted:
             for i in todo:
                 self.finish(i)
@@ -280,16 +335,17 @@ class _SubEnvs:
     def finish(self, i: int) -> None:
         """After sub-env ``i``'s ``_advance``: the time limit counted here, the same-step
         autoreset."""
-        result = self.results[i]
+        result = self.results[i]  # a view: written in place
         limit = self.limits[i]
         if limit is not None:
             self.elapsed[i] = elapsed = self.elapsed[i] + 1
-            if elapsed >= limit and not result[6]:
-                self.results[i] = result = (*result[:6], True)
+            if elapsed >= limit:
+                result[6] = 1.0
         if self.same_step and (result[5] or result[6]):
+            self.fresh(i)
             base = self.bases[i]
-            self.finals.append((i, base._get_obs(), base._step_info(*result[1:5])))
-            self.results[i] = (result[0], *_NO_TERMS, result[5], result[6])  # terms masked
+            self.finals.append((i, base._get_obs(), base._step_info(*result[1:5].tolist())))
+            result[1:5] = 0.0  # the terms masked
             self.reset_fast(i)
 
     def reset_fast(self, i: int) -> None:
@@ -309,7 +365,9 @@ class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArr
         autoreset_mode: ``NextStep`` (the default, as Gymnasium's), ``SameStep`` or
             ``Disabled`` (an ``AutoresetMode`` or its value), with Gymnasium's semantics.
         num_threads: threads that step the sub-envs (the caller's included; at most
-            ``num_envs``); default :data:`DEFAULT_THREADS`.
+            ``num_envs``): their compiled steps on numba's threads (at most its pool,
+            ``NUMBA_NUM_THREADS``, the cores by default), the rest (resets, sub-envs that
+            step in Python) on threads of this env; default :data:`DEFAULT_THREADS`.
         copy: return fresh observation arrays at every call (True, as Gymnasium's vector
             envs) or the same buffers, overwritten by the next call.
         **env_kwargs: the single env's arguments (``gymnasium.make(env_id, **env_kwargs)``);
@@ -363,7 +421,9 @@ class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArr
         self.spec = None  # make_vec sets it
         self._autoreset_mode = mode
         self._batcher = InfoBatcher(num_envs, self._add_info)
-        self._sub = _SubEnvs(envs, tuple(observation_space.spaces), self._batcher)
+        self._sub = _SubEnvs(
+            envs, tuple(observation_space.spaces), self._batcher, min(threads, num_envs)
+        )
         self._shapes: dict[str, tuple[int, ...]] = {
             key: tuple(space.shape or ()) for key, space in observation_space.spaces.items()
         }
@@ -372,12 +432,14 @@ class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArr
         self._no_resets = [False] * num_envs  # reset_first of the modes other than NextStep
         self._has_reset = False
         self._loop = ParallelLoop(self._sub, num_envs, min(threads, num_envs))
+        self._sub.set_threads(self._loop.threads)
         self._finalizer = weakref.finalize(self, self._loop.close)
 
     # ------------------------------------------------------------------ properties
     @property
     def envs(self) -> tuple[gym.Env[Any, Any], ...]:
         """The sub-envs (for reading; stepping one by hand breaks the batch's bookkeeping)."""
+        self._sub.fresh_all()
         return tuple(self._sub.envs)
 
     @property
@@ -476,13 +538,20 @@ class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArr
             finals = sorted(sub.finals, key=lambda f: f[0]) if sub.finals else ()
             infos = self._batcher.batch(sub.infos, finals)
         else:  # the fast way: rows of float64, as each sub-env's step converts its own
-            sub.actions = list(actions.astype(np.float64, copy=False))
+            sub.action_array = np.ascontiguousarray(actions, dtype=np.float64)
             sub.counted = sub.has_limits or sub.same_step
-            if self._loop.threads == 1:
-                sub.pass_fast()
+            if self._loop.threads == 1 or sub.compiled is not None:
+                sub.pass_fast()  # the compiled steps on numba's threads (CompiledSteps)
             else:
-                self._loop.run(sub.step_fast)
-            observations = columns.observe(sub.bases, None if self.copy else self._buffers)
+                self._loop.run_each(sub.share_fast)
+                sub.raise_errors()
+            observations = columns.observe(
+                sub.bases,
+                None if self.copy else self._buffers,
+                None if sub.compiled is None else sub.unwritten,
+            )
+            if sub.unwritten:
+                sub.unwritten = []
             rewards, terminations, truncations, infos = columns.batch(sub.results, sub.stepped_now)
             if sub.finals:  # Gymnasium's final_obs and final_info, in the sub-envs' order
                 for i, observation, info in sorted(sub.finals, key=lambda f: f[0]):
@@ -496,12 +565,12 @@ class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArr
         """A frame per sub-env (``rgb_array``/``depth_array``), None without a render mode."""
         if self.render_mode is None:
             return None
-        return tuple(env.render() for env in self._sub.envs)
+        return tuple(env.render() for env in self.envs)
 
     def call(self, name: str, *args: Any, **kwargs: Any) -> tuple[Any, ...]:
         """Call ``name`` on every sub-env (an attribute: its value), as Gymnasium's."""
         results = []
-        for env in self._sub.envs:
+        for env in self.envs:
             attribute = env.get_wrapper_attr(name)
             results.append(attribute(*args, **kwargs) if callable(attribute) else attribute)
         return tuple(results)
@@ -516,7 +585,7 @@ class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArr
             values = [values] * self.num_envs
         if len(values) != self.num_envs:
             raise ValueError(f"set_attr: {len(values)} values for {self.num_envs} sub-envs")
-        for env, value in zip(self._sub.envs, values, strict=True):
+        for env, value in zip(self.envs, values, strict=True):
             env.set_wrapper_attr(name, value)
 
     def close_extras(self, **kwargs: Any) -> None:

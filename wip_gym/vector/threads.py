@@ -32,6 +32,7 @@ class ParallelLoop:
         self._pass_body = body  # this pass's
         self._count = count
         self._counter = itertools.count()
+        self._each = False  # this pass: body(k) once on thread k (run_each)
         self._errors: list[tuple[int, BaseException]] = []
         self._closed = False
         self._starts: list[threading.Lock] = []
@@ -42,7 +43,10 @@ class ParallelLoop:
             start.acquire()
             done.acquire()
             thread = threading.Thread(
-                target=self._serve, args=(start, done), name=f"wip-vector-{k + 1}", daemon=True
+                target=self._serve,
+                args=(start, done, k + 1),
+                name=f"wip-vector-{k + 1}",
+                daemon=True,
             )
             self._starts.append(start)
             self._dones.append(done)
@@ -54,8 +58,14 @@ class ParallelLoop:
         """Threads that step (the caller's included)."""
         return len(self._threads) + 1
 
-    def _drain(self) -> None:
+    def _drain(self, thread: int) -> None:
         count, counter, body = self._count, self._counter, self._pass_body
+        if self._each:
+            try:
+                body(thread)
+            except BaseException as error:  # raised by run_each() in the caller
+                self._errors.append((thread, error))
+            return
         while True:
             i = next(counter)  # atomic under the GIL
             if i >= count:
@@ -65,13 +75,13 @@ class ParallelLoop:
             except BaseException as error:  # raised by run() in the caller
                 self._errors.append((i, error))
 
-    def _serve(self, start: threading.Lock, done: threading.Lock) -> None:
+    def _serve(self, start: threading.Lock, done: threading.Lock, thread: int) -> None:
         while True:
             start.acquire()
             if self._closed:
                 done.release()
                 return
-            self._drain()
+            self._drain(thread)
             done.release()
 
     def run(self, body: Callable[[int], None] | None = None) -> None:
@@ -88,11 +98,29 @@ class ParallelLoop:
         else:
             self._counter = itertools.count()
             self._pass_body = body
-            for start in self._starts:
-                start.release()
-            self._drain()
-            for done in self._dones:
-                done.acquire()
+            self._each = False
+            self._pass()
+        self._raise()
+
+    def run_each(self, body: Callable[[int], None]) -> None:
+        """One pass of ``body(k)`` on each thread ``k`` (0 the caller's, up to
+        :attr:`threads` - 1), each at once: for shares of work fixed in advance (handed out
+        one at a time, the caller could take them all before another thread wakes)."""
+        if self._closed:
+            raise RuntimeError("the loop is closed")
+        self._pass_body = body
+        self._each = True
+        self._pass()
+        self._raise()
+
+    def _pass(self) -> None:
+        for start in self._starts:
+            start.release()
+        self._drain(0)
+        for done in self._dones:
+            done.acquire()
+
+    def _raise(self) -> None:
         if self._errors:
             errors, self._errors = sorted(self._errors, key=lambda e: e[0]), []
             raise errors[0][1]

@@ -1,0 +1,366 @@
+"""Sub-envs' steps in one compiled call, for the native vector env (docs/vector.md §3).
+
+A wip env's step (``WIPEnv._advance``) is Python around MuJoCo's step and the env's compiled
+measures: the action's check and its ctrl cost, the torques written, ``frame_skip`` calls of
+``mj_step``, the measures, the cup's loss, the reward's four terms (docs/learning.md §3) and the
+two ends. :func:`advance` does exactly that, in the same order and arithmetic, for a list of
+sub-envs in one compiled call that holds no GIL, so the vector env's threads step their shares
+of the batch side by side (``wip_gym.vector.threads``), and one thread pays the Python once per
+pass instead of once per sub-env.
+
+What stays in Python, per sub-env and pass (:class:`CompiledSteps`): whether it may take this
+way (no push or payload due, no perturbed torques, its data and ``frame_skip`` those bound
+here; otherwise the vector env calls its ``_advance``), its episode's two numbers (the last
+goal distance, whether the cup was lost) read before and written back after, the islands'
+switch at a cup's loss (``WIPEnv._solve_by_islands``, which touches the model only), and a
+rejected action, which its own ``_advance`` then raises as the single env does. The steps'
+results are the single env's to the bit: ``tests/test_vector_env.py`` holds the vector env to
+Gymnasium's ``SyncVectorEnv`` of single envs on every path.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+from numba import carray, njit, prange
+from numpy.typing import NDArray
+
+from wip_gym import mujoco_c as mjc
+from wip_gym.array_table import float64_pointer, float_vector, int32_pointer, int_vector
+from wip_gym.envs import measures as ms
+from wip_gym.envs.base import WIPEnv
+
+_CTRL, _NCON, _TIME = range(3)  # addresses: the data's ctrl, ncon and time
+_FRAMES, _TRAY, _END_ON_LOSS = range(3)  # settings
+# parameters: the reward's weights (progress, ctrl, fall, cup loss), the step's duration, the
+# time limit (NaN: none) and MuJoCo's timestep
+_W_PROGRESS, _W_CTRL, _W_FALL, _W_CUP, _DT, _LIMIT, _TIMESTEP = range(7)
+_PREVIOUS, _LOST = range(2)  # an episode's numbers: the last goal distance, the cup lost (1.0)
+#: a result's columns, as ``WIPEnv._advance`` returns them (the ends 1.0 or 0.0)
+REWARD, PROGRESS, CTRL, FALL, CUP_LOSS, TERMINATED, TRUNCATED = range(7)
+STEPPED, NEWLY_LOST, REJECTED = 0, 1, -1  # a note: stepped; the cup lost now; not stepped
+_OUT, _E, _MODEL, _DATA = ms.OUT, ms._E, ms._MODEL, ms._DATA
+
+
+@njit(cache=True, nogil=True)
+def advance_one(
+    i: int,
+    tables: NDArray[np.int64],
+    addresses: NDArray[np.int64],
+    actions: NDArray[np.float64],
+    action_tables: NDArray[np.float64],
+    settings: NDArray[np.int64],
+    parameters: NDArray[np.float64],
+    episodes: NDArray[np.float64],
+    results: NDArray[np.float64],
+    notes: NDArray[np.int64],
+    qpos_out: NDArray[np.float64],
+    qvel_out: NDArray[np.float64],
+) -> int:
+    """Step sub-env ``i`` as ``WIPEnv._advance`` does (see :func:`advance`); its note
+    (:data:`STEPPED`, :data:`NEWLY_LOST` or :data:`REJECTED`)."""
+    action = actions[i]
+    row = results[i]
+    effort = ms.action_effort(action, action_tables[i])
+    if effort != effort:  # a torque beyond its band, or NaN
+        notes[i] = REJECTED
+        return REJECTED
+    table = tables[i]
+    layout = int_vector(table[_E.mujoco])
+    model, data = np.uint64(layout[_MODEL]), np.uint64(layout[_DATA])
+    where = addresses[i]
+    nu = action.shape[0]
+    ctrl = carray(float64_pointer(np.uint64(where[_CTRL])), (nu,))
+    for j in range(nu):
+        ctrl[j] = action[j]
+    setting = settings[i]
+    for _ in range(setting[_FRAMES]):
+        mjc.mj_step(model, data)
+    ncon = carray(int32_pointer(np.uint64(where[_NCON])), (1,))[0]
+    ms.env_measures(table, ncon)
+    qpos, qvel = float_vector(table[_E.qpos]), float_vector(table[_E.qvel])
+    qpos_row, qvel_row = qpos_out[i], qvel_out[i]
+    for j in range(qpos_row.shape[0]):  # the robot's, the observation's first entries
+        qpos_row[j] = qpos[j]
+    for j in range(qvel_row.shape[0]):
+        qvel_row[j] = qvel[j]
+    values = float_vector(table[_E.out])
+    fallen = values[_OUT.fallen] != 0.0
+    episode = episodes[i]
+    newly_lost = False
+    tray = setting[_TRAY] != 0
+    if tray:
+        kept = (
+            values[_OUT.cup_on_plate] != 0.0
+            and values[_OUT.cup_upright] != 0.0
+            and values[_OUT.tray_on_hand] != 0.0
+        )
+        lost = episode[_LOST] != 0.0
+        newly_lost = not kept and not lost
+        if not kept:
+            episode[_LOST] = 1.0
+    distance = values[_OUT.goal_distance]
+    p = parameters[i]
+    progress = p[_W_PROGRESS] * (episode[_PREVIOUS] - distance)
+    ctrl_cost = -p[_W_CTRL] * effort * p[_DT]
+    fall = -p[_W_FALL] if fallen else 0.0
+    cup_loss = -p[_W_CUP] if newly_lost else 0.0
+    episode[_PREVIOUS] = distance
+    terminated = fallen or (tray and setting[_END_ON_LOSS] != 0 and episode[_LOST] != 0.0)
+    limit = p[_LIMIT]
+    time = carray(float64_pointer(np.uint64(where[_TIME])), (1,))[0]
+    truncated = not math.isnan(limit) and time >= limit - 0.5 * p[_TIMESTEP]
+    row[REWARD] = progress + ctrl_cost + fall + cup_loss
+    row[PROGRESS] = progress
+    row[CTRL] = ctrl_cost
+    row[FALL] = fall
+    row[CUP_LOSS] = cup_loss
+    row[TERMINATED] = 1.0 if terminated else 0.0
+    row[TRUNCATED] = 1.0 if truncated else 0.0
+    note = NEWLY_LOST if newly_lost else STEPPED
+    notes[i] = note
+    return note
+
+
+@njit(cache=True, nogil=True)
+def advance(
+    todo: NDArray[np.int64],
+    tables: NDArray[np.int64],
+    addresses: NDArray[np.int64],
+    actions: NDArray[np.float64],
+    action_tables: NDArray[np.float64],
+    settings: NDArray[np.int64],
+    parameters: NDArray[np.float64],
+    episodes: NDArray[np.float64],
+    results: NDArray[np.float64],
+    notes: NDArray[np.int64],
+    qpos_out: NDArray[np.float64],
+    qvel_out: NDArray[np.float64],
+) -> int:
+    """Step the sub-envs ``todo`` as ``WIPEnv._advance`` does, each ``i`` from its row of every
+    array: ``tables[i]`` its measures' table (``wip_gym.envs.measures.env_table``: its model,
+    data and measures), ``addresses[i]`` its data's ``ctrl``, ``ncon`` and ``time``,
+    ``actions[i]`` its torques, ``action_tables[i]`` their band and scale
+    (``measures.action_effort``), ``settings[i]`` its ``frame_skip``, tray and end at the cup's
+    loss, ``parameters[i]`` its reward's weights, step duration, time limit and timestep,
+    ``episodes[i]`` its last goal distance and cup loss (updated), into ``results[i]``
+    (:data:`REWARD` ... :data:`TRUNCATED`), ``notes[i]`` (:data:`STEPPED`,
+    :data:`NEWLY_LOST`, or :data:`REJECTED`: its action rejected, the sub-env not stepped),
+    and its robot's ``qpos`` and ``qvel`` after the step (the observation's) into
+    ``qpos_out[i]`` and ``qvel_out[i]``.
+    Returns how many were noted otherwise than :data:`STEPPED` (Python has work then)."""
+    noted = 0
+    for k in range(todo.shape[0]):
+        noted += (
+            advance_one(
+                todo[k],
+                tables,
+                addresses,
+                actions,
+                action_tables,
+                settings,
+                parameters,
+                episodes,
+                results,
+                notes,
+                qpos_out,
+                qvel_out,
+            )
+            != STEPPED
+        )
+    return noted
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def advance_parallel(
+    todo: NDArray[np.int64],
+    tables: NDArray[np.int64],
+    addresses: NDArray[np.int64],
+    actions: NDArray[np.float64],
+    action_tables: NDArray[np.float64],
+    settings: NDArray[np.int64],
+    parameters: NDArray[np.float64],
+    episodes: NDArray[np.float64],
+    results: NDArray[np.float64],
+    notes: NDArray[np.int64],
+    qpos_out: NDArray[np.float64],
+    qvel_out: NDArray[np.float64],
+) -> int:
+    """:func:`advance` with the sub-envs spread over numba's threads (``numba.set_num_threads``
+    of the calling thread; each sub-env's rows are its own)."""
+    noted = 0
+    for k in prange(todo.shape[0]):
+        noted += (
+            advance_one(
+                todo[k],
+                tables,
+                addresses,
+                actions,
+                action_tables,
+                settings,
+                parameters,
+                episodes,
+                results,
+                notes,
+                qpos_out,
+                qvel_out,
+            )
+            != STEPPED
+        )
+    return noted
+
+
+class CompiledSteps:
+    """The arrays :func:`advance` reads for the sub-envs ``envs`` (bare wip envs on the fast
+    path, each keeping its measures in its row: ``WIPEnv._measure_into``), kept bound to each
+    sub-env's data and measures' table: :meth:`eligible` says whether sub-env ``i`` may take
+    the compiled step now (binding it again when the env made new ones), :meth:`step` steps
+    a list of them into :attr:`results` and :attr:`states` (the robot's ``qpos`` and
+    ``qvel``, the observation's), on ``threads`` of numba's threads.
+
+    A sub-env's episode numbers (last goal distance, cup lost) and its ``_values`` and
+    ``_block`` are the batch's after a compiled step: :meth:`fresh` gives them back to the
+    env before its own code runs (its ``_advance``, or anyone reading it), :meth:`forget`
+    takes the env's as they are after its own code changed them (a reset, its ``_advance``).
+    """
+
+    def __init__(
+        self,
+        envs: list[WIPEnv],
+        results: NDArray[np.float64],
+        states: tuple[NDArray[np.float64], NDArray[np.float64]],
+        threads: int,
+    ) -> None:
+        n = len(envs)
+        self.envs = envs
+        # numba's threads: as many as asked, up to its pool (NUMBA_NUM_THREADS, the machine's
+        # cores unless set before numba is imported); results do not depend on it
+        pool: int = numba.config.NUMBA_NUM_THREADS  # type: ignore[attr-defined]
+        self.threads = max(1, min(threads, pool))
+        first = envs[0]
+        rows = first._measure_table.rows.shape if first._measure_table is not None else (0, 0)
+        nu = first.model.nu
+        self.tables = np.zeros((n, *rows), dtype=np.int64)
+        self.addresses = np.zeros((n, 3), dtype=np.int64)
+        self.action_tables = np.zeros((n, 3, nu))
+        self.settings = np.zeros((n, 3), dtype=np.int64)
+        self.parameters = np.zeros((n, 7))
+        self.episodes = np.zeros((n, 2))
+        if results.shape != (n, 7) or results.dtype != np.float64:
+            raise ValueError(f"results must be float64 of shape ({n}, 7), got {results.shape}")
+        self.results = results
+        self.states = states  # where the robot's qpos and qvel go, a row each
+        self.notes = np.zeros(n, dtype=np.int64)
+        self.everyone = np.arange(n, dtype=np.int64)
+        self.stale = np.zeros(n, dtype=np.bool_)  # the batch's numbers newer than the env's
+        self.taken = np.zeros(n, dtype=np.bool_)  # the batch holds the env's episode numbers
+        self._bound: list[tuple[object, object, int]] = [(None, None, -1)] * n
+        self.steps = 0  #: sub-env steps taken here (for the tests and the benchmark)
+        #: whether each sub-env can ever take it (:meth:`can_take`, and the first's sizes)
+        self.capable = [
+            self.can_take(env)
+            and env._measure_table is not None
+            and env._measure_table.rows.shape == rows
+            and env.model.nu == nu
+            for env in envs
+        ]
+
+    @staticmethod
+    def can_take(env: WIPEnv) -> bool:
+        """Whether the wip env ``env`` can take the compiled step at all: it measures on the
+        fast path (``wip_gym.mujoco_c``) and its torques are applied as given (no delay or
+        noise: ``Perturber.actuate`` is Python)."""
+        return env._measure_table is not None and not env._perturb_action
+
+    def eligible(self, i: int) -> bool:
+        """Whether sub-env ``i`` takes the compiled step now: it can, no event is due, its
+        views are of its data and model and its ``frame_skip`` has been checked (otherwise
+        its ``_advance`` does both); its arrays bound again if its data, table or
+        ``frame_skip`` changed."""
+        env = self.envs[i]
+        if not self.capable[i] or env._events_due or env._frames_bound != env.frame_skip:
+            return False
+        views = env._views_of
+        if views[1] is not env.data or views[0] is not env.model:  # _advance binds them
+            return False
+        if self._bound[i] != (env.data, env._measure_table, env._frames_bound):
+            self._bind(i)
+        return True
+
+    def _bind(self, i: int) -> None:
+        env = self.envs[i]
+        table, data, model = env._measure_table, env.data, env.model
+        assert table is not None
+        self.tables[i] = table.rows
+        ncon, time = mjc.size_addresses(data)
+        self.addresses[i] = (data.ctrl.ctypes.data, ncon, time)
+        self.action_tables[i] = env._action_table
+        self.settings[i] = (env._frames_bound, env._tray, env._terminate_on_cup_loss)
+        limit = math.nan if env._time_limit is None else env._time_limit
+        self.parameters[i] = (*env._weights, env._step_dt, limit, model.opt.timestep)
+        self._bound[i] = (data, table, env._frames_bound)
+
+    def fresh(self, i: int) -> None:
+        """Sub-env ``i``'s ``_values``, ``_block`` and episode numbers given back to it if a
+        compiled step left them behind."""
+        if self.stale[i]:
+            env = self.envs[i]
+            env._keep_measures()
+            env._prev_distance = self.episodes.item(i, _PREVIOUS)
+            env._cup_lost = self.episodes.item(i, _LOST) != 0.0
+            self.stale[i] = False
+
+    def forget(self, i: int) -> None:
+        """Sub-env ``i``'s own code changed its episode numbers (reset, ``_advance``): taken
+        from the env at its next compiled step."""
+        self.stale[i] = False
+        self.taken[i] = False
+
+    def step(self, todo: list[int], actions: NDArray[np.float64]) -> list[int]:
+        """Step the sub-envs ``todo`` (each :meth:`eligible`) with their rows of ``actions``
+        (C-contiguous float64, a row per sub-env) into :attr:`results` and :attr:`notes`, the
+        islands switched at a cup's loss. Returns those whose actions were rejected (not
+        stepped: their own ``_advance`` raises why)."""
+        everyone = len(todo) == len(self.envs)
+        indices = self.everyone if everyone else np.array(todo, dtype=np.int64)
+        taken, episodes = self.taken, self.episodes
+        if not (taken.all() if everyone else taken[indices].all()):
+            for i in todo:
+                if not taken[i]:  # the env's own numbers, after its reset or _advance
+                    env = self.envs[i]
+                    episodes[i, _PREVIOUS] = env._prev_distance
+                    episodes[i, _LOST] = 1.0 if env._cup_lost else 0.0
+                    taken[i] = True
+        if self.threads > 1:
+            numba.set_num_threads(self.threads)  # this thread's parallel regions
+            kernel = advance_parallel
+        else:
+            kernel = advance
+        noted = kernel(
+            indices,
+            self.tables,
+            self.addresses,
+            actions,
+            self.action_tables,
+            self.settings,
+            self.parameters,
+            episodes,
+            self.results,
+            self.notes,
+            *self.states,
+        )
+        self.stale[indices] = True
+        self.steps += len(todo)
+        rejected = []
+        if noted:
+            notes = self.notes
+            for i in todo:
+                note = notes.item(i)
+                if note == NEWLY_LOST:
+                    self.envs[i]._solve_by_islands(True)
+                elif note == REJECTED:
+                    rejected.append(i)
+            self.steps -= len(rejected)
+        return rejected
