@@ -498,3 +498,21 @@ def test_compiled_steps_and_advance_mixed_equal_sync_vector_env(
     assert moved == [True, False, True, False]
     sync.close()
     native.close()
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_the_fast_path_without_compiled_steps_equals_sync_vector_env(threads: int) -> None:
+    """Sub-envs whose torques are perturbed (``Perturber.actuate`` is Python) keep their
+    ``_advance`` on the fast path (their infos from the measures, their state copied from
+    their views), still equal to SyncVectorEnv's."""
+    probe = gym.make_vec("wip_gym/PlanarTray-v0", num_envs=2, torque_noise=0.05)
+    assert probe.unwrapped._sub.fast and probe.unwrapped._sub.compiled is None
+    probe.close()
+    terminations, truncations = run_pair(
+        "wip_gym/PlanarTray-v0",
+        AutoresetMode.SAME_STEP,
+        threads,
+        150,
+        limit={"max_episode_steps": QUICK_STEPS, "torque_noise": 0.05},
+    )
+    assert terminations + truncations > 0

@@ -262,17 +262,32 @@ def _find_sizes_offset() -> int:
     return found[0]
 
 
+def sizes_found() -> bool:
+    """Whether :func:`size_addresses` can find ``ncon`` and ``time`` on this release (the
+    fast path runs and the probe found ``ncon``'s place; found once)."""
+    global _sizes_offset
+    if not available():
+        return False
+    if _sizes_offset is None:
+        try:
+            _sizes_offset = _find_sizes_offset()
+        except RuntimeError:
+            _sizes_offset = -1
+    return _sizes_offset > 0
+
+
 def size_addresses(data: mujoco.MjData) -> tuple[int, int]:
     """The addresses of ``data``'s ``ncon`` (int) and ``time`` (mjtNum), which the bindings
     give only as Python numbers, for compiled code that steps ``data`` and then reads them
     (``wip_gym.vector.compiled``): ``time`` right before ``energy`` (whose view the bindings
     give), ``ncon`` where :func:`_find_sizes_offset` found it on this release; each checked
     against the bindings' value. ``RuntimeError`` where the layout differs."""
-    global _sizes_offset
-    if not available():
-        raise RuntimeError("the compiled fast path is not available (wip_gym.mujoco_c)")
-    if _sizes_offset is None:
-        _sizes_offset = _find_sizes_offset()
+    if not sizes_found():
+        raise RuntimeError(
+            "mjData's ncon is not where wip_gym.mujoco_c looks for it on MuJoCo "
+            f"{mujoco.__version__} (or the fast path is off)"
+        )
+    assert _sizes_offset is not None
     time = int(data.energy.ctypes.data) - 8
     ncon = time - _sizes_offset
     if (

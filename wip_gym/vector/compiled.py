@@ -21,10 +21,12 @@ Gymnasium's ``SyncVectorEnv`` of single envs on every path.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import Any
 
-import numba
 import numpy as np
-from numba import carray, njit, prange
+from numba import carray, njit, types
+from numba.extending import intrinsic
 from numpy.typing import NDArray
 
 from wip_gym import mujoco_c as mjc
@@ -173,8 +175,25 @@ def advance(
     return noted
 
 
-@njit(cache=True, nogil=True, parallel=True)
-def advance_parallel(
+def _claim_typing(typingctx: Any, counter: Any) -> Any:
+    """``counter[0]`` incremented atomically; its value before (the next sub-env to claim)."""
+    if not (isinstance(counter, types.Array) and counter.dtype == types.int64):
+        return None
+
+    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+        array = context.make_array(signature.args[0])(context, builder, args[0])
+        one = context.get_constant(types.int64, 1)
+        return builder.atomic_rmw("add", array.data, one, "seq_cst")
+
+    return types.int64(counter), codegen
+
+
+_claim: Any = intrinsic(_claim_typing)
+
+
+@njit(cache=True, nogil=True)
+def advance_claimed(
+    claims: NDArray[np.int64],
     todo: NDArray[np.int64],
     tables: NDArray[np.int64],
     addresses: NDArray[np.int64],
@@ -188,10 +207,16 @@ def advance_parallel(
     qpos_out: NDArray[np.float64],
     qvel_out: NDArray[np.float64],
 ) -> int:
-    """:func:`advance` with the sub-envs spread over numba's threads (``numba.set_num_threads``
-    of the calling thread; each sub-env's rows are its own)."""
+    """:func:`advance` of the sub-envs of ``todo`` this thread claims, one at a time, from
+    the counter ``claims[0]`` that every thread of the pass shares (atomically: each sub-env
+    is stepped once, by whichever thread is free; a thread the system does not run leaves
+    its share to the others)."""
     noted = 0
-    for k in prange(todo.shape[0]):
+    n = todo.shape[0]
+    while True:
+        k = _claim(claims)
+        if k >= n:
+            return noted
         noted += (
             advance_one(
                 todo[k],
@@ -209,7 +234,6 @@ def advance_parallel(
             )
             != STEPPED
         )
-    return noted
 
 
 class CompiledSteps:
@@ -218,7 +242,7 @@ class CompiledSteps:
     sub-env's data and measures' table: :meth:`eligible` says whether sub-env ``i`` may take
     the compiled step now (binding it again when the env made new ones), :meth:`step` steps
     a list of them into :attr:`results` and :attr:`states` (the robot's ``qpos`` and
-    ``qvel``, the observation's), on ``threads`` of numba's threads.
+    ``qvel``, the observation's), on one thread or several (:meth:`use_threads`).
 
     A sub-env's episode numbers (last goal distance, cup lost) and its ``_values`` and
     ``_block`` are the batch's after a compiled step: :meth:`fresh` gives them back to the
@@ -231,14 +255,14 @@ class CompiledSteps:
         envs: list[WIPEnv],
         results: NDArray[np.float64],
         states: tuple[NDArray[np.float64], NDArray[np.float64]],
-        threads: int,
     ) -> None:
         n = len(envs)
         self.envs = envs
-        # numba's threads: as many as asked, up to its pool (NUMBA_NUM_THREADS, the machine's
-        # cores unless set before numba is imported); results do not depend on it
-        pool: int = numba.config.NUMBA_NUM_THREADS  # type: ignore[attr-defined]
-        self.threads = max(1, min(threads, pool))
+        self.threads = 1  # threads that step (use_threads)
+        self._run_each: Callable[[Callable[[int], None]], None] | None = None
+        self.claims = np.zeros(1, dtype=np.int64)  # the next sub-env to claim (threads)
+        self._pass: tuple[NDArray[np.int64], NDArray[np.float64]] = (self.claims, np.zeros(0))
+        self._noted = [0]
         first = envs[0]
         rows = first._measure_table.rows.shape if first._measure_table is not None else (0, 0)
         nu = first.model.nu
@@ -270,9 +294,9 @@ class CompiledSteps:
     @staticmethod
     def can_take(env: WIPEnv) -> bool:
         """Whether the wip env ``env`` can take the compiled step at all: it measures on the
-        fast path (``wip_gym.mujoco_c``) and its torques are applied as given (no delay or
-        noise: ``Perturber.actuate`` is Python)."""
-        return env._measure_table is not None and not env._perturb_action
+        fast path (``wip_gym.mujoco_c``, where it finds ``mjData.ncon``) and its torques are
+        applied as given (no delay or noise: ``Perturber.actuate`` is Python)."""
+        return env._measure_table is not None and not env._perturb_action and mjc.sizes_found()
 
     def eligible(self, i: int) -> bool:
         """Whether sub-env ``i`` takes the compiled step now: it can, no event is due, its
@@ -301,6 +325,30 @@ class CompiledSteps:
         limit = math.nan if env._time_limit is None else env._time_limit
         self.parameters[i] = (*env._weights, env._step_dt, limit, model.opt.timestep)
         self._bound[i] = (data, table, env._frames_bound)
+
+    def use_threads(self, run_each: Callable[[Callable[[int], None]], None], threads: int) -> None:
+        """Step on ``threads`` threads: ``run_each(body)`` runs ``body(k)`` once on each
+        thread ``k`` (``ParallelLoop.run_each``), each claiming sub-envs from a shared counter
+        in compiled code (:func:`advance_claimed`)."""
+        self._run_each, self.threads = run_each, threads
+        self._noted = [0] * threads
+
+    def _claim_share(self, k: int) -> None:
+        indices, actions = self._pass
+        self._noted[k] = advance_claimed(
+            self.claims,
+            indices,
+            self.tables,
+            self.addresses,
+            actions,
+            self.action_tables,
+            self.settings,
+            self.parameters,
+            self.episodes,
+            self.results,
+            self.notes,
+            *self.states,
+        )
 
     def fresh(self, i: int) -> None:
         """Sub-env ``i``'s ``_values``, ``_block`` and episode numbers given back to it if a
@@ -333,24 +381,25 @@ class CompiledSteps:
                     episodes[i, _PREVIOUS] = env._prev_distance
                     episodes[i, _LOST] = 1.0 if env._cup_lost else 0.0
                     taken[i] = True
-        if self.threads > 1:
-            numba.set_num_threads(self.threads)  # this thread's parallel regions
-            kernel = advance_parallel
+        if self.threads > 1 and self._run_each is not None and len(todo) > 1:
+            self.claims[0] = 0
+            self._pass = (indices, actions)
+            self._run_each(self._claim_share)
+            noted = sum(self._noted)
         else:
-            kernel = advance
-        noted = kernel(
-            indices,
-            self.tables,
-            self.addresses,
-            actions,
-            self.action_tables,
-            self.settings,
-            self.parameters,
-            episodes,
-            self.results,
-            self.notes,
-            *self.states,
-        )
+            noted = advance(
+                indices,
+                self.tables,
+                self.addresses,
+                actions,
+                self.action_tables,
+                self.settings,
+                self.parameters,
+                episodes,
+                self.results,
+                self.notes,
+                *self.states,
+            )
         self.stale[indices] = True
         self.steps += len(todo)
         rejected = []

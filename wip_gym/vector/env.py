@@ -123,7 +123,6 @@ class _SubEnvs:
         envs: list[gym.Env[Any, Any]],
         observation_keys: tuple[str, ...],
         batcher: InfoBatcher,
-        threads: int,
     ) -> None:
         self.envs = envs
         paths = [step_path(env) for env in envs]
@@ -158,7 +157,7 @@ class _SubEnvs:
         self.compiled: CompiledSteps | None = None
         if self.columns is not None and any(CompiledSteps.can_take(b) for b in self.bases):
             qpos, qvel = self.columns.states
-            self.compiled = CompiledSteps(self.bases, self.results, (qpos, qvel), threads)
+            self.compiled = CompiledSteps(self.bases, self.results, (qpos, qvel))
         self.everyone = list(range(n))
         self.shares: list[list[int]] = [self.everyone]  # each thread's sub-envs (set_threads)
         self.has_limits = any(limit is not None for limit in self.limits)
@@ -365,9 +364,7 @@ class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArr
         autoreset_mode: ``NextStep`` (the default, as Gymnasium's), ``SameStep`` or
             ``Disabled`` (an ``AutoresetMode`` or its value), with Gymnasium's semantics.
         num_threads: threads that step the sub-envs (the caller's included; at most
-            ``num_envs``): their compiled steps on numba's threads (at most its pool,
-            ``NUMBA_NUM_THREADS``, the cores by default), the rest (resets, sub-envs that
-            step in Python) on threads of this env; default :data:`DEFAULT_THREADS`.
+            ``num_envs``); default :data:`DEFAULT_THREADS`.
         copy: return fresh observation arrays at every call (True, as Gymnasium's vector
             envs) or the same buffers, overwritten by the next call.
         **env_kwargs: the single env's arguments (``gymnasium.make(env_id, **env_kwargs)``);
@@ -421,9 +418,7 @@ class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArr
         self.spec = None  # make_vec sets it
         self._autoreset_mode = mode
         self._batcher = InfoBatcher(num_envs, self._add_info)
-        self._sub = _SubEnvs(
-            envs, tuple(observation_space.spaces), self._batcher, min(threads, num_envs)
-        )
+        self._sub = _SubEnvs(envs, tuple(observation_space.spaces), self._batcher)
         self._shapes: dict[str, tuple[int, ...]] = {
             key: tuple(space.shape or ()) for key, space in observation_space.spaces.items()
         }
@@ -433,6 +428,8 @@ class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArr
         self._has_reset = False
         self._loop = ParallelLoop(self._sub, num_envs, min(threads, num_envs))
         self._sub.set_threads(self._loop.threads)
+        if self._sub.compiled is not None and self._loop.threads > 1:
+            self._sub.compiled.use_threads(self._loop.run_each, self._loop.threads)
         self._finalizer = weakref.finalize(self, self._loop.close)
 
     # ------------------------------------------------------------------ properties
@@ -541,7 +538,7 @@ class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArr
             sub.action_array = np.ascontiguousarray(actions, dtype=np.float64)
             sub.counted = sub.has_limits or sub.same_step
             if self._loop.threads == 1 or sub.compiled is not None:
-                sub.pass_fast()  # the compiled steps on numba's threads (CompiledSteps)
+                sub.pass_fast()  # the compiled steps on the threads (CompiledSteps)
             else:
                 self._loop.run_each(sub.share_fast)
                 sub.raise_errors()
