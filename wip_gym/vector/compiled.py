@@ -280,6 +280,7 @@ class CompiledSteps:
         self.everyone = np.arange(n, dtype=np.int64)
         self.stale = np.zeros(n, dtype=np.bool_)  # the batch's numbers newer than the env's
         self.taken = np.zeros(n, dtype=np.bool_)  # the batch holds the env's episode numbers
+        self._all_taken = False  # every one is
         self._bound: list[tuple[object, object, int]] = [(None, None, -1)] * n
         self.steps = 0  #: sub-env steps taken here (for the tests and the benchmark)
         #: whether each sub-env can ever take it (:meth:`can_take`, and the first's sizes)
@@ -365,6 +366,7 @@ class CompiledSteps:
         from the env at its next compiled step."""
         self.stale[i] = False
         self.taken[i] = False
+        self._all_taken = False
 
     def step(self, todo: list[int], actions: NDArray[np.float64]) -> list[int]:
         """Step the sub-envs ``todo`` (each :meth:`eligible`) with their rows of ``actions``
@@ -374,13 +376,14 @@ class CompiledSteps:
         everyone = len(todo) == len(self.envs)
         indices = self.everyone if everyone else np.array(todo, dtype=np.int64)
         taken, episodes = self.taken, self.episodes
-        if not (taken.all() if everyone else taken[indices].all()):
+        if not self._all_taken:
             for i in todo:
                 if not taken[i]:  # the env's own numbers, after its reset or _advance
                     env = self.envs[i]
                     episodes[i, _PREVIOUS] = env._prev_distance
                     episodes[i, _LOST] = 1.0 if env._cup_lost else 0.0
                     taken[i] = True
+            self._all_taken = everyone or bool(taken.all())
         if self.threads > 1 and self._run_each is not None and len(todo) > 1:
             self.claims[0] = 0
             self._pass = (indices, actions)
@@ -400,7 +403,10 @@ class CompiledSteps:
                 self.notes,
                 *self.states,
             )
-        self.stale[indices] = True
+        if everyone:
+            self.stale.fill(True)
+        else:
+            self.stale[indices] = True
         self.steps += len(todo)
         rejected = []
         if noted:
