@@ -126,55 +126,6 @@ def advance_one(
     return note
 
 
-@njit(cache=True, nogil=True)
-def advance(
-    todo: NDArray[np.int64],
-    tables: NDArray[np.int64],
-    addresses: NDArray[np.int64],
-    actions: NDArray[np.float64],
-    action_tables: NDArray[np.float64],
-    settings: NDArray[np.int64],
-    parameters: NDArray[np.float64],
-    episodes: NDArray[np.float64],
-    results: NDArray[np.float64],
-    notes: NDArray[np.int64],
-    qpos_out: NDArray[np.float64],
-    qvel_out: NDArray[np.float64],
-) -> int:
-    """Step the sub-envs ``todo`` as ``WIPEnv._advance`` does, each ``i`` from its row of every
-    array: ``tables[i]`` its measures' table (``wip_gym.envs.measures.env_table``: its model,
-    data and measures), ``addresses[i]`` its data's ``ctrl``, ``ncon`` and ``time``,
-    ``actions[i]`` its torques, ``action_tables[i]`` their band and scale
-    (``measures.action_effort``), ``settings[i]`` its ``frame_skip``, tray and end at the cup's
-    loss, ``parameters[i]`` its reward's weights, step duration, time limit and timestep,
-    ``episodes[i]`` its last goal distance and cup loss (updated), into ``results[i]``
-    (:data:`REWARD` ... :data:`TRUNCATED`), ``notes[i]`` (:data:`STEPPED`,
-    :data:`NEWLY_LOST`, or :data:`REJECTED`: its action rejected, the sub-env not stepped),
-    and its robot's ``qpos`` and ``qvel`` after the step (the observation's) into
-    ``qpos_out[i]`` and ``qvel_out[i]``.
-    Returns how many were noted otherwise than :data:`STEPPED` (Python has work then)."""
-    noted = 0
-    for k in range(todo.shape[0]):
-        noted += (
-            advance_one(
-                todo[k],
-                tables,
-                addresses,
-                actions,
-                action_tables,
-                settings,
-                parameters,
-                episodes,
-                results,
-                notes,
-                qpos_out,
-                qvel_out,
-            )
-            != STEPPED
-        )
-    return noted
-
-
 def _claim_typing(typingctx: Any, counter: Any) -> Any:
     """``counter[0]`` incremented atomically; its value before (the next sub-env to claim)."""
     if not (isinstance(counter, types.Array) and counter.dtype == types.int64):
@@ -192,7 +143,7 @@ _claim: Any = intrinsic(_claim_typing)
 
 
 @njit(cache=True, nogil=True)
-def advance_claimed(
+def advance(
     claims: NDArray[np.int64],
     todo: NDArray[np.int64],
     tables: NDArray[np.int64],
@@ -207,10 +158,22 @@ def advance_claimed(
     qpos_out: NDArray[np.float64],
     qvel_out: NDArray[np.float64],
 ) -> int:
-    """:func:`advance` of the sub-envs of ``todo`` this thread claims, one at a time, from
-    the counter ``claims[0]`` that every thread of the pass shares (atomically: each sub-env
-    is stepped once, by whichever thread is free; a thread the system does not run leaves
-    its share to the others)."""
+    """Step the sub-envs ``todo`` this thread claims as ``WIPEnv._advance`` does: one at a
+    time, from the counter ``claims[0]`` that every thread of the pass shares (atomically:
+    each sub-env is stepped once, by whichever thread is free; a thread the system does not
+    run leaves its share to the others; alone, a thread steps them all, in order).
+
+    Each ``i`` from its row of every array: ``tables[i]`` its measures' table
+    (``wip_gym.envs.measures.env_table``: its model, data and measures), ``addresses[i]`` its
+    data's ``ctrl``, ``ncon`` and ``time``, ``actions[i]`` its torques, ``action_tables[i]``
+    their band and scale (``measures.action_effort``), ``settings[i]`` its ``frame_skip``,
+    tray and end at the cup's loss, ``parameters[i]`` its reward's weights, step duration,
+    time limit and timestep, ``episodes[i]`` its last goal distance and cup loss (updated);
+    into ``results[i]`` (:data:`REWARD` ... :data:`TRUNCATED`), ``notes[i]``
+    (:data:`STEPPED`, :data:`NEWLY_LOST`, or :data:`REJECTED`: its action rejected, the
+    sub-env not stepped), and its robot's ``qpos`` and ``qvel`` after the step (the
+    observation's) into ``qpos_out[i]`` and ``qvel_out[i]``. Returns how many this thread
+    noted otherwise than :data:`STEPPED` (Python has work then)."""
     noted = 0
     n = todo.shape[0]
     while True:
@@ -330,13 +293,13 @@ class CompiledSteps:
     def use_threads(self, run_each: Callable[[Callable[[int], None]], None], threads: int) -> None:
         """Step on ``threads`` threads: ``run_each(body)`` runs ``body(k)`` once on each
         thread ``k`` (``ParallelLoop.run_each``), each claiming sub-envs from a shared counter
-        in compiled code (:func:`advance_claimed`)."""
+        in compiled code (:func:`advance`)."""
         self._run_each, self.threads = run_each, threads
         self._noted = [0] * threads
 
     def _claim_share(self, k: int) -> None:
         indices, actions = self._pass
-        self._noted[k] = advance_claimed(
+        self._noted[k] = advance(
             self.claims,
             indices,
             self.tables,
@@ -384,25 +347,14 @@ class CompiledSteps:
                     episodes[i, _LOST] = 1.0 if env._cup_lost else 0.0
                     taken[i] = True
             self._all_taken = everyone or bool(taken.all())
+        self.claims[0] = 0
+        self._pass = (indices, actions)
         if self.threads > 1 and self._run_each is not None and len(todo) > 1:
-            self.claims[0] = 0
-            self._pass = (indices, actions)
             self._run_each(self._claim_share)
             noted = sum(self._noted)
         else:
-            noted = advance(
-                indices,
-                self.tables,
-                self.addresses,
-                actions,
-                self.action_tables,
-                self.settings,
-                self.parameters,
-                episodes,
-                self.results,
-                self.notes,
-                *self.states,
-            )
+            self._claim_share(0)
+            noted = self._noted[0]
         if everyone:
             self.stale.fill(True)
         else:

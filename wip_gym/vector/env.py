@@ -6,13 +6,15 @@
 randomisation, a payload; its own time limit), reset with seed ``S + i`` by ``reset(seed=S)``,
 so that it equals the single env bit for bit, through autoresets. What it saves over
 Gymnasium's ``SyncVectorEnv`` is everything around the sub-envs' physics that a batch does not
-need (docs/vector.md §3): a sub-env's step is its ``WIPEnv._advance`` (``step`` without its
-observation and info dicts), its measures written by the compiled code straight into its row
-of one batch array, and the step's observation and info are made from the batch's arrays after
-the pass, a few array operations per step (``wip_gym.vector.columns``); sub-envs whose infos
-may change type take their own ``step`` and the dicts are batched a few conversions per step
-(``wip_gym.vector.infos``). With ``num_threads`` > 1, threads overlap one sub-env's physics
-(which releases the GIL) with another's Python (``wip_gym.vector.threads``).
+need (docs/vector.md §3): the sub-envs' steps are one compiled call per pass
+(``wip_gym.vector.compiled``: the single env's ``WIPEnv._advance``, the step without its
+observation and info dicts, in compiled code holding no GIL), their measures and state written
+straight into their rows of the batch's arrays, and the step's observation and info are made
+from those after the pass, a few array operations per step (``wip_gym.vector.columns``); a
+sub-env with an event due or perturbed torques takes its own ``_advance``, and sub-envs whose
+infos may change type their own ``step``, their dicts batched a few conversions per step
+(``wip_gym.vector.infos``). With ``num_threads`` > 1, the threads claim sub-envs from a shared
+counter inside the compiled call (``wip_gym.vector.threads``).
 """
 
 from __future__ import annotations
@@ -40,11 +42,9 @@ from wip_gym.vector.infos import InfoBatcher
 from wip_gym.vector.threads import ParallelLoop
 
 _MODES = {mode.value: mode for mode in AutoresetMode}
-#: the default number of threads: one. A sub-env's step holds the GIL for about half its time
-#: (its Python; MuJoCo's step and the env's compiled measures release it) and the batch's
-#: arrays are made in the caller's thread after the pass, so two threads can at best bring a
-#: step to that half, and measured on a shared 2-core machine they were slower than one
-#: (docs/vector.md §3)
+#: the default number of threads: one, as Gymnasium's own vector envs; ``num_threads=2`` steps
+#: the sub-envs' compiled steps on two cores (docs/vector.md §3), at the cost of a second core
+#: that a sweep of many processes would rather have
 DEFAULT_THREADS = 1
 
 
@@ -109,14 +109,15 @@ class _SubEnvs:
     Two ways to step: the fast one, when every sub-env is a wip env stepped bare (or under
     the ``TimeLimit`` counted here) with a :meth:`WIPEnv.step_layout` (its infos' types
     fixed): each sub-env's :meth:`WIPEnv._advance` (the step without its observation and
-    info dicts), its measures kept in its row of :attr:`ColumnBatcher.measures`, from which
-    (and the sub-envs' ``qpos`` and ``qvel``) the step's info and observation are made
-    after the pass (``wip_gym.vector.columns``); otherwise each
-    sub-env's ``step`` and its dicts batched (:class:`InfoBatcher`). Resets take the second
-    way (their infos through Gymnasium's rule). On one thread the fast way's pass is
-    :meth:`pass_fast`; on several, each thread steps its share (:meth:`share_fast`): the
-    sub-envs that can take them in one compiled call, the others by their ``_advance``
-    (:meth:`step_part`)."""
+    info dicts; for the sub-envs that can, all of them in one compiled call,
+    :class:`CompiledSteps`), its measures kept in its row of
+    :attr:`ColumnBatcher.measures`, from which (and the rows of the sub-envs' ``qpos`` and
+    ``qvel``) the step's info and observation are made after the pass
+    (``wip_gym.vector.columns``); otherwise each sub-env's ``step`` and its dicts batched
+    (:class:`InfoBatcher`). Resets take the second way (their infos through Gymnasium's
+    rule). The fast way's pass is :meth:`pass_fast` (the compiled call spreads over the
+    threads itself); without compiled steps and with several threads, each thread steps its
+    share (:meth:`share_fast`)."""
 
     def __init__(
         self,

@@ -1,12 +1,12 @@
-"""A loop over the sub-envs spread over threads, for the vector env (docs/vector.md §3).
+"""Threads for the vector env's passes over its sub-envs (docs/vector.md §3).
 
-A sub-env's step is Python around two calls that release the GIL (``mujoco.mj_step`` and the
-env's compiled measures, ``nogil``), so threads can overlap one sub-env's physics with
-another's Python: at best, a step comes down to its Python part (about half of it). The
-threads are made once and wait on a lock between steps; the calling thread takes part.
-Sub-envs are handed out one at a time from a shared counter, so a slow one (a reset) does not
-hold the others back; which thread steps a sub-env does not matter, as each is touched by one
-thread per step and the sub-envs share nothing.
+The threads are made once and wait on a lock between passes; the calling thread takes part.
+Two kinds of pass: :meth:`ParallelLoop.run` hands the indices out one at a time from a shared
+counter (a reset pass: a slow sub-env does not hold the others back), and
+:meth:`ParallelLoop.run_each` runs one body per thread (the compiled steps' pass, whose
+threads claim sub-envs in compiled code, ``wip_gym.vector.compiled``). Which thread steps a
+sub-env does not matter: each is touched by one thread per pass and the sub-envs share
+nothing.
 """
 
 from __future__ import annotations
