@@ -236,9 +236,9 @@ _sizes_offset: int | None = None  # ncon's offset before time in mjData (found o
 
 def _find_sizes_offset() -> int:
     """How many bytes ``mjData.ncon`` lies before ``mjData.time`` on this release: the
-    variable sizes (``ncon, ne, nf, nl, nefc``, ints, then more that vary by release: 88
-    bytes on 3.17) come shortly before ``time`` in every 3.x ``mjdata.h``; found on a probe
-    box resting on a plane
+    variable sizes (``ncon, ne, nf, nl, nefc``, ints, then more that vary by release: 64
+    bytes on 3.10, 80 on 3.11 and 3.12, 88 on 3.13 to 3.17) come shortly before ``time`` in
+    every 3.x ``mjdata.h``; found on a probe box resting on a plane
     (4 contacts, 16 constraint rows) as the place of the bindings' own five values, and
     ``RuntimeError`` if no place or several hold them."""
     model = mujoco.MjModel.from_xml_string(_SIZES_PROBE)
