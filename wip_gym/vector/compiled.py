@@ -21,18 +21,18 @@ Gymnasium's ``SyncVectorEnv`` of single envs on every path.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+import threading
 from typing import Any
 
 import numpy as np
-from numba import carray, njit, types
-from numba.extending import intrinsic
+from numba import carray, njit
 from numpy.typing import NDArray
 
 from wip_gym import mujoco_c as mjc
 from wip_gym.array_table import float64_pointer, float_vector, int32_pointer, int_vector
 from wip_gym.envs import measures as ms
 from wip_gym.envs.base import WIPEnv
+from wip_gym.vector.atomics import atomic_add, atomic_load, atomic_store, atomic_swap
 
 _CTRL, _NCON, _TIME = range(3)  # addresses: the data's ctrl, ncon and time
 _FRAMES, _TRAY, _END_ON_LOSS = range(3)  # settings
@@ -43,6 +43,9 @@ _PREVIOUS, _LOST = range(2)  # an episode's numbers: the last goal distance, the
 #: a result's columns, as ``WIPEnv._advance`` returns them (the ends 1.0 or 0.0)
 REWARD, PROGRESS, CTRL, FALL, CUP_LOSS, TERMINATED, TRUNCATED = range(7)
 STEPPED, NEWLY_LOST, REJECTED = 0, 1, -1  # a note: stepped; the cup lost now; not stepped
+TEAM_SPINS = 200_000
+"""Turns a team thread spins waiting for the next pass before it sleeps (about a millisecond
+on the development machine: a loop of RL steps keeps it awake, an idle env lets it sleep)."""
 _OUT, _E, _MODEL, _DATA = ms.OUT, ms._E, ms._MODEL, ms._DATA
 
 
@@ -126,25 +129,66 @@ def advance_one(
     return note
 
 
-def _claim_typing(typingctx: Any, counter: Any) -> Any:
-    """``counter[0]`` incremented atomically; its value before (the next sub-env to claim)."""
-    if not (isinstance(counter, types.Array) and counter.dtype == types.int64):
-        return None
-
-    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
-        array = context.make_array(signature.args[0])(context, builder, args[0])
-        one = context.get_constant(types.int64, 1)
-        return builder.atomic_rmw("add", array.data, one, "seq_cst")
-
-    return types.int64(counter), codegen
+# A pass's shared counters (``sync``, int64, read and written atomically): the claim word
+# (the pass's generation, its number of sub-envs and the next one to claim, in one word so
+# that a thread claims with one compare-and-swap and never from another pass), the sub-envs
+# done and noted in the pass, and the order to stop.
+_CLAIM, _DONE, _NOTED, _STOP = range(4)
+_GENERATION_SHIFT, _COUNT_SHIFT, _INDEX_MASK = 32, 16, (1 << 16) - 1
+MAX_SUB_ENVS = _INDEX_MASK
+"""Sub-envs a pass can step (the claim word's 16 bits)."""
 
 
-_claim: Any = intrinsic(_claim_typing)
+@njit(cache=True, nogil=True)
+def _work(
+    sync: NDArray[np.int64],
+    generation: int,
+    todo: NDArray[np.int64],
+    tables: NDArray[np.int64],
+    addresses: NDArray[np.int64],
+    actions: NDArray[np.float64],
+    action_tables: NDArray[np.float64],
+    settings: NDArray[np.int64],
+    parameters: NDArray[np.float64],
+    episodes: NDArray[np.float64],
+    results: NDArray[np.float64],
+    notes: NDArray[np.int64],
+    qpos_out: NDArray[np.float64],
+    qvel_out: NDArray[np.float64],
+) -> None:
+    """Claim and step the pass ``generation``'s sub-envs (``todo[k]``) until none is left."""
+    while True:
+        word = atomic_load(sync, _CLAIM)
+        if word >> _GENERATION_SHIFT != generation:
+            return
+        k = word & _INDEX_MASK
+        if k >= (word >> _COUNT_SHIFT) & _INDEX_MASK:
+            return
+        if not atomic_swap(sync, _CLAIM, word, word + 1):
+            continue  # another thread claimed it
+        note = advance_one(
+            todo[k],
+            tables,
+            addresses,
+            actions,
+            action_tables,
+            settings,
+            parameters,
+            episodes,
+            results,
+            notes,
+            qpos_out,
+            qvel_out,
+        )
+        if note != STEPPED:
+            atomic_add(sync, _NOTED, 1)
+        atomic_add(sync, _DONE, 1)
 
 
 @njit(cache=True, nogil=True)
 def advance(
-    claims: NDArray[np.int64],
+    sync: NDArray[np.int64],
+    count: int,
     todo: NDArray[np.int64],
     tables: NDArray[np.int64],
     addresses: NDArray[np.int64],
@@ -158,10 +202,11 @@ def advance(
     qpos_out: NDArray[np.float64],
     qvel_out: NDArray[np.float64],
 ) -> int:
-    """Step the sub-envs ``todo`` this thread claims as ``WIPEnv._advance`` does: one at a
-    time, from the counter ``claims[0]`` that every thread of the pass shares (atomically:
-    each sub-env is stepped once, by whichever thread is free; a thread the system does not
-    run leaves its share to the others; alone, a thread steps them all, in order).
+    """Step the sub-envs ``todo[:count]`` as ``WIPEnv._advance`` does, on this thread and on
+    the team's (:func:`serve`) that the pass finds awake: the pass is published in ``sync``,
+    every thread claims sub-envs one at a time (each is stepped once, by whichever thread is
+    free; a thread the system does not run leaves its share to the others), and this one
+    returns when all are done.
 
     Each ``i`` from its row of every array: ``tables[i]`` its measures' table
     (``wip_gym.envs.measures.env_table``: its model, data and measures), ``addresses[i]`` its
@@ -172,31 +217,142 @@ def advance(
     into ``results[i]`` (:data:`REWARD` ... :data:`TRUNCATED`), ``notes[i]``
     (:data:`STEPPED`, :data:`NEWLY_LOST`, or :data:`REJECTED`: its action rejected, the
     sub-env not stepped), and its robot's ``qpos`` and ``qvel`` after the step (the
-    observation's) into ``qpos_out[i]`` and ``qvel_out[i]``. Returns how many this thread
-    noted otherwise than :data:`STEPPED` (Python has work then)."""
-    noted = 0
-    n = todo.shape[0]
+    observation's) into ``qpos_out[i]`` and ``qvel_out[i]``. Returns how many were noted
+    otherwise than :data:`STEPPED` (Python has work then)."""
+    atomic_store(sync, _DONE, 0)
+    atomic_store(sync, _NOTED, 0)
+    generation = ((atomic_load(sync, _CLAIM) >> _GENERATION_SHIFT) + 1) & 0x7FFFFFFF
+    atomic_store(sync, _CLAIM, (generation << _GENERATION_SHIFT) | (count << _COUNT_SHIFT))
+    _work(
+        sync,
+        generation,
+        todo,
+        tables,
+        addresses,
+        actions,
+        action_tables,
+        settings,
+        parameters,
+        episodes,
+        results,
+        notes,
+        qpos_out,
+        qvel_out,
+    )
+    while atomic_load(sync, _DONE) < count:  # the others' last sub-envs
+        pass
+    return atomic_load(sync, _NOTED)
+
+
+@njit(cache=True, nogil=True)
+def serve(
+    sync: NDArray[np.int64],
+    asleep: NDArray[np.int64],
+    me: int,
+    spins: int,
+    todo: NDArray[np.int64],
+    tables: NDArray[np.int64],
+    addresses: NDArray[np.int64],
+    actions: NDArray[np.float64],
+    action_tables: NDArray[np.float64],
+    settings: NDArray[np.int64],
+    parameters: NDArray[np.float64],
+    episodes: NDArray[np.float64],
+    results: NDArray[np.float64],
+    notes: NDArray[np.int64],
+    qpos_out: NDArray[np.float64],
+    qvel_out: NDArray[np.float64],
+) -> bool:
+    """A team thread's loop: wait for each pass of :func:`advance` (spinning, without the
+    GIL) and claim sub-envs in it; after ``spins`` turns with no new pass, note itself
+    ``asleep[me]`` and return True (its Python sleeps until the next pass wakes it); False
+    once ``sync`` says stop."""
+    seen = -1
     while True:
-        k = _claim(claims)
-        if k >= n:
-            return noted
-        noted += (
-            advance_one(
-                todo[k],
-                tables,
-                addresses,
-                actions,
-                action_tables,
-                settings,
-                parameters,
-                episodes,
-                results,
-                notes,
-                qpos_out,
-                qvel_out,
-            )
-            != STEPPED
+        idle = 0
+        while True:
+            generation = atomic_load(sync, _CLAIM) >> _GENERATION_SHIFT
+            if generation != seen:
+                break
+            if atomic_load(sync, _STOP) != 0:
+                return False
+            idle += 1
+            if idle > spins:
+                atomic_store(asleep, me, 1)
+                return True
+        seen = generation
+        _work(
+            sync,
+            generation,
+            todo,
+            tables,
+            addresses,
+            actions,
+            action_tables,
+            settings,
+            parameters,
+            episodes,
+            results,
+            notes,
+            qpos_out,
+            qvel_out,
         )
+
+
+def _serve_loop(
+    sync: NDArray[np.int64],
+    asleep: NDArray[np.int64],
+    me: int,
+    spins: int,
+    wake: threading.Semaphore,
+    arrays: tuple[NDArray[Any], ...],
+) -> None:
+    """A team thread: :func:`serve` until told to stop, asleep on ``wake`` between."""
+    while serve(sync, asleep, me, spins, *arrays):
+        wake.acquire()
+        if sync[_STOP]:
+            return
+
+
+class Team:
+    """``helpers`` threads that step the passes of :func:`advance` with its caller, each
+    running :func:`serve` on ``arrays`` (the pass's ``todo`` and the sub-envs' arrays, the
+    same objects at every pass): they spin for ``spins`` turns after a pass (about a
+    millisecond), then sleep until :meth:`wake` (called before each pass) wakes them."""
+
+    def __init__(self, helpers: int, arrays: tuple[NDArray[Any], ...], spins: int) -> None:
+        self.sync = np.zeros(4, dtype=np.int64)
+        self.asleep = np.zeros(helpers, dtype=np.int64)
+        self._wakes = [threading.Semaphore(0) for _ in range(helpers)]
+        self._threads = [
+            threading.Thread(
+                target=_serve_loop,
+                args=(self.sync, self.asleep, me, spins, self._wakes[me], arrays),
+                name=f"wip-vector-step-{me + 1}",
+                daemon=True,
+            )
+            for me in range(helpers)
+        ]
+        for thread in self._threads:
+            thread.start()
+
+    def wake(self) -> None:
+        """Wake the threads that fell asleep since the last pass."""
+        asleep = self.asleep
+        if asleep.any():
+            for me in np.flatnonzero(asleep):
+                asleep[me] = 0
+                self._wakes[me].release()
+
+    def close(self) -> None:
+        """Stop the threads (idempotent)."""
+        if self.sync[_STOP]:
+            return
+        self.sync[_STOP] = 1
+        for wake in self._wakes:
+            wake.release()
+        for thread in self._threads:
+            thread.join()
 
 
 class CompiledSteps:
@@ -205,7 +361,8 @@ class CompiledSteps:
     sub-env's data and measures' table: :meth:`eligible` says whether sub-env ``i`` may take
     the compiled step now (binding it again when the env made new ones), :meth:`step` steps
     a list of them into :attr:`results` and :attr:`states` (the robot's ``qpos`` and
-    ``qvel``, the observation's), on one thread or several (:meth:`use_threads`).
+    ``qvel``, the observation's), on one thread or several (:meth:`use_threads`: a
+    :class:`Team`).
 
     A sub-env's episode numbers (last goal distance, cup lost) and its ``_values`` and
     ``_block`` are the batch's after a compiled step: :meth:`fresh` gives them back to the
@@ -221,11 +378,11 @@ class CompiledSteps:
     ) -> None:
         n = len(envs)
         self.envs = envs
+        if n > MAX_SUB_ENVS:
+            raise ValueError(f"at most {MAX_SUB_ENVS} sub-envs take compiled steps, got {n}")
         self.threads = 1  # threads that step (use_threads)
-        self._run_each: Callable[[Callable[[int], None]], None] | None = None
-        self.claims = np.zeros(1, dtype=np.int64)  # the next sub-env to claim (threads)
-        self._pass: tuple[NDArray[np.int64], NDArray[np.float64]] = (self.claims, np.zeros(0))
-        self._noted = [0]
+        self._team: Team | None = None
+        self._sync = np.zeros(4, dtype=np.int64)  # a pass's counters on one thread
         first = envs[0]
         rows = first._measure_table.rows.shape if first._measure_table is not None else (0, 0)
         nu = first.model.nu
@@ -240,7 +397,10 @@ class CompiledSteps:
         self.results = results
         self.states = states  # where the robot's qpos and qvel go, a row each
         self.notes = np.zeros(n, dtype=np.int64)
-        self.everyone = np.arange(n, dtype=np.int64)
+        # a pass's sub-envs and actions (the same arrays at every pass: the team reads them)
+        self.todo = np.arange(n, dtype=np.int64)
+        self._todo_everyone = True  # todo holds every sub-env in order
+        self.actions = np.zeros((n, nu))
         self.stale = np.zeros(n, dtype=np.bool_)  # the batch's numbers newer than the env's
         self.taken = np.zeros(n, dtype=np.bool_)  # the batch holds the env's episode numbers
         self._all_taken = False  # every one is
@@ -290,21 +450,17 @@ class CompiledSteps:
         self.parameters[i] = (*env._weights, env._step_dt, limit, model.opt.timestep)
         self._bound[i] = (data, table, env._frames_bound)
 
-    def use_threads(self, run_each: Callable[[Callable[[int], None]], None], threads: int) -> None:
-        """Step on ``threads`` threads: ``run_each(body)`` runs ``body(k)`` once on each
-        thread ``k`` (``ParallelLoop.run_each``), each claiming sub-envs from a shared counter
-        in compiled code (:func:`advance`)."""
-        self._run_each, self.threads = run_each, threads
-        self._noted = [0] * threads
-
-    def _claim_share(self, k: int) -> None:
-        indices, actions = self._pass
-        self._noted[k] = advance(
-            self.claims,
-            indices,
+    def use_threads(self, threads: int, spins: int = TEAM_SPINS) -> None:
+        """Step on ``threads`` threads: this one and a :class:`Team` of the others, which spin
+        ``spins`` turns after each pass before they sleep."""
+        if threads < 2:
+            return
+        self.threads = threads
+        arrays = (
+            self.todo,
             self.tables,
             self.addresses,
-            actions,
+            self.actions,
             self.action_tables,
             self.settings,
             self.parameters,
@@ -313,6 +469,12 @@ class CompiledSteps:
             self.notes,
             *self.states,
         )
+        self._team = Team(threads - 1, arrays, spins)
+
+    def close(self) -> None:
+        """Stop the team's threads (idempotent)."""
+        if self._team is not None:
+            self._team.close()
 
     def fresh(self, i: int) -> None:
         """Sub-env ``i``'s ``_values``, ``_block`` and episode numbers given back to it if a
@@ -337,7 +499,6 @@ class CompiledSteps:
         islands switched at a cup's loss. Returns those whose actions were rejected (not
         stepped: their own ``_advance`` raises why)."""
         everyone = len(todo) == len(self.envs)
-        indices = self.everyone if everyone else np.array(todo, dtype=np.int64)
         taken, episodes = self.taken, self.episodes
         if not self._all_taken:
             for i in todo:
@@ -347,18 +508,32 @@ class CompiledSteps:
                     episodes[i, _LOST] = 1.0 if env._cup_lost else 0.0
                     taken[i] = True
             self._all_taken = everyone or bool(taken.all())
-        self.claims[0] = 0
-        self._pass = (indices, actions)
-        if self.threads > 1 and self._run_each is not None and len(todo) > 1:
-            self._run_each(self._claim_share)
-            noted = sum(self._noted)
-        else:
-            self._claim_share(0)
-            noted = self._noted[0]
+        if not (everyone and self._todo_everyone):
+            self.todo[: len(todo)] = todo
+            self._todo_everyone = everyone
+        np.copyto(self.actions, actions)
+        team = self._team
+        if team is not None:
+            team.wake()
+        noted = advance(
+            self._sync if team is None else team.sync,
+            len(todo),
+            self.todo,
+            self.tables,
+            self.addresses,
+            self.actions,
+            self.action_tables,
+            self.settings,
+            self.parameters,
+            episodes,
+            self.results,
+            self.notes,
+            *self.states,
+        )
         if everyone:
             self.stale.fill(True)
         else:
-            self.stale[indices] = True
+            self.stale[todo] = True
         self.steps += len(todo)
         rejected = []
         if noted:

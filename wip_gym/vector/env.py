@@ -354,6 +354,13 @@ class _SubEnvs:
         self.stepped_now[i] = False
 
 
+def _close_threads(loop: ParallelLoop, compiled: CompiledSteps | None) -> None:
+    """Stop a vector env's threads (its finalizer: holds no reference to the env)."""
+    loop.close()
+    if compiled is not None:
+        compiled.close()
+
+
 class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArray[Any]]):
     """``num_envs`` copies of the env ``env_id`` stepped in one call (docs/vector.md).
 
@@ -427,11 +434,15 @@ class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArr
         self._ended = np.zeros(num_envs, dtype=np.bool_)  # ended at the last step
         self._no_resets = [False] * num_envs  # reset_first of the modes other than NextStep
         self._has_reset = False
-        self._loop = ParallelLoop(self._sub, num_envs, min(threads, num_envs))
+        self._threads = min(threads, num_envs)
+        compiled = self._sub.compiled
+        # with compiled steps, a team of threads steps with the caller (CompiledSteps) and
+        # the rare passes in Python (resets) run on the caller alone
+        self._loop = ParallelLoop(self._sub, num_envs, 1 if compiled else self._threads)
         self._sub.set_threads(self._loop.threads)
-        if self._sub.compiled is not None and self._loop.threads > 1:
-            self._sub.compiled.use_threads(self._loop.run_each, self._loop.threads)
-        self._finalizer = weakref.finalize(self, self._loop.close)
+        if compiled is not None:
+            compiled.use_threads(self._threads)
+        self._finalizer = weakref.finalize(self, _close_threads, self._loop, compiled)
 
     # ------------------------------------------------------------------ properties
     @property
@@ -443,7 +454,7 @@ class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArr
     @property
     def num_threads(self) -> int:
         """Threads that step the sub-envs (the caller's included)."""
-        return self._loop.threads
+        return self._threads
 
     def _new_observations(self) -> dict[str, NDArray[np.float64]]:
         n = self.num_envs
@@ -538,8 +549,8 @@ class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArr
         else:  # the fast way: rows of float64, as each sub-env's step converts its own
             sub.action_array = np.ascontiguousarray(actions, dtype=np.float64)
             sub.counted = sub.has_limits or sub.same_step
-            if self._loop.threads == 1 or sub.compiled is not None:
-                sub.pass_fast()  # the compiled steps on the threads (CompiledSteps)
+            if self._loop.threads == 1:
+                sub.pass_fast()  # with compiled steps, on their team (CompiledSteps)
             else:
                 self._loop.run_each(sub.share_fast)
                 sub.raise_errors()
