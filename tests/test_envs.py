@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import copy
+
 import gymnasium as gym
+import mujoco
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
@@ -232,6 +235,28 @@ def test_mass_randomization_is_seeded() -> None:
     assert not np.allclose(first, env.unwrapped.model.body_mass)
     env.reset(seed=3)
     np.testing.assert_array_equal(first, env.unwrapped.model.body_mass)
+
+
+def test_set_const_on_the_scratch_data_equals_a_fresh_datas() -> None:
+    """The model's constants after each reset (masses randomised, ``mj_setConst`` on the env's
+    one scratch MjData, which episodes leave in any state) equal ``mj_setConst`` on a fresh
+    MjData of a copy of the same model, in every array of the model."""
+    env = gym.make("wip_gym/KrangTray-v0", mass_randomization=0.1)
+    base = env.unwrapped
+    for seed in range(3):
+        env.reset(seed=seed)
+        for _ in range(20):
+            env.step(env.action_space.sample() * 0.1)
+        scratch = base._scratch_data[1]  # left in another state than setConst's
+        scratch.qpos[:] = np.random.default_rng(seed).normal(size=scratch.qpos.shape)
+        mujoco.mj_step(base.model, scratch)
+        fresh = copy.deepcopy(base.model)
+        mujoco.mj_setConst(fresh, mujoco.MjData(fresh))
+        base._set_const()
+        for name in dir(fresh):
+            value = getattr(fresh, name)
+            if isinstance(value, np.ndarray):
+                np.testing.assert_array_equal(getattr(base.model, name), value, err_msg=name)
 
 
 @pytest.mark.parametrize("env_id", ENV_IDS)

@@ -22,7 +22,7 @@ from __future__ import annotations
 import copy
 import os
 import weakref
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -161,6 +161,8 @@ class _SubEnvs:
             self.compiled = CompiledSteps(self.bases, self.results, (qpos, qvel))
         self.everyone = list(range(n))
         self.shares: list[list[int]] = [self.everyone]  # each thread's sub-envs (set_threads)
+        # runs a body over every sub-env on several threads, for a pass's resets (None: here)
+        self.reset_loop: Callable[[Callable[[int], None]], None] | None = None
         self.has_limits = any(limit is not None for limit in self.limits)
         self.counted = False  # a pass with a time limit counted here or same-step autoresets
         # one pass's inputs
@@ -270,6 +272,13 @@ class _SubEnvs:
         self.infos[i] = info
         self.batcher.write(i, info)
 
+    def reset_due(self, i: int) -> None:
+        """Sub-env ``i`` reset if it ended at the last step (``NextStep``; a thread's part of
+        a pass's resets)."""
+        if self.reset_first[i]:
+            self.results[i] = _RESET_RESULT
+            self.reset_fast(i)
+
     def pass_fast(self) -> None:
         """Every sub-env's step the fast way in this thread (:meth:`step_part` of all)."""
         self.step_part(self.everyone)
@@ -298,7 +307,15 @@ class _SubEnvs:
         todo = part
         if any(reset_first):
             todo = []
+            parallel = self.reset_loop is not None and part is self.everyone
+            if parallel:  # the resets spread over the threads (their physics holds no GIL)
+                self.reset_loop(self.reset_due)  # type: ignore[misc]
             for i in part:
+                if parallel:
+                    if not reset_first[i]:
+                        stepped_now[i] = True
+                        todo.append(i)
+                    continue
                 if reset_first[i]:
                     results[i] = _RESET_RESULT
                     self.reset_fast(i)
@@ -437,11 +454,13 @@ class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArr
         self._threads = min(threads, num_envs)
         compiled = self._sub.compiled
         # with compiled steps, a team of threads steps with the caller (CompiledSteps) and
-        # the rare passes in Python (resets) run on the caller alone
-        self._loop = ParallelLoop(self._sub, num_envs, 1 if compiled else self._threads)
+        # the loop's threads share the resets
+        self._loop = ParallelLoop(self._sub, num_envs, self._threads)
         self._sub.set_threads(self._loop.threads)
         if compiled is not None:
             compiled.use_threads(self._threads)
+            if self._threads > 1:
+                self._sub.reset_loop = self._loop.run
         self._finalizer = weakref.finalize(self, _close_threads, self._loop, compiled)
 
     # ------------------------------------------------------------------ properties
@@ -549,7 +568,7 @@ class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArr
         else:  # the fast way: rows of float64, as each sub-env's step converts its own
             sub.action_array = np.ascontiguousarray(actions, dtype=np.float64)
             sub.counted = sub.has_limits or sub.same_step
-            if self._loop.threads == 1:
+            if self._loop.threads == 1 or sub.compiled is not None:
                 sub.pass_fast()  # with compiled steps, on their team (CompiledSteps)
             else:
                 self._loop.run_each(sub.share_fast)
