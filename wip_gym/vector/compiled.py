@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 import threading
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -186,8 +187,20 @@ def _work(
 
 
 @njit(cache=True, nogil=True)
+def publish(sync: NDArray[np.int64], count: int) -> int:
+    """Publish a pass of ``count`` sub-envs in ``sync`` (the team's threads start claiming
+    them; :func:`advance` steps them on this thread too); returns its generation."""
+    atomic_store(sync, _DONE, 0)
+    atomic_store(sync, _NOTED, 0)
+    generation = ((atomic_load(sync, _CLAIM) >> _GENERATION_SHIFT) + 1) & 0x7FFFFFFF
+    atomic_store(sync, _CLAIM, (generation << _GENERATION_SHIFT) | (count << _COUNT_SHIFT))
+    return generation
+
+
+@njit(cache=True, nogil=True)
 def advance(
     sync: NDArray[np.int64],
+    generation: int,
     count: int,
     todo: NDArray[np.int64],
     tables: NDArray[np.int64],
@@ -202,11 +215,11 @@ def advance(
     qpos_out: NDArray[np.float64],
     qvel_out: NDArray[np.float64],
 ) -> int:
-    """Step the sub-envs ``todo[:count]`` as ``WIPEnv._advance`` does, on this thread and on
-    the team's (:func:`serve`) that the pass finds awake: the pass is published in ``sync``,
-    every thread claims sub-envs one at a time (each is stepped once, by whichever thread is
-    free; a thread the system does not run leaves its share to the others), and this one
-    returns when all are done.
+    """Step the sub-envs ``todo[:count]`` of the pass ``generation`` (:func:`publish`) as
+    ``WIPEnv._advance`` does, on this thread and on the team's (:func:`serve`) that the pass
+    finds awake: every thread claims sub-envs one at a time (each is stepped once, by
+    whichever thread is free; a thread the system does not run leaves its share to the
+    others), and this one returns when all are done.
 
     Each ``i`` from its row of every array: ``tables[i]`` its measures' table
     (``wip_gym.envs.measures.env_table``: its model, data and measures), ``addresses[i]`` its
@@ -219,10 +232,6 @@ def advance(
     sub-env not stepped), and its robot's ``qpos`` and ``qvel`` after the step (the
     observation's) into ``qpos_out[i]`` and ``qvel_out[i]``. Returns how many were noted
     otherwise than :data:`STEPPED` (Python has work then)."""
-    atomic_store(sync, _DONE, 0)
-    atomic_store(sync, _NOTED, 0)
-    generation = ((atomic_load(sync, _CLAIM) >> _GENERATION_SHIFT) + 1) & 0x7FFFFFFF
-    atomic_store(sync, _CLAIM, (generation << _GENERATION_SHIFT) | (count << _COUNT_SHIFT))
     _work(
         sync,
         generation,
@@ -493,11 +502,17 @@ class CompiledSteps:
         self.taken[i] = False
         self._all_taken = False
 
-    def step(self, todo: list[int], actions: NDArray[np.float64]) -> list[int]:
+    def step(
+        self,
+        todo: list[int],
+        actions: NDArray[np.float64],
+        meanwhile: Callable[[], None] | None = None,
+    ) -> list[int]:
         """Step the sub-envs ``todo`` (each :meth:`eligible`) with their rows of ``actions``
         (C-contiguous float64, a row per sub-env) into :attr:`results` and :attr:`notes`, the
-        islands switched at a cup's loss. Returns those whose actions were rejected (not
-        stepped: their own ``_advance`` raises why)."""
+        islands switched at a cup's loss; ``meanwhile()`` (Python work on other sub-envs:
+        their resets) runs once the pass is published, while the team steps it. Returns those
+        whose actions were rejected (not stepped: their own ``_advance`` raises why)."""
         everyone = len(todo) == len(self.envs)
         taken, episodes = self.taken, self.episodes
         if not self._all_taken:
@@ -515,8 +530,13 @@ class CompiledSteps:
         team = self._team
         if team is not None:
             team.wake()
+        sync = self._sync if team is None else team.sync
+        generation = publish(sync, len(todo))
+        if meanwhile is not None:
+            meanwhile()
         noted = advance(
-            self._sync if team is None else team.sync,
+            sync,
+            generation,
             len(todo),
             self.todo,
             self.tables,

@@ -22,7 +22,7 @@ from __future__ import annotations
 import copy
 import os
 import weakref
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -161,8 +161,7 @@ class _SubEnvs:
             self.compiled = CompiledSteps(self.bases, self.results, (qpos, qvel))
         self.everyone = list(range(n))
         self.shares: list[list[int]] = [self.everyone]  # each thread's sub-envs (set_threads)
-        # runs a body over every sub-env on several threads, for a pass's resets (None: here)
-        self.reset_loop: Callable[[Callable[[int], None]], None] | None = None
+
         self.has_limits = any(limit is not None for limit in self.limits)
         self.counted = False  # a pass with a time limit counted here or same-step autoresets
         # one pass's inputs
@@ -272,10 +271,10 @@ class _SubEnvs:
         self.infos[i] = info
         self.batcher.write(i, info)
 
-    def reset_due(self, i: int) -> None:
-        """Sub-env ``i`` reset if it ended at the last step (``NextStep``; a thread's part of
-        a pass's resets)."""
-        if self.reset_first[i]:
+    def reset_all(self, resets: list[int]) -> None:
+        """The sub-envs ``resets`` (ended at the last step, ``NextStep``) reset in the pass
+        (while the compiled steps' team steps the others)."""
+        for i in resets:
             self.results[i] = _RESET_RESULT
             self.reset_fast(i)
 
@@ -305,20 +304,12 @@ class _SubEnvs:
         :attr:`errors`, its sub-env not stepped, the others stepped."""
         reset_first, results, stepped_now = self.reset_first, self.results, self.stepped_now
         todo = part
+        resets: list[int] = []
         if any(reset_first):
             todo = []
-            parallel = self.reset_loop is not None and part is self.everyone
-            if parallel:  # the resets spread over the threads (their physics holds no GIL)
-                self.reset_loop(self.reset_due)  # type: ignore[misc]
             for i in part:
-                if parallel:
-                    if not reset_first[i]:
-                        stepped_now[i] = True
-                        todo.append(i)
-                    continue
                 if reset_first[i]:
-                    results[i] = _RESET_RESULT
-                    self.reset_fast(i)
+                    resets.append(i)
                 else:
                     stepped_now[i] = True
                     todo.append(i)
@@ -327,15 +318,21 @@ class _SubEnvs:
                 stepped_now[i] = True
         by_python = todo
         compiled = self.compiled
+        ready: list[int] = []
         if compiled is not None:
             ready = [i for i in todo if compiled.eligible(i)]
-            if ready:
-                rejected = compiled.step(ready, self.action_array)
-                if len(ready) < len(todo) or rejected:
-                    taken = set(ready).difference(rejected)
-                    by_python = [i for i in todo if i not in taken]
-                else:
-                    by_python = []
+        if compiled is not None and ready:
+            # the resets in Python while the compiled pass runs on the team
+            rejected = compiled.step(
+                ready, self.action_array, (lambda: self.reset_all(resets)) if resets else None
+            )
+            if len(ready) < len(todo) or rejected:
+                taken = set(ready).difference(rejected)
+                by_python = [i for i in todo if i not in taken]
+            else:
+                by_python = []
+        elif resets:
+            self.reset_all(resets)
         for i in by_python:
             self.fresh(i)
             try:
@@ -453,14 +450,12 @@ class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArr
         self._has_reset = False
         self._threads = min(threads, num_envs)
         compiled = self._sub.compiled
-        # with compiled steps, a team of threads steps with the caller (CompiledSteps) and
-        # the loop's threads share the resets
-        self._loop = ParallelLoop(self._sub, num_envs, self._threads)
+        # with compiled steps, a team of threads steps with the caller (CompiledSteps) while
+        # the caller resets the sub-envs that ended; the other passes (resets) run here
+        self._loop = ParallelLoop(self._sub, num_envs, 1 if compiled else self._threads)
         self._sub.set_threads(self._loop.threads)
         if compiled is not None:
             compiled.use_threads(self._threads)
-            if self._threads > 1:
-                self._sub.reset_loop = self._loop.run
         self._finalizer = weakref.finalize(self, _close_threads, self._loop, compiled)
 
     # ------------------------------------------------------------------ properties
