@@ -193,9 +193,9 @@ class TraySeat:
             raise RuntimeError("the seated tray rests on no support")
         m, d = self.robot.model, self.data
         self.fractions = {name: load / total for name, load in loads.items()}
-        R_tray = np.zeros(9)
-        mujoco.mju_quat2Mat(R_tray, quat)
-        R_tray = R_tray.reshape(3, 3)
+        flat = np.zeros(9)
+        mujoco.mju_quat2Mat(flat, quat)
+        R_tray = flat.reshape(3, 3)
         com = position + R_tray @ self._ipos
 
         def part(name: str) -> tuple[float, Array]:
