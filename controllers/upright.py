@@ -72,9 +72,10 @@ class UprightConfig(HierarchicalConfig):
         carried: what the controller is told about the cup (its friction None: the env's).
         tray: the tray targets' lead and outer-loop gains (one hand: PlanarTray-v0).
         two_hand_tray: the same with a tray held by two hands (Krang): lead 0.1 s, kp 4,
-            kv 4. The one hand's softer loop (kp 1, kv 1.5, lead 0.25) let Krang's body and
-            free tray oscillate: in the paper's configuration at friction 0.05 it carried 4
-            of 10 (3 fell) where these carry 8 (docs/upright.md §6).
+            kv 4. Without ``share_tray_weight`` the one hand's softer loop (kp 1, kv 1.5,
+            lead 0.25) let Krang's body and free tray oscillate: in the paper's configuration
+            at friction 0.05 it carried 4 of 10 (3 fell) where these carry 8; with it both
+            carry 10 (docs/upright.md §6).
         tangential_weight: weight of the cup's tangential specific force (in g) toward zero.
         two_hand_tangential_weight: the same with a tray held by two hands (Krang): at 3000
             the task outweighed the hands' position tasks and walked both hands off their
