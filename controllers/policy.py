@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 
 from wip_gym.envs.base import wip_env
 from wip_gym.robot_model import RobotModel
-from wip_gym.scene import SceneOptions, build_model
+from wip_gym.scene import SceneOptions, build_spec
 
 ModelChoice = Literal["nominal", "oracle"]
 
@@ -91,13 +91,20 @@ def controller_model(env: gym.Env, choice: ModelChoice) -> mujoco.MjModel:
         return base.model
     if choice != "nominal":
         raise ValueError(f"model must be 'nominal' or 'oracle', got {choice!r}")
+    return nominal_spec(env).compile()
+
+
+def nominal_spec(env: gym.Env) -> mujoco.MjSpec:
+    """The ``MjSpec`` of :func:`controller_model`'s ``nominal`` model (a controller that adds
+    to it compiles its own)."""
+    base = wip_env(env)
     options = dataclasses.replace(
         base.scene_options, cup=False, payload_mass=0.0, tray_attachment="welded"
     )
     if base.scene_options.tray_attachment == "free":
         rest = base.model.site("tray_rest")
         options = dataclasses.replace(options, tray_weld=(*rest.pos.tolist(), *rest.quat.tolist()))
-    return build_model(options)
+    return build_spec(options)
 
 
 def task_info(env: gym.Env, choice: ModelChoice) -> TaskInfo:

@@ -32,8 +32,9 @@ meets it).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Self
 
+import gymnasium as gym
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
@@ -42,7 +43,7 @@ from controllers.hierarchical import HierarchicalConfig, HierarchicalController
 from controllers.high_level.planning import PlanConfig
 from controllers.high_level.receding_horizon import HighLevelConfig
 from controllers.high_level.tray_reference import TrayGains, TrayReference, plan_acceleration
-from controllers.high_level.tray_seat import TraySeat
+from controllers.high_level.tray_seat import TraySeat, add_tray_shares
 from controllers.low_level.hand_pair import HandPair
 from controllers.low_level.object_balance import CarriedObject, ObjectBalance
 from controllers.low_level.object_tasks import (
@@ -53,6 +54,7 @@ from controllers.low_level.object_tasks import (
 from controllers.low_level.priority_qp import PriorityStep
 from controllers.low_level.task_stack import unwrap
 from controllers.low_level.tasks import FramePositionTask, site_in_axle_frame
+from controllers.policy import nominal_spec, task_info
 from wip_gym.robot_model import RobotModel
 
 Array = NDArray[np.float64]
@@ -70,9 +72,10 @@ class UprightConfig(HierarchicalConfig):
         carried: what the controller is told about the cup (its friction None: the env's).
         tray: the tray targets' lead and outer-loop gains (one hand: PlanarTray-v0).
         two_hand_tray: the same with a tray held by two hands (Krang): lead 0.1 s, kp 4,
-            kv 4. The one hand's softer loop (kp 1, kv 1.5, lead 0.25) let Krang's body and
-            free tray oscillate: in the paper's configuration at friction 0.05 it carried 4
-            of 10 (3 fell) where these carry 8 (docs/upright.md §6).
+            kv 4. Without ``share_tray_weight`` the one hand's softer loop (kp 1, kv 1.5,
+            lead 0.25) let Krang's body and free tray oscillate: in the paper's configuration
+            at friction 0.05 it carried 4 of 10 (3 fell) where these carry 8; with it both
+            carry 10 (docs/upright.md §6).
         tangential_weight: weight of the cup's tangential specific force (in g) toward zero.
         two_hand_tangential_weight: the same with a tray held by two hands (Krang): at 3000
             the task outweighed the hands' position tasks and walked both hands off their
@@ -90,6 +93,13 @@ class UprightConfig(HierarchicalConfig):
             observer of their unmodelled acceleration read that as a disturbance.
         seat_tray: a free tray: weld the nominal model's tray where it settles on the hand's
             supports at each reset pose (``controllers.high_level.tray_seat``).
+        share_tray_weight: with ``seat_tray``, a free tray on two hands (Krang): the nominal
+            model's tray weight divided between the hands as their supports carry it at the
+            seat (``tray_seat.add_tray_shares``). Off, the nominal model hangs the whole tray on
+            the left gripper, the right arm carries about half of it unmodelled and its hand
+            sags 3 to 6 mm against the left, turning the tray 1 to 2.3 deg about the heading:
+            at friction 0.05 in the paper's configuration 8 of 10 carried, on: 10 of 10
+            (docs/upright.md §6).
         hand_pair_weight, hand_pair_kp, hand_pair_kv: with two hands under the tray (Krang),
             the second hand's pose relative to the first held at its reset value
             (``controllers.low_level.hand_pair``; 0: not held). docs/upright.md §6 measured
@@ -108,6 +118,7 @@ class UprightConfig(HierarchicalConfig):
     orientation_kv: float = 40.0
     hand_observer_bandwidth: float | None = None
     seat_tray: bool = True
+    share_tray_weight: bool = True
     hand_pair_weight: float = 100.0
     hand_pair_kp: float = 400.0
     hand_pair_kv: float = 40.0
@@ -142,6 +153,26 @@ class UprightController(HierarchicalController):
 
     config_class = UprightConfig
     config: UprightConfig
+
+    @classmethod
+    def for_env(cls, env: gym.Env, config: Any = None) -> Self:
+        """The hierarchical controller's, with a nominal model whose free tray's weight is
+        shared by every hand under it (``UprightConfig.share_tray_weight``)."""
+        config = cls.config_class() if config is None else config
+        if not isinstance(config, cls.config_class):
+            raise ValueError(
+                f"{cls.__name__} needs a {cls.config_class.__name__}, got {type(config).__name__}"
+            )
+        task = task_info(env, config.model)
+        if (
+            task.free_tray is None
+            or config.model != "nominal"
+            or not (config.seat_tray and config.share_tray_weight)
+        ):
+            return super().for_env(env, config)
+        spec = nominal_spec(env)
+        add_tray_shares(spec, task.free_tray)
+        return cls(RobotModel(spec.compile()), task, config)
 
     @property
     def name(self) -> str:

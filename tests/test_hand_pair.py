@@ -15,12 +15,18 @@ import numpy as np
 import pytest
 
 import wip_gym  # noqa: F401
-from controllers.high_level.tray_seat import TRAY_SINK_TIME, TraySeat
+from controllers.high_level.tray_seat import (
+    TRAY_SHARE_PREFIX,
+    TRAY_SINK_TIME,
+    TraySeat,
+    add_tray_shares,
+)
 from controllers.low_level.hand_pair import HandPair
 from controllers.low_level.motion_probe import MotionProbe
-from controllers.policy import controller_model, task_info
+from controllers.policy import controller_model, nominal_spec, task_info
 from tests.robot_states import random_states, robot_at_reset
 from wip_gym.robot_model import RobotModel
+from wip_gym.scene import GRAVITY, TRAY_MASS
 
 ENV = "wip_gym/KrangTray-v0"
 
@@ -155,6 +161,78 @@ def test_the_seat_is_where_the_env_puts_the_tray(rim, sink_s):
         np.testing.assert_allclose(R, base.data.site_xmat[env_site].reshape(3, 3), atol=1e-9)
         turns.append(np.degrees(np.arccos(np.clip((np.trace(R @ before.T) - 1) / 2, -1, 1))))
     assert max(turns) > 0.5  # the nominal weld was off by more than half a degree
+
+
+def _horizontal_support_forces(m: mujoco.MjModel, d: mujoco.MjData) -> np.ndarray:
+    """The generalised forces (``nv``) of the horizontal parts of the forces the free tray puts
+    on its supports (Krang's finger plates), at their contact points."""
+    tray = m.geom("tray").id
+    total, force = np.zeros(m.nv), np.zeros(6)
+    jacp = np.zeros((3, m.nv))
+    for i in range(d.ncon):
+        contact = d.contact[i]
+        geoms = (int(contact.geom[0]), int(contact.geom[1]))
+        if tray not in geoms:
+            continue
+        other = geoms[1] if geoms[0] == tray else geoms[0]
+        mujoco.mj_contactForce(m, d, i, force)
+        world = contact.frame.reshape(3, 3).T @ force[:3]  # on geom 2, from geom 1
+        on_support = world if geoms[1] == other else -world
+        on_support[2] = 0.0
+        mujoco.mj_jac(m, d, jacp, None, contact.pos, int(m.geom_bodyid[other]))
+        total += jacp.T @ on_support
+    return total
+
+
+def test_the_shared_tray_weighs_on_each_arm_as_the_env_tray_does():
+    """With the tray's weight shared (``add_tray_shares``), the nominal model's gravity torques
+    on the body joints (waist, torso, both arms) at the seat are the env's: its gravity and the
+    free tray's contact forces on the finger plates, with the robot held still for the
+    seat's sinking time (the cup lifted clear), less the horizontal parts of those forces (the
+    plates' friction, internal forces between the two grippers that no mass gives). Without the
+    share the right arm misses the part of the tray it carries. The parts' mass and centre of
+    mass are the tray's."""
+    env = gym.make(ENV, tray_attachment="free", tray_rim=0.0)
+    base = env.unwrapped
+    options = task_info(env, "nominal").free_tray
+    assert options is not None
+    spec = nominal_spec(env)
+    assert add_tray_shares(spec, options) == [TRAY_SHARE_PREFIX + "right_gripper"]
+    shared = RobotModel(spec.compile())
+    whole = RobotModel(controller_model(env, "nominal"))
+    seats = [TraySeat(robot, options) for robot in (shared, whole)]
+    m = shared.model
+    tray, share = m.body("tray").id, m.body(TRAY_SHARE_PREFIX + "right_gripper").id
+    dofs = np.array(shared.layout.body_dof)  # every joint the floor's contacts do not load
+    errors: dict[str, list[float]] = {"shared": [], "whole": []}
+    for seed in range(4):
+        observation, _ = env.reset(seed=seed)
+        qpos, qvel = observation["qpos"], np.zeros(shared.layout.nv)
+        _held(env, round(TRAY_SINK_TIME / base.model.opt.timestep))
+        d = base.data
+        d.qvel[: shared.layout.nv] = 0.0
+        mujoco.mj_forward(base.model, d)
+        # what holds the body still: gravity less what the floor and the tray's supports give
+        env_torques = (d.qfrc_bias - d.qfrc_constraint)[dofs]
+        friction = _horizontal_support_forces(base.model, d)[dofs]
+        for name, robot, seat in zip(("shared", "whole"), (shared, whole), seats, strict=True):
+            seat.seat(qpos)
+            robot.update(qpos, qvel)
+            mujoco.mj_forward(robot.model, robot.data)
+            error = np.abs(robot.data.qfrc_bias[dofs] - env_torques - friction).max()
+            errors[name].append(float(error))
+        # the parts are the tray: its mass, and its centre of mass where the env's tray has it
+        sd = shared.data
+        mass = m.body_mass[tray] + m.body_mass[share]
+        assert mass == pytest.approx(base.model.body_mass[base.model.body("tray").id], rel=1e-12)
+        com = (m.body_mass[tray] * sd.xipos[tray] + m.body_mass[share] * sd.xipos[share]) / mass
+        env_com = d.xipos[base.model.body("tray").id]
+        np.testing.assert_allclose(com[:2], env_com[:2], atol=1e-3)
+        assert 0.3 < seats[0].fractions["right_gripper"] < 0.7
+    # N m: 1 % of the tray's weight half a metre from a joint (the tray, 0.2 s after it was
+    # placed, still moves a little); the tray's whole weight there is 1 N m
+    tolerance = 0.01 * TRAY_MASS * GRAVITY * 0.5
+    assert max(errors["shared"]) < tolerance < 0.1 * min(errors["whole"])
 
 
 def test_a_welded_tray_has_no_seat():

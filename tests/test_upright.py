@@ -145,3 +145,45 @@ def test_one_hand_and_two_hands_follow_their_own_tray_gains(env_id):
     tangential = [t for t in policy._qp_tasks if type(t).__name__ == "TangentialForceTask"]
     weight = config.two_hand_tangential_weight if two_hands else config.tangential_weight
     assert [t.weight for t in tangential] == [weight]
+
+
+@pytest.mark.parametrize("share", [True, False])
+def test_the_free_tray_weighs_on_both_hands_of_the_nominal_model(share):
+    """On Krang's free tray the nominal model carries the tray on both grippers, each its
+    measured share (``share_tray_weight``; controllers/high_level/tray_seat.py); off, or with a
+    welded tray, the whole tray hangs on the left gripper as in every other controller's."""
+    config = dataclasses.replace(default_config("unified-upright"), share_tray_weight=share)
+    for attachment in ("free", "welded"):
+        env = gym.make("wip_gym/KrangTray-v0", tray_attachment=attachment)
+        observation, info = env.reset(seed=0)
+        policy = make_policy("unified-upright", env, config)
+        policy.reset(observation, info)
+        m = policy.robot.model
+        tray = m.body("tray").id
+        shares = [b for b in range(m.nbody) if m.body(b).name.startswith("tray_share_")]
+        env_tray = env.unwrapped.model.body_mass[env.unwrapped.model.body("tray").id]
+        assert m.body_mass[tray] + sum(m.body_mass[b] for b in shares) == pytest.approx(env_tray)
+        if share and attachment == "free":
+            assert [m.body(b).name for b in shares] == ["tray_share_right_gripper"]
+            assert 0.3 * env_tray < m.body_mass[shares[0]] < 0.7 * env_tray
+            assert m.body_subtreemass[0] == pytest.approx(m.body_mass.sum())
+        else:
+            assert shares == []
+
+
+@pytest.mark.parametrize("share", [True, False])
+def test_the_shared_tray_keeps_the_cup_where_the_right_hand_sagged(share):
+    """KrangTray-v0 in the paper's configuration at friction 0.05 (no rim, 5 % mass
+    randomisation), seed 8: with the whole tray on the left gripper the unmodelled half on the
+    right arm sags its hand and turns the tray about the heading, and the cup slides off at
+    1.06 s; with the weight shared it stays (docs/upright.md §6)."""
+    overrides = {
+        "env.tray_rim": 0.0,
+        "env.cup_friction": 0.05,
+        "env.mass_randomization": 0.05,
+        "unified-upright.share_tray_weight": share,
+    }
+    row = run_configured_episode(
+        "wip_gym/KrangTray-v0", "unified-upright", overrides, 8, 1.5, preset="paper"
+    )
+    assert (row["outcome"] == "carried") == share, row["outcome"]
