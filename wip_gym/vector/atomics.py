@@ -18,8 +18,10 @@ _ORDER = "seq_cst"
 _ALIGN = 8
 
 
-def _is_int64_array(array: Any) -> bool:
-    return isinstance(array, types.Array) and array.dtype == types.int64
+def _valid(array: Any, index: Any, *values: Any) -> bool:
+    """Whether the arguments' types are an int64 array, an integer index and integers."""
+    integers = all(isinstance(v, types.Integer) for v in (index, *values))
+    return isinstance(array, types.Array) and array.dtype == types.int64 and integers
 
 
 def _element(context: Any, builder: Any, signature: Any, args: Any) -> Any:
@@ -30,7 +32,7 @@ def _element(context: Any, builder: Any, signature: Any, args: Any) -> Any:
 
 
 def _load_typing(typingctx: Any, array: Any, index: Any) -> Any:
-    if not (_is_int64_array(array) and isinstance(index, types.Integer)):
+    if not _valid(array, index):
         return None
 
     def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
@@ -40,9 +42,7 @@ def _load_typing(typingctx: Any, array: Any, index: Any) -> Any:
 
 
 def _store_typing(typingctx: Any, array: Any, index: Any, value: Any) -> Any:
-    if not (_is_int64_array(array) and isinstance(index, types.Integer)):
-        return None
-    if not isinstance(value, types.Integer):
+    if not _valid(array, index, value):
         return None
 
     def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
@@ -54,9 +54,7 @@ def _store_typing(typingctx: Any, array: Any, index: Any, value: Any) -> Any:
 
 
 def _add_typing(typingctx: Any, array: Any, index: Any, value: Any) -> Any:
-    if not (_is_int64_array(array) and isinstance(index, types.Integer)):
-        return None
-    if not isinstance(value, types.Integer):
+    if not _valid(array, index, value):
         return None
 
     def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
@@ -67,9 +65,7 @@ def _add_typing(typingctx: Any, array: Any, index: Any, value: Any) -> Any:
 
 
 def _swap_typing(typingctx: Any, array: Any, index: Any, expected: Any, value: Any) -> Any:
-    if not (_is_int64_array(array) and isinstance(index, types.Integer)):
-        return None
-    if not (isinstance(expected, types.Integer) and isinstance(value, types.Integer)):
+    if not _valid(array, index, expected, value):
         return None
 
     def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:

@@ -141,23 +141,9 @@ MAX_SUB_ENVS = _INDEX_MASK
 
 
 @njit(cache=True, nogil=True)
-def _work(
-    sync: NDArray[np.int64],
-    generation: int,
-    todo: NDArray[np.int64],
-    tables: NDArray[np.int64],
-    addresses: NDArray[np.int64],
-    actions: NDArray[np.float64],
-    action_tables: NDArray[np.float64],
-    settings: NDArray[np.int64],
-    parameters: NDArray[np.float64],
-    episodes: NDArray[np.float64],
-    results: NDArray[np.float64],
-    notes: NDArray[np.int64],
-    qpos_out: NDArray[np.float64],
-    qvel_out: NDArray[np.float64],
-) -> None:
-    """Claim and step the pass ``generation``'s sub-envs (``todo[k]``) until none is left."""
+def _work(sync: NDArray[np.int64], generation: int, todo: NDArray[np.int64], arrays: Any) -> None:
+    """Claim and step the pass ``generation``'s sub-envs (``todo[k]``, with ``arrays``: the
+    arrays of :func:`advance_one` after ``i``) until none is left."""
     while True:
         word = atomic_load(sync, _CLAIM)
         if word >> _GENERATION_SHIFT != generation:
@@ -167,21 +153,7 @@ def _work(
             return
         if not atomic_swap(sync, _CLAIM, word, word + 1):
             continue  # another thread claimed it
-        note = advance_one(
-            todo[k],
-            tables,
-            addresses,
-            actions,
-            action_tables,
-            settings,
-            parameters,
-            episodes,
-            results,
-            notes,
-            qpos_out,
-            qvel_out,
-        )
-        if note != STEPPED:
+        if advance_one(todo[k], *arrays) != STEPPED:
             atomic_add(sync, _NOTED, 1)
         atomic_add(sync, _DONE, 1)
 
@@ -199,21 +171,7 @@ def publish(sync: NDArray[np.int64], count: int) -> int:
 
 @njit(cache=True, nogil=True)
 def advance(
-    sync: NDArray[np.int64],
-    generation: int,
-    count: int,
-    todo: NDArray[np.int64],
-    tables: NDArray[np.int64],
-    addresses: NDArray[np.int64],
-    actions: NDArray[np.float64],
-    action_tables: NDArray[np.float64],
-    settings: NDArray[np.int64],
-    parameters: NDArray[np.float64],
-    episodes: NDArray[np.float64],
-    results: NDArray[np.float64],
-    notes: NDArray[np.int64],
-    qpos_out: NDArray[np.float64],
-    qvel_out: NDArray[np.float64],
+    sync: NDArray[np.int64], generation: int, count: int, todo: NDArray[np.int64], arrays: Any
 ) -> int:
     """Step the sub-envs ``todo[:count]`` of the pass ``generation`` (:func:`publish`) as
     ``WIPEnv._advance`` does, on this thread and on the team's (:func:`serve`) that the pass
@@ -221,7 +179,8 @@ def advance(
     whichever thread is free; a thread the system does not run leaves its share to the
     others), and this one returns when all are done.
 
-    Each ``i`` from its row of every array: ``tables[i]`` its measures' table
+    ``arrays``, :func:`advance_one`'s after ``i``: each sub-env ``i`` from its row of every
+    array, ``tables[i]`` its measures' table
     (``wip_gym.envs.measures.env_table``: its model, data and measures), ``addresses[i]`` its
     data's ``ctrl``, ``ncon`` and ``time``, ``actions[i]`` its torques, ``action_tables[i]``
     their band and scale (``measures.action_effort``), ``settings[i]`` its ``frame_skip``,
@@ -232,22 +191,7 @@ def advance(
     sub-env not stepped), and its robot's ``qpos`` and ``qvel`` after the step (the
     observation's) into ``qpos_out[i]`` and ``qvel_out[i]``. Returns how many were noted
     otherwise than :data:`STEPPED` (Python has work then)."""
-    _work(
-        sync,
-        generation,
-        todo,
-        tables,
-        addresses,
-        actions,
-        action_tables,
-        settings,
-        parameters,
-        episodes,
-        results,
-        notes,
-        qpos_out,
-        qvel_out,
-    )
+    _work(sync, generation, todo, arrays)
     while atomic_load(sync, _DONE) < count:  # the others' last sub-envs
         pass
     return atomic_load(sync, _NOTED)
@@ -260,17 +204,7 @@ def serve(
     me: int,
     spins: int,
     todo: NDArray[np.int64],
-    tables: NDArray[np.int64],
-    addresses: NDArray[np.int64],
-    actions: NDArray[np.float64],
-    action_tables: NDArray[np.float64],
-    settings: NDArray[np.int64],
-    parameters: NDArray[np.float64],
-    episodes: NDArray[np.float64],
-    results: NDArray[np.float64],
-    notes: NDArray[np.int64],
-    qpos_out: NDArray[np.float64],
-    qvel_out: NDArray[np.float64],
+    arrays: Any,
 ) -> bool:
     """A team thread's loop: wait for each pass of :func:`advance` (spinning, without the
     GIL) and claim sub-envs in it; after ``spins`` turns with no new pass, note itself
@@ -290,22 +224,7 @@ def serve(
                 atomic_store(asleep, me, 1)
                 return True
         seen = generation
-        _work(
-            sync,
-            generation,
-            todo,
-            tables,
-            addresses,
-            actions,
-            action_tables,
-            settings,
-            parameters,
-            episodes,
-            results,
-            notes,
-            qpos_out,
-            qvel_out,
-        )
+        _work(sync, generation, todo, arrays)
 
 
 def _serve_loop(
@@ -314,10 +233,11 @@ def _serve_loop(
     me: int,
     spins: int,
     wake: threading.Semaphore,
-    arrays: tuple[NDArray[Any], ...],
+    arrays: tuple[NDArray[np.int64], tuple[NDArray[Any], ...]],
 ) -> None:
     """A team thread: :func:`serve` until told to stop, asleep on ``wake`` between."""
-    while serve(sync, asleep, me, spins, *arrays):
+    todo, rest = arrays
+    while serve(sync, asleep, me, spins, todo, rest):
         wake.acquire()
         if sync[_STOP]:
             return
@@ -325,11 +245,16 @@ def _serve_loop(
 
 class Team:
     """``helpers`` threads that step the passes of :func:`advance` with its caller, each
-    running :func:`serve` on ``arrays`` (the pass's ``todo`` and the sub-envs' arrays, the
-    same objects at every pass): they spin for ``spins`` turns after a pass (about a
+    running :func:`serve` on ``arrays`` (the pass's ``todo`` and :func:`advance_one`'s arrays,
+    the same objects at every pass): they spin for ``spins`` turns after a pass (about a
     millisecond), then sleep until :meth:`wake` (called before each pass) wakes them."""
 
-    def __init__(self, helpers: int, arrays: tuple[NDArray[Any], ...], spins: int) -> None:
+    def __init__(
+        self,
+        helpers: int,
+        arrays: tuple[NDArray[np.int64], tuple[NDArray[Any], ...]],
+        spins: int,
+    ) -> None:
         self.sync = np.zeros(4, dtype=np.int64)
         self.asleep = np.zeros(helpers, dtype=np.int64)
         self._wakes = [threading.Semaphore(0) for _ in range(helpers)]
@@ -415,6 +340,19 @@ class CompiledSteps:
         self._all_taken = False  # every one is
         self._bound: list[tuple[object, object, int]] = [(None, None, -1)] * n
         self.steps = 0  #: sub-env steps taken here (for the tests and the benchmark)
+        #: advance_one's arrays after ``i`` (the same objects at every pass: the team reads them)
+        self._arrays = (
+            self.tables,
+            self.addresses,
+            self.actions,
+            self.action_tables,
+            self.settings,
+            self.parameters,
+            self.episodes,
+            self.results,
+            self.notes,
+            *self.states,
+        )
         #: whether each sub-env can ever take it (:meth:`can_take`, and the first's sizes)
         self.capable = [
             self.can_take(env)
@@ -465,20 +403,7 @@ class CompiledSteps:
         if threads < 2:
             return
         self.threads = threads
-        arrays = (
-            self.todo,
-            self.tables,
-            self.addresses,
-            self.actions,
-            self.action_tables,
-            self.settings,
-            self.parameters,
-            self.episodes,
-            self.results,
-            self.notes,
-            *self.states,
-        )
-        self._team = Team(threads - 1, arrays, spins)
+        self._team = Team(threads - 1, (self.todo, self._arrays), spins)
 
     def close(self) -> None:
         """Stop the team's threads (idempotent)."""
@@ -534,22 +459,7 @@ class CompiledSteps:
         generation = publish(sync, len(todo))
         if meanwhile is not None:
             meanwhile()
-        noted = advance(
-            sync,
-            generation,
-            len(todo),
-            self.todo,
-            self.tables,
-            self.addresses,
-            self.actions,
-            self.action_tables,
-            self.settings,
-            self.parameters,
-            episodes,
-            self.results,
-            self.notes,
-            *self.states,
-        )
+        noted = advance(sync, generation, len(todo), self.todo, self._arrays)
         if everyone:
             self.stale.fill(True)
         else:
