@@ -116,7 +116,7 @@ class UprightConfig(HierarchicalConfig):
             and shoulder over 1.2 and 1.7 rad at up to 8 rad/s) and the robot falls in 10 of 10
             seeds of the aggressive drive. With the drive alone moved, the forward row holds
             the hand over the axle exactly and the tray's tilt sets the axle's acceleration: it
-            falls sooner (0.7 s). docs/upright.md §4 and §5.
+            falls sooner (0.4 to 1.0 s). docs/upright.md §4 and §5.
         hand_pair_weight, hand_pair_kp, hand_pair_kv: with two hands under the tray (Krang),
             the second hand's pose relative to the first held at its reset value
             (``controllers.low_level.hand_pair``; 0: not held). docs/upright.md §6 measured
