@@ -9,7 +9,8 @@ the task QP (docs/upright.md):
    inside the friction pyramid of the planning coefficient and with its zero-moment point inside
    the cup's feet (``controllers.low_level.object_balance``). Weighted, they are soft with a
    stiff slack (``controllers.low_level.priority_qp``); strict, a level of their own under the
-   balance;
+   balance, and the drive row and the hands' forward rows traded with the posture in the last
+   level (``UprightConfig.strict_posture_rows``);
 2. **a task on the cup's tangential specific force** at its place on the plate, toward zero
    (the tray tilted so that the plate's normal carries the motion's force), and a drive row
    that holds the axle's acceleration to the MPC's prediction (the base must not give up the
@@ -32,7 +33,7 @@ meets it).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Self
+from typing import Any, Literal, Self
 
 import gymnasium as gym
 import mujoco
@@ -60,6 +61,11 @@ from wip_gym.robot_model import RobotModel
 Array = NDArray[np.float64]
 #: the site on the plate's top that the cup stands on (wip_gym/scene.py)
 TRAY_TOP_SITE = "tray_top"
+#: rows the strict stack may trade with the posture (``UprightConfig.strict_posture_rows``)
+StrictPostureRow = Literal["drive", "hand_forward"]
+STRICT_POSTURE_ROWS: tuple[StrictPostureRow, ...] = ("drive", "hand_forward")
+#: a hand position task's row along the axle's forward axis (rows: forward, lateral, up)
+FORWARD_ROW = 0
 
 
 @dataclass(frozen=True)
@@ -100,6 +106,17 @@ class UprightConfig(HierarchicalConfig):
             sags 3 to 6 mm against the left, turning the tray 1 to 2.3 deg about the heading:
             at friction 0.05 in the paper's configuration 8 of 10 carried, on: 10 of 10
             (docs/upright.md §6).
+        strict_posture_rows: with ``priority="strict"``, the rows met in the posture level,
+            traded by their weights with the posture as the weighted QP trades them, instead of
+            in the motion level: ``drive`` (the axle's acceleration toward the MPC's) and
+            ``hand_forward`` (each hand's position along the axle's forward axis, whose weight
+            0.1 lets the tilt hold the tray's place). In the motion level the theta row, the
+            drive, the tangential force and the hand's height and tilt fix five of the planar
+            robot's six accelerations exactly; the drive met to 0.01 m/s^2 folds the body (torso
+            and shoulder over 1.2 and 1.7 rad at up to 8 rad/s) and the robot falls in 10 of 10
+            seeds of the aggressive drive. With the drive alone moved, the forward row holds
+            the hand over the axle exactly and the tray's tilt sets the axle's acceleration: it
+            falls sooner (0.4 to 1.0 s). docs/upright.md §4 and §5.
         hand_pair_weight, hand_pair_kp, hand_pair_kv: with two hands under the tray (Krang),
             the second hand's pose relative to the first held at its reset value
             (``controllers.low_level.hand_pair``; 0: not held). docs/upright.md §6 measured
@@ -119,6 +136,7 @@ class UprightConfig(HierarchicalConfig):
     hand_observer_bandwidth: float | None = None
     seat_tray: bool = True
     share_tray_weight: bool = True
+    strict_posture_rows: tuple[StrictPostureRow, ...] = STRICT_POSTURE_ROWS
     hand_pair_weight: float = 100.0
     hand_pair_kp: float = 400.0
     hand_pair_kv: float = 40.0
@@ -139,6 +157,11 @@ class UprightConfig(HierarchicalConfig):
                 raise ValueError(f"{name} must be finite and >= 0, got {value!r}")
         if self.slack_weight == 0:
             raise ValueError("slack_weight must be positive")
+        unknown = set(self.strict_posture_rows) - set(STRICT_POSTURE_ROWS)
+        if unknown:
+            raise ValueError(
+                f"strict_posture_rows: unknown {sorted(unknown)}; known: {STRICT_POSTURE_ROWS}"
+            )
 
     @classmethod
     def paper(cls, tray_mode: Any = "level") -> UprightConfig:  # noqa: ARG003 - the signature
@@ -220,6 +243,13 @@ class UprightController(HierarchicalController):
         self._hands = [
             inner for inner, _ in map(unwrap, self.tasks) if isinstance(inner, FramePositionTask)
         ]
+        # the strict stack's rows traded with the posture (UprightConfig.strict_posture_rows)
+        demoted = cfg.strict_posture_rows
+        self._posture_rows: list[tuple[Any, tuple[int, ...]]] = []
+        if "drive" in demoted:
+            self._posture_rows.append((self._drive, (0,)))
+        if "hand_forward" in demoted:
+            self._posture_rows += [(hand, (FORWARD_ROW,)) for hand in self._hands]
         self.tray_reference = TrayReference(
             plate,
             [task.target.copy() for task in self._hands],
@@ -268,6 +298,7 @@ class UprightController(HierarchicalController):
             self._qp_constraints,
             self.config.priority,
             balance_rows=self.balance.rows_count,
+            posture_rows=self._posture_rows,
         )
         self._active += step.active
         self._relaxed += step.relaxed

@@ -6,7 +6,8 @@ Their compiled rows (``compiled_tasks.tangential_force_rows``, ``axle_accelerati
 states of both tray robots, on and off the rolling manifold, with the cup off the plate's
 centre. And ``unified-upright``'s QP with the rows as objects (``PriorityQP.solve`` with
 ``balance_rows``) against the same QP with the rows as arrays (``ExtraRows``) at every step of
-a closed-loop drive, weighted and strict."""
+a closed-loop drive, weighted and strict (strict: the drive row a task in both, traded with the
+posture as ``UprightConfig.strict_posture_rows`` says)."""
 
 from __future__ import annotations
 
@@ -121,11 +122,18 @@ def test_the_qp_with_the_rows_as_objects_equals_the_qp_with_the_rows_as_arrays(
         probe.update(robot)
         motion = balance.tray_motion(robot, probe)
         T, t = balance.tangential(robot, probe, motion)
-        xdd = policy._drive.target  # noqa: SLF001 - the drive row's target of this step
-        A = np.vstack([cfg.tangential_weight * T, np.eye(1, len(robot.nu))[0] * cfg.drive_weight])
-        a = np.concatenate([cfg.tangential_weight * t, [-cfg.drive_weight * xdd]])
+        drive = policy._drive  # noqa: SLF001 - the drive row's task of this step
+        if priority == "weighted":
+            tasks, moved = policy.tasks, ()
+            A = np.vstack([cfg.tangential_weight * T, np.eye(1, len(robot.nu))[0] * drive.weight])
+            a = np.concatenate([cfg.tangential_weight * t, [-drive.weight * drive.target]])
+        else:  # the drive a task, so that it can be in the posture level with the hand's row
+            tasks, moved = [*policy.tasks, drive], policy._posture_rows  # noqa: SLF001
+            A, a = cfg.tangential_weight * T, cfg.tangential_weight * t
         rows = ExtraRows((A, a), balance.rows(robot, probe, motion))
-        expected = reference.solve(robot, policy.tasks, policy.constraints, priority, rows)
+        expected = reference.solve(
+            robot, tasks, policy.constraints, priority, rows, posture_rows=moved
+        )
         ours, theirs = step.solution, expected.solution
         assert ours.solved and theirs.solved
         _close(ours.actuators, theirs.actuators, tol)

@@ -15,7 +15,8 @@ import pytest
 import wip_gym  # noqa: F401
 from controllers.hierarchical import HierarchicalConfig, HierarchicalController
 from controllers.low_level.object_balance import CarriedObject, ObjectBalance
-from controllers.low_level.priority_qp import ExtraRows, PriorityQP, task_level
+from controllers.low_level.priority_qp import ExtraRows, PriorityQP, row_levels, task_level
+from controllers.low_level.tasks import FramePositionTask
 from controllers.registry import make_policy
 from tests.test_priorities import _proxqp
 
@@ -136,6 +137,77 @@ def test_the_strict_stack_keeps_each_level_optimal_under_those_above():
                    np.vstack([C, Gq]), np.concatenate([lower, np.full(len(rhs), -1e20)]),
                    np.concatenate([upper, np.maximum(rhs, Gq @ x) + 1e-9]))  # fmt: skip
     assert np.linalg.norm(Tm @ x - bm) <= np.linalg.norm(Tm @ keep - bm) + 1e-5
+
+
+def _hand(policy: HierarchicalController) -> FramePositionTask:
+    from controllers.low_level.task_stack import unwrap
+
+    return next(
+        inner for inner, _ in map(unwrap, policy.tasks) if isinstance(inner, FramePositionTask)
+    )
+
+
+def test_row_levels_move_the_named_rows_to_the_posture_level():
+    _, policy = _policy(steps=0)
+    hand = _hand(policy)
+    plain = row_levels(policy.tasks)
+    sizes = [len(np.atleast_1d(t.weights())) for t in _inner(policy.tasks)]
+    assert plain == list(np.repeat([task_level(t) for t in policy.tasks], sizes))
+    moved = row_levels(policy.tasks, [(hand, (0, 2))])
+    start = sum(sizes[: _inner(policy.tasks).index(hand)])
+    changed = [i for i, (a, b) in enumerate(zip(plain, moved, strict=True)) if a != b]
+    assert changed == [start, start + 2]
+    assert moved[start] == moved[start + 2] == "posture" and moved[start + 1] == "motion"
+    with pytest.raises(ValueError, match="not a task here"):
+        row_levels(policy.tasks, [(FramePositionTask(hand.site, hand.target), (0,))])
+    with pytest.raises(ValueError, match="row 3"):
+        row_levels(policy.tasks, [(hand, (3,))])
+
+
+def test_rows_moved_to_the_posture_level_trade_with_the_posture_under_the_levels_above():
+    """Strict with the cup's rows and the hand's forward row in the posture level: the balance,
+    object and motion levels (without that row) each optimal under those above, and the posture
+    level (posture, the moved row and ``eps ||qdd||^2``) the best that keeps them (a cascade of
+    ProxQP solves)."""
+    _, policy = _policy()
+    robot, qp = policy.robot, policy.qp
+    balance = _balance(policy, 0.05)
+    _, _, C, lower, upper = (a.copy() for a in qp.assemble(robot, None, policy.tasks))
+    T, b_t = qp.kernel.T.copy(), qp.kernel.b.copy()
+    E, e = qp.kernel.E.copy(), qp.kernel.e.copy()
+    qp.motion.update(robot)
+    G, b = balance.rows(robot, qp.motion)
+    Gq, rhs = G @ E, -(G @ e + b)
+    moved = [(_hand(policy), (0,))]
+    step = PriorityQP(qp).solve(
+        robot, policy.tasks, (), "strict", ExtraRows(None, (G, b)), posture_rows=moved
+    )
+    assert step.solution.solved
+    x, n = step.solution.qdd, len(step.solution.qdd)
+    rows = np.array(row_levels(policy.tasks, moved))
+    assert (rows == "posture").sum() == (np.array(row_levels(policy.tasks)) == "posture").sum() + 1
+    Tb, bb = T[rows == "balance"], b_t[rows == "balance"]
+    best = _proxqp(Tb.T @ Tb + 1e-12 * np.eye(n), -Tb.T @ bb, np.zeros((0, n)), np.zeros(0),
+                   C, lower, upper)  # fmt: skip
+    assert np.linalg.norm(Tb @ x - bb) <= np.linalg.norm(Tb @ best - bb) + 1e-6
+    assert np.maximum(Gq @ x - rhs, 0.0).max() <= 1e-6 or step.relaxed
+    inequalities = np.vstack([C, Gq])
+    low = np.concatenate([lower, np.full(len(rhs), -1e20)])
+    high = np.concatenate([upper, np.maximum(rhs, Gq @ x) + 1e-9])
+    Tm, bm = T[rows == "motion"], b_t[rows == "motion"]
+    keep = _proxqp(Tm.T @ Tm + 1e-12 * np.eye(n), -Tm.T @ bm, Tb, Tb @ x, inequalities, low, high)
+    assert np.linalg.norm(Tm @ x - bm) <= np.linalg.norm(Tm @ keep - bm) + 1e-5
+    # the posture level: its rows and eps ||qdd||^2, the levels above held where x holds them
+    eps = qp.settings.regularization
+    Tp, bp = T[rows == "posture"], b_t[rows == "posture"]
+    above = np.vstack([Tb, Tm])
+    keep = _proxqp(Tp.T @ Tp + eps * np.eye(n), -Tp.T @ bp, above, above @ x, inequalities,
+                   low, high)  # fmt: skip
+
+    def posture_cost(y: np.ndarray) -> float:
+        return float(np.sum((Tp @ y - bp) ** 2) + eps * y @ y)
+
+    assert posture_cost(x) <= posture_cost(keep) * (1 + 1e-6) + 1e-8
 
 
 def _inner(tasks):

@@ -101,13 +101,37 @@ def test_it_carries_the_cup_on_the_aggressive_drive_where_unified_loses_it():
     assert not kept_unified or uses_unified.max() >= 1.0
 
 
-def test_strict_priorities_run_the_cup_aware_stack():
-    """``priority="strict"``: the object's rows are a level under the balance (DAQP); the
-    first 0.5 s of the drive runs without a fallback and counts the object's activity."""
+def test_strict_priorities_carry_the_cup_through_the_acceleration():
+    """``priority="strict"``: the object's rows are a level under the balance (DAQP), the drive
+    row and the hand's forward row traded with the posture in the last level; seed 0 of the
+    aggressive drive at friction 0.05 keeps the cup through the acceleration phase (3 s),
+    without a fallback, its friction use's 99th percentile under 0.8 (docs/upright.md §5)."""
     overrides = {**AGGRESSIVE, "unified-upright.priority": "strict"}
-    policy, _, _ = _episode("unified-upright", 0.5, overrides)
+    policy, kept, uses = _episode("unified-upright", 3.0, overrides)
     assert policy.config.priority == "strict"
+    assert kept, "strict unified-upright lost the cup or fell"
+    assert np.percentile(uses, 99) < 0.8, np.percentile(uses, 99)
     assert policy.controller_counters()["qp_fallbacks"] == 0
+
+
+def test_the_strict_stack_trades_the_drive_and_the_hands_forward_rows_with_the_posture():
+    """``strict_posture_rows`` names the rows given to the strict stack's posture level: the
+    drive row and each hand's forward position row (its weight the least of its three)."""
+    for rows, expected in (((), 0), (("drive",), 1), (("hand_forward",), 1), (None, 2)):
+        overrides = {**AGGRESSIVE, "unified-upright.priority": "strict"}
+        if rows is not None:
+            overrides["unified-upright.strict_posture_rows"] = list(rows)
+        policy, _, _ = _episode("unified-upright", 0.01, overrides)
+        posture_rows = policy._posture_rows  # noqa: SLF001 - what the QP is given
+        assert len(posture_rows) == expected
+        for task, indices in posture_rows:
+            if task is policy._drive:  # noqa: SLF001
+                assert indices == (0,)
+            else:
+                assert task in policy._hands and indices == (0,)  # noqa: SLF001
+                assert np.argmin(task.weights()) == 0 and task.weights()[0] == 0.1
+    with pytest.raises(ValueError, match="strict_posture_rows"):
+        UprightConfig(strict_posture_rows=("posture",))  # type: ignore[arg-type]
     assert dataclasses.replace(policy.config, priority="weighted").priority == "weighted"
 
 

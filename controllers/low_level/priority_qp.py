@@ -22,7 +22,9 @@ Two priorities (``HierarchicalConfig.priority``; docs/upright.md §4):
   balance rows), ``motion`` (the hands, the heading and the cost rows), ``posture`` (posture,
   speed regularisation, a user's tasks, and the QP's ``eps ||qdd||^2``). A level is met as well
   as it can be without worsening any level above it; the object's rows relaxed under the balance
-  are counted.
+  are counted. The caller may put chosen rows of the motion tasks in the posture level
+  (``posture_rows``), where they trade with the body's shape by their weights as in the weighted
+  QP: ``unified-upright``'s drive row and its hands' forward rows (docs/upright.md §4).
 
 Without cost and balance rows and with ``weighted``, :meth:`PriorityQP.solve` is
 ``TaskQP.solve`` itself. The rows may come as arrays (:class:`ExtraRows`) or as task and
@@ -75,6 +77,10 @@ class PriorityStep:
     relaxed: bool
 
 
+#: ``(task, row indices)``: rows of a task that the strict stack puts in its posture level
+PostureRows = Sequence[tuple[Any, Sequence[int]]]
+
+
 def task_level(task: Any) -> str:
     """The strict stack's level of a task: ``balance`` for ``theta``, ``posture`` for posture
     and speed regularisation, ``motion`` for the others (hands, heading, a user's tasks)."""
@@ -84,6 +90,29 @@ def task_level(task: Any) -> str:
     if isinstance(inner, PostureTask):
         return "posture"
     return "motion"
+
+
+def row_levels(tasks: Sequence[Any], posture_rows: PostureRows = ()) -> list[str]:
+    """The strict stack's level of every row of ``tasks``, in order: each task's
+    (``task_level``), but ``posture`` for the rows ``posture_rows`` names (``PriorityQP.solve``).
+    ``ValueError`` for a task not in ``tasks`` or a row index outside its task's rows."""
+    levels: list[list[str]] = []
+    inner = [unwrap(task)[0] for task in tasks]
+    for task in tasks:
+        levels.append([task_level(task)] * rows_of(unwrap(task)[0]))
+    for task, indices in posture_rows:
+        found = [i for i, own in enumerate(inner) if task is tasks[i] or task is own]
+        if not found:
+            raise ValueError(f"posture_rows: {getattr(task, 'name', task)!r} is not a task here")
+        rows = levels[found[0]]
+        for index in indices:
+            if not 0 <= index < len(rows):
+                raise ValueError(
+                    f"posture_rows: row {index} of {getattr(task, 'name', task)!r}, which has "
+                    f"{len(rows)}"
+                )
+            rows[index] = "posture"
+    return [level for task_rows in levels for level in task_rows]
 
 
 class PriorityQP:
@@ -106,6 +135,7 @@ class PriorityQP:
         priority: Priority,
         extra: ExtraRows = ExtraRows(),
         balance_rows: int = 0,
+        posture_rows: PostureRows = (),
     ) -> PriorityStep:
         """The step's solution (``robot`` updated to the state; eq. iso3 from it).
 
@@ -113,7 +143,12 @@ class PriorityQP:
         ``G nu_dot + b <= 0`` (an ``object_tasks.ObjectBalanceConstraint`` last in
         ``constraints``): the one-call step computes them with the rest, and they are soft
         (weighted) or the object's level (strict) as ``extra.balance``'s, which must then be
-        None. Their unconstrained minimiser, when it meets every row, is the compiled call's."""
+        None. Their unconstrained minimiser, when it meets every row, is the compiled call's.
+
+        ``posture_rows``: ``(task, row indices)`` pairs, each task one of ``tasks`` (as given or
+        unwrapped): with ``strict``, those rows are in the posture level instead of their task's
+        (``task_level``); the weighted QP, one level, has no use for them. ``ValueError`` for a
+        task not in ``tasks`` or an index outside its rows."""
         if priority not in PRIORITIES:
             raise ValueError(f"priority must be one of {PRIORITIES}, got {priority!r}")
         if balance_rows and extra.balance is not None:
@@ -143,7 +178,8 @@ class PriorityQP:
         else:
             Gq, rhs = np.zeros((0, len(g))), np.zeros(0)
         if priority == "strict":
-            return self._strict(robot, tasks, k.T, k.b, cost_T, cost_b, C, lower, upper, Gq, rhs)
+            levels = row_levels(tasks, posture_rows)
+            return self._strict(levels, k.T, k.b, cost_T, cost_b, C, lower, upper, Gq, rhs)
         H = H + cost_T.T @ cost_T
         g = g - cost_T.T @ cost_b
         x = np.linalg.solve(H, -g)
@@ -199,8 +235,7 @@ class PriorityQP:
     # ------------------------------------------------------------------- strict
     def _strict(
         self,
-        robot: RobotModel,
-        tasks: Sequence[Any],
+        levels_of_rows: Sequence[str],
         T: Array,
         b: Array,
         cost_T: Array,
@@ -211,14 +246,12 @@ class PriorityQP:
         Gq: Array,
         rhs: Array,
     ) -> PriorityStep:
-        """DAQP's levels (module docstring) on the task rows split by their tasks' levels."""
+        """DAQP's levels (module docstring) on the task rows split by ``levels_of_rows`` (one
+        level name per row of ``T``)."""
         n = T.shape[1]
         rows = {"balance": [], "motion": [], "posture": []}  # type: dict[str, list[int]]
-        start = 0
-        for task in tasks:
-            count = rows_of(unwrap(task)[0])
-            rows[task_level(task)] += range(start, start + count)
-            start += count
+        for index, level in enumerate(levels_of_rows):
+            rows[level].append(index)
         eps = np.sqrt(self.qp.settings.regularization)
 
         def block(name: str, A: Array, a: Array) -> tuple[Array, Array]:
