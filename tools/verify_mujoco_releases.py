@@ -7,7 +7,8 @@ what is imported):
 1. the C-declaration checks, ``tests/test_mujoco_c.py`` (the installed ``mujoco.h`` declares
    every C function as ``wip_gym.mujoco_c.DECLARATIONS`` does; each, called from compiled code,
    gives what the bindings give);
-2. a smoke of every env with every registered controller, ``--steps`` control steps each from
+2. a smoke of every env with every registered controller (``ppo`` where a checkpoint is
+   shipped), ``--steps`` control steps each from
    a seeded reset, on the path the release gets (the compiled fast path where
    ``wip_gym.mujoco_c.VERIFIED_RELEASES`` holds it), then on the readable path
    (``WIP_GYM_FAST_PATH=0``) for a fifth of the steps: every action finite, no exception.
@@ -44,6 +45,7 @@ SMOKE = textwrap.dedent(
     import wip_gym
     from controllers.optimizer import jax_setup
     jax_setup.configure()
+    from controllers.learned import shipped_checkpoint
     from controllers.registry import controller_names, make_policy
     from wip_gym import mujoco_c
     steps = int(sys.argv[1])
@@ -52,6 +54,11 @@ SMOKE = textwrap.dedent(
     runs = 0
     for env_id in wip_gym.ENV_IDS:
         for name in controller_names():
+            if name == "ppo":  # a learned policy runs where a checkpoint is shipped
+                try:
+                    shipped_checkpoint(env_id)
+                except ValueError:
+                    continue
             env = gym.make(env_id)
             obs, info = env.reset(seed=0)
             policy = make_policy(name, env)
