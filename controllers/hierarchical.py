@@ -108,8 +108,9 @@ class HierarchicalConfig:
             (``controllers.low_level.constraints``).
         priority: ``weighted`` (the paper: one QP trading every task by its weight) or
             ``strict`` (balance, then the hands and heading, then posture, as lexicographic
-            levels under the torque and joint limits; ``controllers.low_level.priority_qp``,
-            docs/upright.md §4).
+            levels under the torque and joint limits; ``unified-upright`` puts its drive row
+            and the hands' forward rows with the posture, ``UprightConfig.strict_posture_rows``;
+            ``controllers.low_level.priority_qp``, docs/upright.md §4).
         high_level: plan and MPC settings. qp: QP settings.
     """
 

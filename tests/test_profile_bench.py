@@ -55,6 +55,7 @@ TOP_KEYS = {
     "control_time_units",
     "per_step_us",
     "per_step_units",
+    "qp_priority",
     "qp_iterations",
     "qp_paths",
     "control_over_mujoco_step",
@@ -370,6 +371,20 @@ def test_profile_takes_compares_settings(tmp_path: Path) -> None:
     with pytest.raises(SystemExit) as refused:
         main([*argv, "--set", "unified.high_level.no_such_field=1"])
     assert refused.value.code == 2
+
+
+def test_a_strict_stack_is_reported_as_such(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """With strict priorities the profile reports DAQP's levels, not ProxQP's iteration
+    counts (which the strict stack does not make)."""
+    path = tmp_path / "profile.json"
+    argv = ["profile", "--env", "PlanarTray-v0", "--controller", "unified", "--duration", "0.05"]
+    assert main([*argv, "--set", "unified.priority=strict", "--json", str(path)]) == 0
+    result = json.loads(path.read_text())
+    assert result["qp_priority"] == "strict"
+    assert result["qp_iterations"] is None and result["qp_paths"] is None
+    assert "strict priorities, DAQP's levels" in capsys.readouterr().out
 
 
 def test_closed_loop_table_refuses_a_profile_without_a_task_qp() -> None:

@@ -82,6 +82,7 @@ JSON schema (``--json PATH``; times per control step in microseconds unless name
       },
       "per_step_units": {...},            # per_step_us / reference_step_us, same keys
       "control_time_units": {"mean": float, "median": float, "p99": float},
+      "qp_priority": "weighted" | "strict",
       "qp_iterations": {"mean": float, "max": int} | null,  # ProxQP's; 0 on a shortcut step
       "qp_paths": {"shortcut": int, "proxqp": int} | null,  # steps solved by each path
       "control_over_mujoco_step": float,  # mean control / mean floor
@@ -352,7 +353,9 @@ def profile_episode(
         "loop": _stats(control + env_step),
     }
     diagnostics = getattr(policy, "diagnostics", {})
-    iterations = diagnostics.get("qp_iterations")
+    priority = getattr(policy.config, "priority", "weighted")
+    # ProxQP's iterations: the weighted QP's (the strict stack solves its levels with DAQP)
+    iterations = diagnostics.get("qp_iterations") if priority == "weighted" else None
     floor_mean = float(floor.mean())
     control_ms = {
         "mean": float(control.mean() * 1e3),
@@ -378,6 +381,7 @@ def profile_episode(
             name: _in_units(stats, reference * 1e6) for name, stats in per_step.items()
         },
         "control_time_units": {key: value * 1e-3 / reference for key, value in control_ms.items()},
+        "qp_priority": priority,
         "qp_iterations": _iterations(iterations),
         "qp_paths": _paths(iterations),
         "control_over_mujoco_step": float(control.mean() / floor_mean),
@@ -443,7 +447,9 @@ def format_table(result: dict[str, Any]) -> str:
         f"garbage collector in the loop ({frozen}): {sum(passes['by_generation'])} passes (by "
         f"generation {passes['by_generation']}), longest {passes['longest_ms']:.1f} ms"
     )
-    if result["qp_iterations"] is not None:
+    if result.get("qp_priority") == "strict":
+        lines.append("QP: strict priorities, DAQP's levels at every step")
+    elif result["qp_iterations"] is not None:
         lines.append(
             f"QP: {result['qp_paths']['shortcut']} steps by the unconstrained shortcut, "
             f"{result['qp_paths']['proxqp']} by ProxQP (iterations: mean "
