@@ -6,6 +6,7 @@ QP itself."""
 from __future__ import annotations
 
 import dataclasses
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -102,10 +103,10 @@ def _hard_feasible(H, g, C, lower, upper, Gq, rhs) -> np.ndarray | None:
     return np.array(qp.results.x)
 
 
-def test_the_strict_stack_keeps_each_level_optimal_under_those_above():
-    """Strict with the cup's rows: the balance level is as good as the balance task alone can
-    be under the hard limits, the object's rows then hold as well as they can without worsening
-    it, and the motion level is the best under both (a cascade of ProxQP solves)."""
+def _strict_problem() -> tuple[Any, ...]:
+    """The unified-upright policy at reset and its strict problem's arrays: the limits
+    ``C, lower, upper``, the task rows ``T, b_t``, the kernel ``E, e``, the cup's balance rows
+    ``G, b`` (friction 0.05) and over ``qdd``, ``Gq, rhs``."""
     _, policy = _policy()
     robot, qp = policy.robot, policy.qp
     balance = _balance(policy, 0.05)
@@ -114,7 +115,14 @@ def test_the_strict_stack_keeps_each_level_optimal_under_those_above():
     E, e = qp.kernel.E.copy(), qp.kernel.e.copy()
     qp.motion.update(robot)
     G, b = balance.rows(robot, qp.motion)
-    Gq, rhs = G @ E, -(G @ e + b)
+    return policy, robot, qp, C, lower, upper, T, b_t, E, e, G, b, G @ E, -(G @ e + b)
+
+
+def test_the_strict_stack_keeps_each_level_optimal_under_those_above():
+    """Strict with the cup's rows: the balance level is as good as the balance task alone can
+    be under the hard limits, the object's rows then hold as well as they can without worsening
+    it, and the motion level is the best under both (a cascade of ProxQP solves)."""
+    policy, robot, qp, C, lower, upper, T, b_t, E, e, G, b, Gq, rhs = _strict_problem()
     step = PriorityQP(qp).solve(robot, policy.tasks, (), "strict", ExtraRows(None, (G, b)))
     assert step.solution.solved
     x = step.solution.qdd
@@ -169,15 +177,7 @@ def test_rows_moved_to_the_posture_level_trade_with_the_posture_under_the_levels
     object and motion levels (without that row) each optimal under those above, and the posture
     level (posture, the moved row and ``eps ||qdd||^2``) the best that keeps them (a cascade of
     ProxQP solves)."""
-    _, policy = _policy()
-    robot, qp = policy.robot, policy.qp
-    balance = _balance(policy, 0.05)
-    _, _, C, lower, upper = (a.copy() for a in qp.assemble(robot, None, policy.tasks))
-    T, b_t = qp.kernel.T.copy(), qp.kernel.b.copy()
-    E, e = qp.kernel.E.copy(), qp.kernel.e.copy()
-    qp.motion.update(robot)
-    G, b = balance.rows(robot, qp.motion)
-    Gq, rhs = G @ E, -(G @ e + b)
+    policy, robot, qp, C, lower, upper, T, b_t, E, e, G, b, Gq, rhs = _strict_problem()
     moved = [(_hand(policy), (0,))]
     step = PriorityQP(qp).solve(
         robot, policy.tasks, (), "strict", ExtraRows(None, (G, b)), posture_rows=moved
