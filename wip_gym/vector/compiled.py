@@ -4,9 +4,8 @@ A wip env's step (``WIPEnv._advance``) is Python around MuJoCo's step and the en
 measures: the action's check and its ctrl cost, the torques written, ``frame_skip`` calls of
 ``mj_step``, the measures, the cup's loss, the reward's four terms (docs/learning.md §3) and the
 two ends. :func:`advance` does exactly that, in the same order and arithmetic, for a list of
-sub-envs in one compiled call that holds no GIL, so the vector env's threads step their shares
-of the batch side by side (``wip_gym.vector.threads``), and one thread pays the Python once per
-pass instead of once per sub-env.
+sub-envs in one compiled call that holds no GIL, so a :class:`Team` of threads steps the batch
+beside the caller, and one thread pays the Python once per pass instead of once per sub-env.
 
 What stays in Python, per sub-env and pass (:class:`CompiledSteps`): whether it may take this
 way (no push or payload due, no perturbed torques, its data and ``frame_skip`` those bound
@@ -314,7 +313,6 @@ class CompiledSteps:
         self.envs = envs
         if n > MAX_SUB_ENVS:
             raise ValueError(f"at most {MAX_SUB_ENVS} sub-envs take compiled steps, got {n}")
-        self.threads = 1  # threads that step (use_threads)
         self._team: Team | None = None
         self._sync = np.zeros(4, dtype=np.int64)  # a pass's counters on one thread
         first = envs[0]
@@ -356,7 +354,7 @@ class CompiledSteps:
         #: whether each sub-env can ever take it (:meth:`can_take`, and the first's sizes)
         self.capable = [
             self.can_take(env)
-            and env._measure_table is not None
+            and env._measure_table is not None  # (can_take says so; for the type checker)
             and env._measure_table.rows.shape == rows
             and env.model.nu == nu
             for env in envs
@@ -402,7 +400,6 @@ class CompiledSteps:
         ``spins`` turns after each pass before they sleep."""
         if threads < 2:
             return
-        self.threads = threads
         self._team = Team(threads - 1, (self.todo, self._arrays), spins)
 
     def close(self) -> None:

@@ -115,9 +115,9 @@ class _SubEnvs:
     ``qvel``) the step's info and observation are made after the pass
     (``wip_gym.vector.columns``); otherwise each sub-env's ``step`` and its dicts batched
     (:class:`InfoBatcher`). Resets take the second way (their infos through Gymnasium's
-    rule). The fast way's pass is :meth:`pass_fast` (the compiled call spreads over the
-    threads itself); without compiled steps and with several threads, each thread steps its
-    share (:meth:`share_fast`)."""
+    rule). The fast way's pass is :meth:`pass_fast` (the compiled call spreads over its own
+    threads); without compiled steps and with several threads, the loop's threads take the
+    sub-envs one at a time (:meth:`step_one`)."""
 
     def __init__(
         self,
@@ -150,18 +150,16 @@ class _SubEnvs:
                 base._measure_into(self.columns.measures[i])
         self.fast = self.columns is not None
         self.advances = [base._advance for base in self.bases]
-        # the compiled steps (wip_gym.vector.compiled), where a sub-env can take them; the
-        # sub-envs they stepped have their _values and _block made only when read (fresh)
         # each sub-env's _advance result: reward, the four reward terms, terminated,
         # truncated (a row each; zero terms where it was reset in the step)
         self.results = np.zeros((n, 7))
+        # the compiled steps (wip_gym.vector.compiled), where a sub-env can take them; the
+        # sub-envs they stepped have their _values and _block made only when read (fresh)
         self.compiled: CompiledSteps | None = None
         if self.columns is not None and any(CompiledSteps.can_take(b) for b in self.bases):
             qpos, qvel = self.columns.states
             self.compiled = CompiledSteps(self.bases, self.results, (qpos, qvel))
         self.everyone = list(range(n))
-        self.shares: list[list[int]] = [self.everyone]  # each thread's sub-envs (set_threads)
-
         self.has_limits = any(limit is not None for limit in self.limits)
         self.counted = False  # a pass with a time limit counted here or same-step autoresets
         # one pass's inputs
@@ -187,10 +185,6 @@ class _SubEnvs:
         # changed (resets, steps in Python); without compiled steps, every one at every step
         self.unwritten: list[int] = list(range(n))
         self.errors: list[tuple[int, ValueError, ValueError]] = []  # a pass's rejected actions
-
-    def set_threads(self, threads: int) -> None:
-        """Split the sub-envs into ``threads`` shares, one per thread of the fast way's pass."""
-        self.shares = [self.everyone[k::threads] for k in range(threads)]
 
     def fresh(self, i: int) -> None:
         """Sub-env ``i`` given back what a compiled step left in the batch (its measures'
@@ -283,9 +277,10 @@ class _SubEnvs:
         self.step_part(self.everyone)
         self.raise_errors()
 
-    def share_fast(self, k: int) -> None:
-        """Thread ``k``'s part of the fast way's pass (:meth:`step_part` of its share)."""
-        self.step_part(self.shares[k])
+    def step_one(self, i: int) -> None:
+        """Sub-env ``i``'s step the fast way (:meth:`step_part`): a thread's part of a pass
+        of the loop's threads, which hand the sub-envs out one at a time."""
+        self.step_part([i])
 
     def raise_errors(self) -> None:
         """After a pass: the lowest sub-env's rejected action raised, if any (every sub-env
@@ -453,7 +448,6 @@ class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArr
         # with compiled steps, a team of threads steps with the caller (CompiledSteps) while
         # the caller resets the sub-envs that ended; the other passes (resets) run here
         self._loop = ParallelLoop(self._sub, num_envs, 1 if compiled else self._threads)
-        self._sub.set_threads(self._loop.threads)
         if compiled is not None:
             compiled.use_threads(self._threads)
         self._finalizer = weakref.finalize(self, _close_threads, self._loop, compiled)
@@ -563,10 +557,10 @@ class WIPVectorEnv(VectorEnv[dict[str, NDArray[np.float64]], NDArray[Any], NDArr
         else:  # the fast way: rows of float64, as each sub-env's step converts its own
             sub.action_array = np.ascontiguousarray(actions, dtype=np.float64)
             sub.counted = sub.has_limits or sub.same_step
-            if self._loop.threads == 1 or sub.compiled is not None:
-                sub.pass_fast()  # with compiled steps, on their team (CompiledSteps)
+            if self._loop.threads == 1:  # so with compiled steps, which have their team
+                sub.pass_fast()
             else:
-                self._loop.run_each(sub.share_fast)
+                self._loop.run(sub.step_one)
                 sub.raise_errors()
             observations = columns.observe(
                 sub.bases,

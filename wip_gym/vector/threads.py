@@ -1,12 +1,14 @@
-"""Threads for the vector env's passes over its sub-envs (docs/vector.md §3).
+"""A loop over the sub-envs spread over threads, for the vector env's passes in Python (its
+resets, and its steps where the sub-envs cannot take the compiled ones, whose own team of
+threads is ``wip_gym.vector.compiled.Team``; docs/vector.md §3).
 
-The threads are made once and wait on a lock between passes; the calling thread takes part.
-Two kinds of pass: :meth:`ParallelLoop.run` hands the indices out one at a time from a shared
-counter (a reset pass: a slow sub-env does not hold the others back), and
-:meth:`ParallelLoop.run_each` runs one body per thread (the compiled steps' pass, whose
-threads claim sub-envs in compiled code, ``wip_gym.vector.compiled``). Which thread steps a
-sub-env does not matter: each is touched by one thread per pass and the sub-envs share
-nothing.
+A sub-env's step is Python around two calls that release the GIL (``mujoco.mj_step`` and the
+env's compiled measures, ``nogil``), so threads can overlap one sub-env's physics with
+another's Python: at best, a step comes down to its Python part (about half of it). The
+threads are made once and wait on a lock between steps; the calling thread takes part.
+Sub-envs are handed out one at a time from a shared counter, so a slow one (a reset) does not
+hold the others back; which thread steps a sub-env does not matter, as each is touched by one
+thread per step and the sub-envs share nothing.
 """
 
 from __future__ import annotations
@@ -32,7 +34,6 @@ class ParallelLoop:
         self._pass_body = body  # this pass's
         self._count = count
         self._counter = itertools.count()
-        self._each = False  # this pass: body(k) once on thread k (run_each)
         self._errors: list[tuple[int, BaseException]] = []
         self._closed = False
         self._starts: list[threading.Lock] = []
@@ -43,10 +44,7 @@ class ParallelLoop:
             start.acquire()
             done.acquire()
             thread = threading.Thread(
-                target=self._serve,
-                args=(start, done, k + 1),
-                name=f"wip-vector-{k + 1}",
-                daemon=True,
+                target=self._serve, args=(start, done), name=f"wip-vector-{k + 1}", daemon=True
             )
             self._starts.append(start)
             self._dones.append(done)
@@ -58,14 +56,8 @@ class ParallelLoop:
         """Threads that step (the caller's included)."""
         return len(self._threads) + 1
 
-    def _drain(self, thread: int) -> None:
+    def _drain(self) -> None:
         count, counter, body = self._count, self._counter, self._pass_body
-        if self._each:
-            try:
-                body(thread)
-            except BaseException as error:  # raised by run_each() in the caller
-                self._errors.append((thread, error))
-            return
         while True:
             i = next(counter)  # atomic under the GIL
             if i >= count:
@@ -75,13 +67,13 @@ class ParallelLoop:
             except BaseException as error:  # raised by run() in the caller
                 self._errors.append((i, error))
 
-    def _serve(self, start: threading.Lock, done: threading.Lock, thread: int) -> None:
+    def _serve(self, start: threading.Lock, done: threading.Lock) -> None:
         while True:
             start.acquire()
             if self._closed:
                 done.release()
                 return
-            self._drain(thread)
+            self._drain()
             done.release()
 
     def run(self, body: Callable[[int], None] | None = None) -> None:
@@ -98,29 +90,11 @@ class ParallelLoop:
         else:
             self._counter = itertools.count()
             self._pass_body = body
-            self._each = False
-            self._pass()
-        self._raise()
-
-    def run_each(self, body: Callable[[int], None]) -> None:
-        """One pass of ``body(k)`` on each thread ``k`` (0 the caller's, up to
-        :attr:`threads` - 1), each at once: for shares of work fixed in advance (handed out
-        one at a time, the caller could take them all before another thread wakes)."""
-        if self._closed:
-            raise RuntimeError("the loop is closed")
-        self._pass_body = body
-        self._each = True
-        self._pass()
-        self._raise()
-
-    def _pass(self) -> None:
-        for start in self._starts:
-            start.release()
-        self._drain(0)
-        for done in self._dones:
-            done.acquire()
-
-    def _raise(self) -> None:
+            for start in self._starts:
+                start.release()
+            self._drain()
+            for done in self._dones:
+                done.acquire()
         if self._errors:
             errors, self._errors = sorted(self._errors, key=lambda e: e[0]), []
             raise errors[0][1]
