@@ -96,10 +96,8 @@ def row_levels(tasks: Sequence[Any], posture_rows: PostureRows = ()) -> list[str
     """The strict stack's level of every row of ``tasks``, in order: each task's
     (``task_level``), but ``posture`` for the rows ``posture_rows`` names (``PriorityQP.solve``).
     ``ValueError`` for a task not in ``tasks`` or a row index outside its task's rows."""
-    levels: list[list[str]] = []
     inner = [unwrap(task)[0] for task in tasks]
-    for task in tasks:
-        levels.append([task_level(task)] * rows_of(unwrap(task)[0]))
+    levels = [[task_level(task)] * rows_of(own) for task, own in zip(tasks, inner, strict=True)]
     for task, indices in posture_rows:
         found = [i for i, own in enumerate(inner) if task is tasks[i] or task is own]
         if not found:
